@@ -1,0 +1,251 @@
+"""NURBS segments: validation and vectorised evaluation of C(u) and C', C'', C'''.
+
+A NURBS curve of degree p with control points P_i (n x 3, mm), weights
+w_i > 0 and non-decreasing knots U (length n + p + 1) is
+
+    C(u) = A(u) / W(u),   A(u) = sum_i N_{i,p}(u) w_i P_i,   W(u) = sum_i N_{i,p}(u) w_i
+
+for u in the domain [U_p, U_{n}].  A and W are one polynomial B-spline with
+homogeneous control points [w P, w] (n x 4), evaluated with
+``scipy.interpolate.BSpline`` for many u at once.  The u-derivatives of C
+follow from the quotient rule (Piegl & Tiller eq. 4.8):
+
+    C'   = (A'   - W' C) / W
+    C''  = (A''  - 2 W' C'  - W'' C) / W
+    C''' = (A''' - 3 W' C'' - 3 W'' C' - W''' C) / W
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.interpolate import BSpline
+
+from geometry.errors import GeometryError
+
+FloatArray = NDArray[np.float64]
+
+#: A segment whose control points all lie within this distance (mm) of each
+#: other is degenerate: it has no length to travel.
+DEGENERATE_SPAN_MM = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class NurbsSegment:
+    """One validated NURBS segment.
+
+    Attributes:
+        degree: polynomial degree p >= 1.
+        knots: (n + p + 1,) non-decreasing knot vector.
+        control_points: (n, 3) control points in mm (2-D input is padded with z = 0).
+        weights: (n,) positive weights.
+        name: field path used in error messages, e.g. ``segments[3]``.
+    """
+
+    degree: int
+    knots: FloatArray
+    control_points: FloatArray
+    weights: FloatArray
+    name: str = "segment"
+    _spl: BSpline = field(init=False, repr=False)
+
+    @classmethod
+    def create(
+        cls,
+        degree: object,
+        knots: object,
+        control_points: object,
+        weights: object | None = None,
+        name: str = "segment",
+    ) -> NurbsSegment:
+        """Validate raw input and build a segment; raise GeometryError naming the field."""
+        p = _check_degree(degree, name)
+        P = _as_points(control_points, f"{name}.control_points")
+        n = P.shape[0]
+        if n < p + 1:
+            raise GeometryError(
+                f"{name}.control_points", n, f"degree {p} needs at least {p + 1} control points"
+            )
+        if weights is None:
+            w = np.ones(n)
+        else:
+            w = _as_vector(weights, f"{name}.weights")
+            if w.shape[0] != n:
+                raise GeometryError(
+                    f"{name}.weights", w.shape[0], f"need one weight per control point ({n})"
+                )
+            bad = np.flatnonzero(~(w > 0.0))
+            if bad.size:
+                raise GeometryError(f"{name}.weights[{bad[0]}]", float(w[bad[0]]), "weights must be > 0")
+        U = _as_vector(knots, f"{name}.knots")
+        if U.shape[0] != n + p + 1:
+            raise GeometryError(
+                f"{name}.knots",
+                U.shape[0],
+                f"need n + p + 1 = {n} + {p} + 1 = {n + p + 1} knots",
+            )
+        dec = np.flatnonzero(np.diff(U) < 0.0)
+        if dec.size:
+            i = int(dec[0]) + 1
+            raise GeometryError(
+                f"{name}.knots[{i}]", float(U[i]), f"knots must be non-decreasing (previous {U[i - 1]})"
+            )
+        lo, hi = U[p], U[n]
+        if not hi > lo:
+            raise GeometryError(f"{name}.knots", [float(lo), float(hi)], "parameter domain [U_p, U_n] is empty")
+        interior = U[(U > lo) & (U < hi)]
+        if interior.size:
+            vals, counts = np.unique(interior, return_counts=True)
+            worst = int(np.argmax(counts))
+            if counts[worst] > p:
+                raise GeometryError(
+                    f"{name}.knots",
+                    float(vals[worst]),
+                    f"interior knot multiplicity {int(counts[worst])} exceeds degree {p}",
+                )
+        span = float(np.max(np.ptp(P, axis=0)))
+        if span <= DEGENERATE_SPAN_MM:
+            raise GeometryError(
+                f"{name}.control_points", span, "degenerate segment: all control points coincide"
+            )
+        return cls(degree=p, knots=U, control_points=P, weights=w, name=name)
+
+    def __post_init__(self) -> None:
+        hom = np.column_stack([self.control_points * self.weights[:, None], self.weights])
+        object.__setattr__(self, "_spl", BSpline(self.knots, hom, self.degree, extrapolate=False))
+
+    @property
+    def domain(self) -> tuple[float, float]:
+        """Parameter domain [U_p, U_n]."""
+        return float(self.knots[self.degree]), float(self.knots[-self.degree - 1])
+
+    @property
+    def breakpoints(self) -> FloatArray:
+        """Distinct knots inside the domain, including both ends."""
+        lo, hi = self.domain
+        u = np.unique(self.knots)
+        return u[(u >= lo) & (u <= hi)]
+
+    def derivatives(self, u: FloatArray) -> FloatArray:
+        """C and its first three u-derivatives.
+
+        Args:
+            u: (K,) parameters inside the domain.
+        Returns:
+            (4, K, 3) array: [C, C', C'', C'''] in mm, mm/u, mm/u^2, mm/u^3.
+        """
+        lo, hi = self.domain
+        uu = np.clip(np.asarray(u, dtype=np.float64), lo, hi)
+        H = [self._hom(uu, order) for order in range(4)]  # each (K, 4)
+        A = [h[:, :3] for h in H]
+        W = [h[:, 3:4] for h in H]
+        C0 = A[0] / W[0]
+        C1 = (A[1] - W[1] * C0) / W[0]
+        C2 = (A[2] - 2.0 * W[1] * C1 - W[2] * C0) / W[0]
+        C3 = (A[3] - 3.0 * W[1] * C2 - 3.0 * W[2] * C1 - W[3] * C0) / W[0]
+        return np.stack([C0, C1, C2, C3])
+
+    def speed(self, u: FloatArray) -> FloatArray:
+        """|C'(u)| (mm per unit u), shape (K,)."""
+        lo, hi = self.domain
+        uu = np.clip(np.asarray(u, dtype=np.float64), lo, hi)
+        h0 = self._hom(uu, 0)
+        h1 = self._hom(uu, 1)
+        c0 = h0[:, :3] / h0[:, 3:4]
+        c1 = (h1[:, :3] - h1[:, 3:4] * c0) / h0[:, 3:4]
+        return np.asarray(np.sqrt(np.einsum("ij,ij->i", c1, c1)), dtype=np.float64)
+
+    def _hom(self, u: FloatArray, order: int) -> FloatArray:
+        """Homogeneous [wP, w] B-spline or its derivative at u, (K, 4)."""
+        if order > self.degree:
+            return np.zeros((u.shape[0], 4))
+        return np.asarray(self._spl(u, nu=order), dtype=np.float64)
+
+    def points(self, u: FloatArray) -> FloatArray:
+        """C(u) only, (K, 3) mm."""
+        lo, hi = self.domain
+        h = self._hom(np.clip(np.asarray(u, dtype=np.float64), lo, hi), 0)
+        return np.asarray(h[:, :3] / h[:, 3:4], dtype=np.float64)
+
+    def split_at_c0_knots(self) -> list[NurbsSegment]:
+        """Split at interior knots of multiplicity p (where the curve is only C0).
+
+        With multiplicity p at knot value k (first index j in U) the curve passes
+        through P_{j-1}; the left piece keeps U[:j+p] + [k] and P[:j], the right
+        piece [k] + U[j:] and P[j-1:].
+        """
+        p = self.degree
+        lo, hi = self.domain
+        U = self.knots
+        vals, first, counts = np.unique(U, return_index=True, return_counts=True)
+        cuts = [int(j) for v, j, c in zip(vals, first, counts, strict=True) if lo < v < hi and c == p]
+        if not cuts:
+            return [self]
+        pieces: list[NurbsSegment] = []
+        seg = self
+        offset = 0
+        for j_abs in cuts:
+            j = j_abs - offset
+            k = seg.knots[j]
+            left = NurbsSegment(
+                degree=p,
+                knots=np.concatenate([seg.knots[: j + p], [k]]),
+                control_points=seg.control_points[:j],
+                weights=seg.weights[:j],
+                name=self.name,
+            )
+            right = NurbsSegment(
+                degree=p,
+                knots=np.concatenate([[k], seg.knots[j:]]),
+                control_points=seg.control_points[j - 1 :],
+                weights=seg.weights[j - 1 :],
+                name=self.name,
+            )
+            pieces.append(left)
+            offset += j - 1
+            seg = right
+        pieces.append(seg)
+        return [s for s in pieces if float(np.max(np.ptp(s.control_points, axis=0))) > DEGENERATE_SPAN_MM]
+
+
+def _check_degree(degree: object, name: str) -> int:
+    if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)):
+        if isinstance(degree, float) and degree.is_integer():
+            degree = int(degree)
+        else:
+            raise GeometryError(f"{name}.degree", degree, "degree must be an integer")
+    p = int(degree)
+    if p < 1:
+        raise GeometryError(f"{name}.degree", p, "degree must be >= 1")
+    return p
+
+
+def _as_vector(values: object, fld: str) -> FloatArray:
+    try:
+        a = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise GeometryError(fld, values, "must be a list of numbers") from exc
+    if a.ndim != 1:
+        raise GeometryError(fld, a.shape, "must be a flat list of numbers")
+    bad = np.flatnonzero(~np.isfinite(a))
+    if bad.size:
+        raise GeometryError(f"{fld}[{bad[0]}]", float(a[bad[0]]), "must be finite (no NaN/Inf)")
+    return a
+
+
+def _as_points(values: object, fld: str) -> FloatArray:
+    try:
+        a = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise GeometryError(fld, values, "must be a list of [x, y, z] points") from exc
+    if a.ndim != 2 or a.shape[1] not in (2, 3) or a.shape[0] == 0:
+        raise GeometryError(fld, a.shape, "must be a non-empty list of [x, y] or [x, y, z] points")
+    bad = np.argwhere(~np.isfinite(a))
+    if bad.size:
+        i, k = (int(v) for v in bad[0])
+        raise GeometryError(f"{fld}[{i}][{k}]", float(a[i, k]), "must be finite (no NaN/Inf)")
+    if a.shape[1] == 2:
+        a = np.column_stack([a, np.zeros(a.shape[0])])
+    return np.ascontiguousarray(a)
