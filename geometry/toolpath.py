@@ -38,6 +38,10 @@ GAP_TOL_MM = 1e-3
 CORNER_TOL_DEG = 0.5
 #: Shortest segment (mm) accepted; below it the segment has no length to travel.
 MIN_SEGMENT_LENGTH_MM = 1e-9
+#: Where |C'| vanishes (repeated control points) derivatives are taken this far
+#: inside (fraction of the parameter domain): the arc-length derivatives have a
+#: limit there but the u-derivative formulas divide by |C'|.
+ZERO_SPEED_NUDGE = 1e-7
 
 
 @dataclass(frozen=True)
@@ -138,6 +142,10 @@ class Toolpath:
         self.subs = subs
         self.sub_origin = np.asarray(origin, dtype=np.int64)
         self.offsets = np.concatenate([[0.0], np.cumsum([t.length for t in subs])])
+        #: global arc length of every knot inside the sub-segments (where C''' may jump)
+        self.knot_s = np.concatenate(
+            [off + t.s_of_u(t.segment.breakpoints[1:-1]) for off, t in zip(self.offsets[:-1], subs, strict=True)]
+        )
         self._check_gaps(gap_tol)
         self.corners = self._find_corners(np.radians(corner_tol_deg))
         self.pieces = self._pieces()
@@ -149,7 +157,13 @@ class Toolpath:
     def _end_derivs(self, k: int, at_end: bool) -> FloatArray:
         seg = self.subs[k].segment
         lo, hi = seg.domain
-        return seg.derivatives(np.array([hi if at_end else lo]))[:, 0, :]
+        u = np.array([hi if at_end else lo])
+        D = seg.derivatives(u)[:, 0, :]
+        if not np.linalg.norm(D[1]) > 0.0:
+            # zero speed at the end (repeated control points): tangent from just inside
+            u = u + (-1.0 if at_end else 1.0) * ZERO_SPEED_NUDGE * (hi - lo)
+            D[1:] = seg.derivatives(u)[1:, 0, :]
+        return D
 
     def _check_gaps(self, gap_tol: float) -> None:
         for k in range(len(self.subs) - 1):
@@ -222,7 +236,15 @@ class Toolpath:
         D = np.empty((4, s.size, 3))
         for kk in np.unique(k):
             m = k == kk
-            D[:, m, :] = self.subs[kk].segment.derivatives(u[m])
+            seg = self.subs[kk].segment
+            Dk = seg.derivatives(u[m])
+            stuck = ~(np.einsum("ij,ij->i", Dk[1], Dk[1]) > 0.0)
+            if stuck.any():
+                lo, hi = seg.domain
+                um = u[m][stuck]
+                nudge = np.where(um < 0.5 * (lo + hi), 1.0, -1.0) * ZERO_SPEED_NUDGE * (hi - lo)
+                Dk[1:, stuck, :] = seg.derivatives(um + nudge)[1:]
+            D[:, m, :] = Dk
         d1, d2, d3 = arc_length_derivatives(D)
         return PathSamples(s=s, position=D[0], d1=d1, d2=d2, d3=d3)
 

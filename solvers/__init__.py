@@ -1,0 +1,1 @@
+"""Feed scheduling solvers: machine model, windowed LP, time reconstruction, pipeline."""

@@ -1,0 +1,70 @@
+"""Uniform quadratic B-spline feed profiles (spec §3).
+
+A profile over a piece [0, L] with knot spacing d = L / n_int has n_int + 2
+control points c_0 .. c_{n_int+1}; on knot interval k (s in [k d, (k+1) d],
+tau = s/d - k in [0, 1]) only c_k, c_{k+1}, c_{k+2} act:
+
+    q    = c_k (1-tau)^2/2  + c_{k+1} (-2 tau^2 + 2 tau + 1)/2 + c_{k+2} tau^2/2
+    q'   = [-c_k (1-tau)    + c_{k+1} (1 - 2 tau)            + c_{k+2} tau] / d
+    q''  = [ c_k            - 2 c_{k+1}                      + c_{k+2}    ] / d^2
+
+So at knot k: q = (c_k + c_{k+1})/2 and q' = (c_{k+1} - c_k)/d; fixing two
+consecutive control points fixes q and q' there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+def basis(
+    s: FloatArray, d: float, n_int: int, k_lo: int = 0, k_hi: int | None = None
+) -> tuple[IntArray, FloatArray, FloatArray, FloatArray]:
+    """Basis weights at piece-local arc lengths s (mm), knot intervals clamped to [k_lo, k_hi].
+
+    Returns:
+        k: (K,) index of the first active control point (= knot interval).
+        W0, W1, W2: (K, 3) weights of c_k, c_{k+1}, c_{k+2} for q, q' (1/mm), q'' (1/mm^2).
+    """
+    x = np.asarray(s, dtype=np.float64) / d
+    k = np.clip(np.floor(x), k_lo, n_int - 1 if k_hi is None else k_hi).astype(np.int64)
+    t = x - k
+    W0 = np.column_stack([(1 - t) ** 2 / 2, (-2 * t * t + 2 * t + 1) / 2, t * t / 2])
+    W1 = np.column_stack([-(1 - t), 1 - 2 * t, t]) / d
+    W2 = np.broadcast_to(np.array([1.0, -2.0, 1.0]) / (d * d), W0.shape).copy()
+    return k, W0, W1, W2
+
+
+def design(k: IntArray, W: FloatArray, col0: int, ncols: int) -> sp.csr_matrix:
+    """Sparse (K, ncols) matrix with W's rows at columns k - col0 .. k - col0 + 2."""
+    K = k.size
+    rows = np.repeat(np.arange(K), 3)
+    cols = (k[:, None] - col0 + np.arange(3)[None, :]).ravel()
+    return sp.csr_matrix((W.ravel(), (rows, cols)), shape=(K, ncols))
+
+
+def evaluate(c: FloatArray, s: FloatArray, d: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """q, q', q'' of the profile with control points c at piece-local s."""
+    n_int = c.size - 2
+    k, W0, W1, W2 = basis(s, d, n_int)
+    C = np.column_stack([c[k], c[k + 1], c[k + 2]])
+    return (
+        np.einsum("ij,ij->i", W0, C),
+        np.einsum("ij,ij->i", W1, C),
+        np.einsum("ij,ij->i", W2, C),
+    )
+
+
+def integral_weights(k0: int, k1: int, d: float, col0: int, ncols: int) -> FloatArray:
+    """w with w . c = integral of q over knot intervals [k0, k1) (mm^3/s^2 per unit c)."""
+    w = np.zeros(ncols)
+    idx = np.arange(k0, k1) - col0
+    np.add.at(w, idx, d / 6.0)
+    np.add.at(w, idx + 1, 2.0 * d / 3.0)
+    np.add.at(w, idx + 2, d / 6.0)
+    return w

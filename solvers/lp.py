@@ -1,0 +1,418 @@
+r"""LP on one window: the feed-squared profile q = sdot^2 (spec §4).
+
+Variables: control points c (ncols,) of the uniform quadratic B-spline q(s)
+(``solvers.bspline``), scaled as c = Q chat with Q the window's largest
+velocity bound (mm^2/s^2), so all rows are O(1).
+
+    maximise    integral of q ds over the window             (w . c)
+    subject to, at every checkpoint s_k and axis x:
+        0 <= q <= ub_k,  ub_k = min(Fmax^2, min_x vmax_x^2 / x_s^2)    (velocity, feed)
+        -amax_x <= x_ss q + x_s q'/2 <= amax_x                          (acceleration)
+      and in stage 2, with q* the stage-1 optimum:
+        q <= q*_k
+        -jmax_x <= sqrt(q*_k) (x_sss q + 1.5 x_ss q' + 0.5 x_s q'') <= jmax_x  (pseudo-jerk)
+      rest at a piece end (s = 0 or L):  q = 0 and |x_s q'/2| <= a_rest_x,
+        a_rest_x = min(amax_x, jmax_x Ts / 2) (the acceleration step at rest,
+        seen over one sample period, stays inside jmax)
+      artificial window end: c_{k1} = c_{k1+1} = 0 (q = q' = 0, discarded)
+      inherited window start: c_{k0}, c_{k0+1} fixed (q, q' continuous)
+
+Since q <= q*, the true jerk |sqrt(q)(...)| <= the pseudo-jerk, so jmax holds
+at checkpoints.  Between checkpoints the limits are verified on a 4x finer
+grid and violated points are added as rows (cutting planes) and re-solved.
+
+Solvers: HiGHS (dual simplex, stage 2 re-solved from stage 1's basis) or
+Clarabel (interior point), both fed the same sparse rows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import clarabel
+import highspy
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from geometry.toolpath import PathSamples
+from solvers import bspline
+from solvers.errors import InfeasibleError, SolverFailure
+from solvers.machine import Machine
+
+FloatArray = NDArray[np.float64]
+
+#: Coefficients below this (after scaling) are dropped (HiGHS presolve trap, spec §10).
+TINY_COEF = 1e-9
+#: Jerk rows whose sqrt(q*) is below this fraction of sqrt(Q) are dropped (spec §10).
+TINY_SQRT_QSTAR = 1e-6
+#: A point whose recomputed v/a/j exceeds its limit by more than this fraction gets a row.
+VERIFY_TOL = 2e-3
+#: Verification points between consecutive checkpoints.
+VERIFY_SUBDIV = 4
+MAX_CUT_ROUNDS = 6
+#: Offset (mm) used to evaluate the left side of a geometry knot.
+BREAK_EPS_MM = 1e-6
+#: Knot intervals after an inherited window start whose jerk rows use the previous q*.
+INHERITED_INTERVALS = 2
+#: An axis whose path-derivative coefficients are all below this is not moving.
+AXIS_EPS = 1e-12
+
+GeometryFn = Callable[[FloatArray], PathSamples]
+
+
+@dataclass(frozen=True)
+class WindowSpec:
+    """One LP window over knot intervals [k0, k1) of a piece.
+
+    Attributes:
+        index: window number (for diagnostics).
+        k0, k1: knot interval range; control points k0 .. k1+1 are variables.
+        d: knot spacing, mm.  n_int: knot intervals in the piece.
+        start_fixed: (c_k0, c_k0+1) inherited from the previous window, or None
+            for a rest start (piece start).
+        end_rest: True if k1 is the piece end (true rest), False for an
+            artificial window end (q = q' = 0 there).
+        prev_c: (k0_prev, c_prev), the previous window's solution.  Rows on the
+            inherited intervals are widened (by at most VERIFY_TOL) to admit it,
+            so the window is feasible by construction.
+        prev_qstar: (k0_prev, c*_prev), the previous window's stage-1 control
+            points.  On the first ``INHERITED_INTERVALS`` knot intervals the
+            jerk rows use the previous window's q* (the inherited state was
+            made feasible against it), so stage 2 stays feasible.
+    """
+
+    index: int
+    k0: int
+    k1: int
+    d: float
+    n_int: int
+    start_fixed: tuple[float, float] | None
+    end_rest: bool
+    prev_qstar: tuple[int, FloatArray] | None = None
+    prev_c: tuple[int, FloatArray] | None = None
+
+    @property
+    def ncols(self) -> int:
+        return self.k1 - self.k0 + 2
+
+
+@dataclass(frozen=True)
+class WindowResult:
+    c: FloatArray  # (ncols,) control points, mm^2/s^2
+    c_star: FloatArray  # stage-1 solution
+    iterations: int
+    cut_rounds: int
+    added_points: int
+    binding: dict[str, FloatArray] = field(default_factory=dict)  # kind -> piece-local s
+
+
+@dataclass(frozen=True)
+class LimitSet:
+    vmax: FloatArray  # (3,)
+    amax: FloatArray
+    jmax: FloatArray
+    a_rest: FloatArray
+    feed_max: float | None
+    jerk: bool
+
+    @classmethod
+    def from_machine(cls, m: Machine, sample_period: float, jerk: bool) -> LimitSet:
+        vmax = np.array([a.limits.vmax for a in m.axes])
+        amax = np.array([a.limits.amax for a in m.axes])
+        jmax = np.array([a.limits.jmax for a in m.axes])
+        a_rest = np.minimum(amax, jmax * sample_period / 2.0) if jerk else amax
+        return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk)
+
+
+class _Rows:
+    """Accumulates sparse rows lo <= A chat <= hi."""
+
+    def __init__(self, ncols: int) -> None:
+        self.ncols = ncols
+        self.blocks: list[sp.csr_matrix] = []
+        self.lo: list[FloatArray] = []
+        self.hi: list[FloatArray] = []
+
+    def add(self, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray) -> None:
+        if A.shape[0]:
+            self.blocks.append(sp.csr_matrix(A))
+            self.lo.append(np.asarray(lo, dtype=np.float64))
+            self.hi.append(np.asarray(hi, dtype=np.float64))
+
+    def build(self) -> tuple[sp.csr_matrix, FloatArray, FloatArray]:
+        if not self.blocks:
+            return sp.csr_matrix((0, self.ncols)), np.zeros(0), np.zeros(0)
+        A = sp.vstack(self.blocks, format="csr")
+        A.data[np.abs(A.data) < TINY_COEF] = 0.0
+        A.eliminate_zeros()
+        return A, np.concatenate(self.lo), np.concatenate(self.hi)
+
+
+def _velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
+    x2 = g.d1**2
+    with np.errstate(divide="ignore"):
+        ub = np.min(np.where(x2 > AXIS_EPS, lim.vmax[None, :] ** 2 / x2, np.inf), axis=1)
+    if lim.feed_max is not None:
+        ub = np.minimum(ub, lim.feed_max**2)
+    return np.asarray(ub, dtype=np.float64)
+
+
+class WindowLP:
+    """Builds and solves the two-stage LP of one window, with cutting planes."""
+
+    def __init__(
+        self, spec: WindowSpec, lim: LimitSet, geometry: GeometryFn, solver: str, breaks: FloatArray | None = None
+    ) -> None:
+        """``breaks``: piece-local s where the geometry's third derivative may jump
+        (NURBS knots); both sides of each are verified."""
+        self.breaks = np.zeros(0) if breaks is None else np.asarray(breaks, dtype=np.float64)
+        self.spec = spec
+        self.lim = lim
+        self.geometry = geometry
+        self.solver = solver
+        self.iterations = 0
+        self.Q = 1.0
+
+    # ----- row blocks ---------------------------------------------------------
+    def _mats(self, s: FloatArray) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
+        sp_ = self.spec
+        k, W0, W1, W2 = bspline.basis(s, sp_.d, sp_.n_int, sp_.k0, sp_.k1 - 1)
+        return (
+            bspline.design(k, W0, sp_.k0, sp_.ncols),
+            bspline.design(k, W1, sp_.k0, sp_.ncols),
+            bspline.design(k, W2, sp_.k0, sp_.ncols),
+        )
+
+    def _add(self, rows: _Rows, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, s: FloatArray) -> None:
+        """Add rows at points s; on inherited intervals widen them to admit the previous solution."""
+        spec = self.spec
+        if spec.prev_c is not None:
+            near = s < (spec.k0 + INHERITED_INTERVALS) * spec.d
+            if near.any():
+                k_prev, c_prev = spec.prev_c
+                x = np.zeros(spec.ncols)
+                m = min(spec.ncols, c_prev.size - (spec.k0 - k_prev))
+                x[:m] = c_prev[spec.k0 - k_prev : spec.k0 - k_prev + m] / self.Q
+                val = A[near] @ x
+                lo = lo.copy()
+                hi = hi.copy()
+                lo[near] = np.minimum(lo[near], val)
+                hi[near] = np.maximum(hi[near], val)
+        rows.add(A, lo, hi)
+
+    def _stage1_rows(self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray | None) -> None:
+        B0, B1, _ = self._mats(g.s)
+        ub = _velocity_bound(g, self.lim)
+        if qstar is not None:
+            ub = np.minimum(ub, np.maximum(qstar, 0.0))
+        self._add(rows, B0, np.zeros(ub.size), ub / Q, g.s)
+        for ax in range(3):
+            if np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) <= AXIS_EPS:
+                continue
+            A = (sp.diags(g.d2[:, ax]) @ B0 + sp.diags(0.5 * g.d1[:, ax]) @ B1) * (Q / self.lim.amax[ax])
+            one = np.ones(g.s.size)
+            self._add(rows, A, -one, one, g.s)
+
+    def _jerk_rows(self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray) -> None:
+        keep = np.sqrt(np.maximum(qstar, 0.0)) > TINY_SQRT_QSTAR * np.sqrt(Q)
+        if not keep.any():
+            return
+        g = PathSamples(g.s[keep], g.position[keep], g.d1[keep], g.d2[keep], g.d3[keep])
+        rq = np.sqrt(qstar[keep])
+        B0, B1, B2 = self._mats(g.s)
+        for ax in range(3):
+            if np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) <= AXIS_EPS:
+                continue
+            J = sp.diags(g.d3[:, ax]) @ B0 + sp.diags(1.5 * g.d2[:, ax]) @ B1 + sp.diags(0.5 * g.d1[:, ax]) @ B2
+            A = sp.diags(rq * Q / self.lim.jmax[ax]) @ J
+            one = np.ones(g.s.size)
+            self._add(rows, A, -one, one, g.s)
+
+    def _rest_rows(self, rows: _Rows, s_rest: float, sign: float, Q: float) -> None:
+        """q(s_rest) = 0 and sign * q'(s_rest) * max_x(|x_s|/(2 a_rest_x)) <= 1."""
+        g = self.geometry(np.array([s_rest]))
+        B0, B1, _ = self._mats(g.s)
+        rows.add(B0, np.zeros(1), np.zeros(1))
+        r = float(np.max(np.abs(g.d1[0]) / (2.0 * self.lim.a_rest)))
+        rows.add(B1 * (sign * Q * r), np.array([-np.inf]), np.ones(1))
+
+    def _eval(self, c: FloatArray, s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """q, q', q'' at piece-local s of a window-local control vector c."""
+        spec = self.spec
+        k, W0, W1, W2 = bspline.basis(s, spec.d, spec.n_int, spec.k0, spec.k1 - 1)
+        C = c[k[:, None] - spec.k0 + np.arange(3)[None, :]]
+        return (
+            np.einsum("ij,ij->i", W0, C),
+            np.einsum("ij,ij->i", W1, C),
+            np.einsum("ij,ij->i", W2, C),
+        )
+
+    def _qstar(self, c_star: FloatArray, s: FloatArray) -> FloatArray:
+        """q*(s) of this window, or of the previous window on the inherited intervals."""
+        spec = self.spec
+        k, W0, _, _ = bspline.basis(s, spec.d, spec.n_int, spec.k0, spec.k1 - 1)
+        cols = k[:, None] - spec.k0 + np.arange(3)[None, :]
+        q = np.einsum("ij,ij->i", W0, c_star[cols])
+        if spec.prev_qstar is not None:
+            k_prev, c_prev = spec.prev_qstar
+            near = s < (spec.k0 + INHERITED_INTERVALS) * spec.d
+            if near.any():
+                cp = k[near, None] - k_prev + np.arange(3)[None, :]
+                q[near] = np.einsum("ij,ij->i", W0[near], c_prev[cp])
+        return np.asarray(q, dtype=np.float64)
+
+    # ----- solve -------------------------------------------------------------
+    def solve(self, s_check: FloatArray) -> WindowResult:
+        spec = self.spec
+        g = self.geometry(s_check)
+        Q = float(np.max(np.minimum(_velocity_bound(g, self.lim), 1e300)))
+        self.Q = Q
+        if not np.isfinite(Q) or Q <= 0:
+            raise InfeasibleError("window has no positive velocity bound", window=spec.index)
+        n = spec.ncols
+        w = bspline.integral_weights(spec.k0, spec.k1, spec.d, spec.k0, n) * Q
+        col_lo = np.full(n, -np.inf)
+        col_hi = np.full(n, np.inf)
+        if spec.start_fixed is not None:
+            col_lo[:2] = col_hi[:2] = np.asarray(spec.start_fixed) / Q
+        if not spec.end_rest:
+            col_lo[-2:] = col_hi[-2:] = 0.0
+
+        base = _Rows(n)
+        if spec.start_fixed is None:
+            self._rest_rows(base, spec.k0 * spec.d, 1.0, Q)
+        if spec.end_rest:
+            self._rest_rows(base, spec.k1 * spec.d, -1.0, Q)
+
+        # stage 1: velocity + acceleration
+        r1 = _Rows(n)
+        r1.blocks, r1.lo, r1.hi = list(base.blocks), list(base.lo), list(base.hi)
+        self._stage1_rows(r1, g, Q, None)
+        chat1 = self._run(r1, w, col_lo, col_hi)
+        chat1, pts1 = self._cuts(chat1, r1, w, col_lo, col_hi, Q, s_check, None)
+        c_star = chat1 * Q
+        if not self.lim.jerk:
+            return WindowResult(chat1 * Q, c_star, self.iterations, *pts1)
+
+        # stage 2: + q <= q*, pseudo-jerk
+        qstar = self._qstar(c_star, g.s)
+        r2 = _Rows(n)
+        r2.blocks, r2.lo, r2.hi = list(base.blocks), list(base.lo), list(base.hi)
+        self._stage1_rows(r2, g, Q, qstar)
+        self._jerk_rows(r2, g, Q, qstar)
+        chat2 = self._run(r2, w, col_lo, col_hi)
+        chat2, pts2 = self._cuts(chat2, r2, w, col_lo, col_hi, Q, s_check, c_star)
+        return WindowResult(chat2 * Q, c_star, self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1])
+
+    def _cuts(
+        self,
+        chat: FloatArray,
+        rows: _Rows,
+        w: FloatArray,
+        col_lo: FloatArray,
+        col_hi: FloatArray,
+        Q: float,
+        s_check: FloatArray,
+        c_star: FloatArray | None,
+    ) -> tuple[FloatArray, tuple[int, int]]:
+        """Verify on a finer grid; add violated points as rows and re-solve."""
+        frac = np.arange(1, VERIFY_SUBDIV) / VERIFY_SUBDIV
+        s_fine = (s_check[:-1, None] + np.diff(s_check)[:, None] * frac[None, :]).ravel()
+        lo, hi = s_check[0], s_check[-1]
+        br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
+        s_fine = np.sort(np.concatenate([s_fine, br - BREAK_EPS_MM, br]))
+        g = self.geometry(s_fine)
+        rounds = added = 0
+        for _ in range(MAX_CUT_ROUNDS):
+            viol = self._violations(chat * Q, g, c_star)
+            if not viol.any():
+                break
+            gv = PathSamples(g.s[viol], g.position[viol], g.d1[viol], g.d2[viol], g.d3[viol])
+            if c_star is None:
+                self._stage1_rows(rows, gv, Q, None)
+            else:
+                qstar = self._qstar(c_star, gv.s)
+                self._stage1_rows(rows, gv, Q, qstar)
+                self._jerk_rows(rows, gv, Q, qstar)
+            chat = self._run(rows, w, col_lo, col_hi)
+            rounds += 1
+            added += int(viol.sum())
+        return chat, (rounds, added)
+
+    def _violations(self, c: FloatArray, g: PathSamples, c_star: FloatArray | None) -> NDArray[np.bool_]:
+        q, q1, q2 = self._eval(c, g.s)
+        q = np.maximum(q, 0.0)
+        tol = 1.0 + VERIFY_TOL
+        bad = q > _velocity_bound(g, self.lim) * tol**2
+        a = g.d2 * q[:, None] + 0.5 * g.d1 * q1[:, None]
+        bad |= np.any(np.abs(a) > self.lim.amax[None, :] * tol, axis=1)
+        if c_star is not None:
+            j = np.sqrt(q)[:, None] * (g.d3 * q[:, None] + 1.5 * g.d2 * q1[:, None] + 0.5 * g.d1 * q2[:, None])
+            bad |= np.any(np.abs(j) > self.lim.jmax[None, :] * tol, axis=1)
+        return np.asarray(bad)
+
+    def _run(self, rows: _Rows, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray) -> FloatArray:
+        A, lo, hi = rows.build()
+        if self.solver == "highs":
+            return self._highs(A, lo, hi, w, col_lo, col_hi)
+        return self._clarabel(A, lo, hi, w, col_lo, col_hi)
+
+    def _highs(
+        self, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray
+    ) -> FloatArray:
+        h = highspy.Highs()  # type: ignore[no-untyped-call]
+        h.setOptionValue("output_flag", False)
+        lp = highspy.HighsLp()
+        lp.num_col_ = A.shape[1]
+        lp.num_row_ = A.shape[0]
+        lp.col_cost_ = -w
+        lp.col_lower_ = np.where(np.isfinite(col_lo), col_lo, -highspy.kHighsInf)
+        lp.col_upper_ = np.where(np.isfinite(col_hi), col_hi, highspy.kHighsInf)
+        lp.row_lower_ = np.where(np.isfinite(lo), lo, -highspy.kHighsInf)
+        lp.row_upper_ = np.where(np.isfinite(hi), hi, highspy.kHighsInf)
+        Acsc = A.tocsc()
+        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+        lp.a_matrix_.start_ = Acsc.indptr.astype(np.int32)
+        lp.a_matrix_.index_ = Acsc.indices.astype(np.int32)
+        lp.a_matrix_.value_ = Acsc.data
+        h.passModel(lp)
+        h.run()
+        status = h.getModelStatus()
+        if status != highspy.HighsModelStatus.kOptimal:
+            h.setOptionValue("presolve", "off")
+            h.clearSolver()
+            h.run()
+            status = h.getModelStatus()
+        self.iterations += int(h.getInfo().simplex_iteration_count)
+        if status == highspy.HighsModelStatus.kInfeasible:
+            raise InfeasibleError("LP window is infeasible", window=self.spec.index, status=str(status))
+        if status != highspy.HighsModelStatus.kOptimal:
+            raise SolverFailure("HiGHS did not reach optimality", window=self.spec.index, status=str(status))
+        return np.asarray(h.getSolution().col_value, dtype=np.float64)
+
+    def _clarabel(
+        self, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray
+    ) -> FloatArray:
+        n = A.shape[1]
+        fixed = np.flatnonzero(np.isfinite(col_lo) & (col_lo == col_hi))
+        E = sp.csr_matrix((np.ones(fixed.size), (np.arange(fixed.size), fixed)), shape=(fixed.size, n))
+        eq = np.isfinite(lo) & np.isfinite(hi) & (lo == hi)
+        up = np.isfinite(hi) & ~eq
+        dn = np.isfinite(lo) & ~eq
+        Aall = sp.vstack([E, A[eq], A[up], -A[dn]], format="csc")
+        b = np.concatenate([col_lo[fixed], lo[eq], hi[up], -lo[dn]])
+        cones = [clarabel.ZeroConeT(fixed.size + int(eq.sum())), clarabel.NonnegativeConeT(int(up.sum() + dn.sum()))]
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        P = sp.csc_matrix((n, n))
+        solver = clarabel.DefaultSolver(P, -w, Aall, b, cones, settings)
+        sol = solver.solve()
+        self.iterations += int(sol.iterations)
+        status = str(sol.status)
+        if status in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
+            raise InfeasibleError("LP window is infeasible", window=self.spec.index, status=status)
+        if status not in ("Solved", "AlmostSolved"):
+            raise SolverFailure("Clarabel did not converge", window=self.spec.index, status=status)
+        return np.asarray(sol.x, dtype=np.float64)

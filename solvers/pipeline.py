@@ -1,0 +1,324 @@
+"""The scheduling pipeline: toolpath -> windows -> feed profile -> time samples.
+
+    schedule(toolpath, machine, options) -> Schedule
+
+1. Split the path at rest points (ends, corners) into pieces.
+2. Per piece: a uniform knot grid (spacing d), LP windows of ``lp_window``
+   knot intervals overlapping by ``lp_overlap`` (at least twice the stopping
+   distance, spec §6); each window inherits c_k0, c_k0+1 from the previous one.
+3. Time reconstruction at the sample period and axis kinematics at each sample.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from geometry.toolpath import PathSamples, Piece, Toolpath
+from solvers import bspline
+from solvers.errors import InvalidOptionsError
+from solvers.lp import LimitSet, WindowLP, WindowSpec
+from solvers.machine import AXES, Machine
+from solvers.timing import PieceProfile, PieceTiming
+
+FloatArray = NDArray[np.float64]
+
+METHODS = ("lp",)
+SOLVERS = ("highs", "clarabel")
+#: Fewest knot intervals in a piece.
+MIN_INTERVALS = 3
+#: Default knot spacing as a fraction of the machine's stopping distance.
+KNOT_SPACING_PER_STOP = 0.2
+#: Overlap safety factor over the stopping distance (spec §6).
+OVERLAP_SAFETY = 2.0
+DEFAULT_LP_WINDOW = 200
+#: Utilisation at or above which a constraint is reported as binding.
+BINDING_UTILISATION = 0.98
+#: Samples computed per chunk (bounds memory in the reconstruction).
+SAMPLE_CHUNK = 100_000
+
+
+@dataclass(frozen=True)
+class Options:
+    """Scheduling options (all lengths mm, times s).
+
+    Attributes:
+        method: "lp" (velocity/acceleration/pseudo-jerk).
+        sample_period: Ts of the output, s.
+        knot_spacing: feed-profile knot spacing d, mm; default 0.2 x stopping distance.
+        checkpoints_per_interval: N, constraint checkpoints per knot interval.
+        lp_window: LP window size in knot intervals.
+        lp_overlap: LP window overlap in knot intervals; default from the stopping distance.
+        jerk: include the pseudo-jerk stage.
+        solver: "highs" or "clarabel".
+    """
+
+    method: str = "lp"
+    sample_period: float = 1e-3
+    knot_spacing: float | None = None
+    checkpoints_per_interval: int = 5
+    lp_window: int = DEFAULT_LP_WINDOW
+    lp_overlap: int | None = None
+    jerk: bool = True
+    solver: str = "highs"
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise InvalidOptionsError(f"method must be one of {METHODS}", field="options.method", value=self.method)
+        if self.solver not in SOLVERS:
+            raise InvalidOptionsError(f"solver must be one of {SOLVERS}", field="options.solver", value=self.solver)
+        _pos(self.sample_period, "options.sample_period")
+        if self.sample_period > 0.1:
+            raise InvalidOptionsError("must be <= 0.1 s", field="options.sample_period", value=self.sample_period)
+        if self.knot_spacing is not None:
+            _pos(self.knot_spacing, "options.knot_spacing")
+        if not (isinstance(self.checkpoints_per_interval, int) and 1 <= self.checkpoints_per_interval <= 64):
+            raise InvalidOptionsError(
+                "must be an integer in [1, 64]", field="options.checkpoints_per_interval",
+                value=self.checkpoints_per_interval,
+            )
+        if not (isinstance(self.lp_window, int) and 8 <= self.lp_window <= 100_000):
+            raise InvalidOptionsError(
+                "must be an integer in [8, 100000]", field="options.lp_window", value=self.lp_window
+            )
+        if self.lp_overlap is not None and not (
+            isinstance(self.lp_overlap, int) and 3 <= self.lp_overlap <= self.lp_window // 2
+        ):
+            raise InvalidOptionsError(
+                "must be an integer in [3, lp_window / 2]", field="options.lp_overlap", value=self.lp_overlap
+            )
+
+
+def _pos(v: object, fld: str) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise InvalidOptionsError("must be a finite number > 0", field=fld, value=v)
+
+
+@dataclass(frozen=True)
+class TimeSamples:
+    """Axis commands at t_k = k Ts.
+
+    Attributes:
+        t: (K,) s.  s: (K,) arc length, mm.  feed: (K,) mm/s.
+        position, velocity, acceleration, jerk: (K, 3) per axis x, y, z in
+            mm, mm/s, mm/s^2, mm/s^3.
+    """
+
+    t: FloatArray
+    s: FloatArray
+    feed: FloatArray
+    position: FloatArray
+    velocity: FloatArray
+    acceleration: FloatArray
+    jerk: FloatArray
+
+
+@dataclass(frozen=True)
+class Schedule:
+    samples: TimeSamples
+    summary: dict[str, Any]
+    diagnostics: dict[str, Any]
+    profiles: tuple[PieceProfile, ...] = field(repr=False, default=())
+
+
+@dataclass(frozen=True)
+class WindowPlan:
+    d: float
+    n_int: int
+    window: int
+    overlap: int
+
+
+def plan_piece(piece: Piece, machine: Machine, opt: Options) -> WindowPlan:
+    D = machine.stopping_distance()
+    d_target = opt.knot_spacing if opt.knot_spacing is not None else KNOT_SPACING_PER_STOP * D
+    n_int = max(MIN_INTERVALS, math.ceil(piece.length / d_target - 1e-9))
+    d = piece.length / n_int
+    overlap = opt.lp_overlap if opt.lp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
+    window = max(opt.lp_window, 3 * overlap)
+    return WindowPlan(d=d, n_int=n_int, window=window, overlap=overlap)
+
+
+def _local(toolpath: Toolpath, piece: Piece) -> Any:
+    def geometry(s_local: FloatArray) -> PathSamples:
+        g = toolpath.evaluate(np.asarray(s_local) + piece.s_start, piece)
+        return PathSamples(np.asarray(s_local, dtype=np.float64), g.position, g.d1, g.d2, g.d3)
+
+    return geometry
+
+
+def solve_piece(
+    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any]
+) -> PieceProfile:
+    """Walk LP windows over one piece and assemble its control points."""
+    plan = plan_piece(piece, machine, opt)
+    geometry = _local(toolpath, piece)
+    ks = toolpath.knot_s
+    breaks = ks[(ks > piece.s_start) & (ks < piece.s_end)] - piece.s_start
+    c = np.zeros(plan.n_int + 2)
+    k0 = 0
+    start: tuple[float, float] | None = None
+    prev_qstar: tuple[int, FloatArray] | None = None
+    prev_c: tuple[int, FloatArray] | None = None
+    N = opt.checkpoints_per_interval
+    while True:
+        k1 = min(k0 + plan.window, plan.n_int)
+        # avoid a last window shorter than the overlap: stretch this one instead
+        if 0 < plan.n_int - k1 < plan.overlap + 3:
+            k1 = plan.n_int
+        spec = WindowSpec(stats["windows"], k0, k1, plan.d, plan.n_int, start, k1 == plan.n_int, prev_qstar, prev_c)
+        s_check = np.linspace(k0 * plan.d, k1 * plan.d, (k1 - k0) * N + 1)
+        t0 = time.perf_counter()
+        res = WindowLP(spec, lim, geometry, opt.solver, breaks).solve(s_check)
+        stats["window_times"].append(time.perf_counter() - t0)
+        stats["windows"] += 1
+        stats["iterations"] += res.iterations
+        stats["cut_rounds"] += res.cut_rounds
+        stats["cut_points"] += res.added_points
+        if spec.end_rest:
+            c[k0 : k1 + 2] = res.c
+            break
+        k_next = k1 - plan.overlap
+        c[k0 : k_next + 2] = res.c[: k_next - k0 + 2]
+        start = (float(res.c[k_next - k0]), float(res.c[k_next - k0 + 1]))
+        prev_qstar = (k0, res.c_star)
+        prev_c = (k0, res.c)
+        k0 = k_next
+    # rest at both piece ends holds exactly (the LP meets it to solver tolerance)
+    c[0] = -c[1]
+    c[-1] = -c[-2]
+    stats["control_points"] += c.size
+    stats["checkpoints"] += plan.n_int * N + 1
+    stats["knot_spacing"].append(plan.d)
+    return PieceProfile(s_start=piece.s_start, length=piece.length, d=plan.d, c=c)
+
+
+def _kinematics(
+    toolpath: Toolpath, piece: Piece, prof: PieceProfile, s_local: FloatArray
+) -> tuple[PathSamples, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Geometry and v, a, j (K, 3) and feed (K,) at piece-local s."""
+    g = toolpath.evaluate(s_local + piece.s_start, piece)
+    q, q1, q2 = bspline.evaluate(prof.c, s_local, prof.d)
+    q = np.maximum(q, 0.0)
+    f = np.sqrt(q)
+    sdd = 0.5 * q1
+    sddd = 0.5 * q2 * f
+    v = g.d1 * f[:, None]
+    a = g.d2 * q[:, None] + g.d1 * sdd[:, None]
+    j = g.d3 * (q * f)[:, None] + 3.0 * g.d2 * (f * sdd)[:, None] + g.d1 * sddd[:, None]
+    return g, f, v, a, j
+
+
+def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = None) -> Schedule:
+    """Fastest feed along ``toolpath`` within ``machine``'s limits, sampled at Ts."""
+    opt = options or Options()
+    t_start = time.perf_counter()
+    lim = LimitSet.from_machine(machine, opt.sample_period, opt.jerk)
+    stats: dict[str, Any] = {
+        "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
+        "control_points": 0, "checkpoints": 0, "knot_spacing": [], "window_times": [],
+    }
+    profiles = [solve_piece(toolpath, p, machine, opt, lim, stats) for p in toolpath.pieces]
+    t_lp = time.perf_counter() - t_start
+    timings = [PieceTiming.build(p) for p in profiles]
+    durations = np.array([tm.duration for tm in timings])
+    t_offsets = np.concatenate([[0.0], np.cumsum(durations)])
+    motion_time = float(t_offsets[-1])
+    Ts = opt.sample_period
+    n_samples = math.ceil(motion_time / Ts - 1e-9) + 1
+    t_all = np.arange(n_samples, dtype=np.float64) * Ts
+    cols: dict[str, list[FloatArray]] = {k: [] for k in ("s", "feed", "pos", "v", "a", "j")}
+    for piece, prof, tm, t0 in zip(toolpath.pieces, profiles, timings, t_offsets[:-1], strict=True):
+        lo = np.searchsorted(t_all, t0, side="left")
+        hi = np.searchsorted(t_all, t0 + tm.duration, side="left") if piece.index < len(profiles) - 1 else n_samples
+        for a in range(lo, hi, SAMPLE_CHUNK):
+            b = min(hi, a + SAMPLE_CHUNK)
+            s_local = np.clip(tm.s_at(t_all[a:b] - t0), 0.0, piece.length)
+            g, f, v, acc, jerk = _kinematics(toolpath, piece, prof, s_local)
+            cols["s"].append(s_local + piece.s_start)
+            cols["feed"].append(f)
+            cols["pos"].append(g.position)
+            cols["v"].append(v)
+            cols["a"].append(acc)
+            cols["j"].append(jerk)
+    samples = TimeSamples(
+        t=t_all,
+        s=np.concatenate(cols["s"]),
+        feed=np.concatenate(cols["feed"]),
+        position=np.concatenate(cols["pos"]),
+        velocity=np.concatenate(cols["v"]),
+        acceleration=np.concatenate(cols["a"]),
+        jerk=np.concatenate(cols["j"]),
+    )
+    # the last sample sits exactly on the path end, at rest
+    samples.feed[-1] = 0.0
+    samples.velocity[-1] = 0.0
+    compute_time = time.perf_counter() - t_start
+    summary = {
+        "method": opt.method,
+        "solver": opt.solver,
+        "path_length": toolpath.length,
+        "motion_time": motion_time,
+        "compute_time": compute_time,
+        "lp_time": t_lp,
+        "windows": stats["windows"],
+        "solver_iterations": stats["iterations"],
+        "cut_rounds": stats["cut_rounds"],
+        "cut_points": stats["cut_points"],
+        "control_points": stats["control_points"],
+        "checkpoints": stats["checkpoints"],
+        "knot_spacing": float(np.min(stats["knot_spacing"])),
+        "samples": int(n_samples),
+        "sample_period": Ts,
+        "peak_utilisation": _peak_utilisation(samples, lim),
+        "window_times": stats["window_times"],
+    }
+    diagnostics = {
+        "corners": [
+            {"s": c.s, "angle_deg": c.angle_deg, "segment": c.segment, "position": list(c.position)}
+            for c in toolpath.corners
+        ],
+        "binding": _binding(toolpath, profiles, lim, opt),
+        "rest_acceleration": {ax: float(v) for ax, v in zip(AXES, lim.a_rest, strict=True)},
+    }
+    return Schedule(samples=samples, summary=summary, diagnostics=diagnostics, profiles=tuple(profiles))
+
+
+def _peak_utilisation(smp: TimeSamples, lim: LimitSet) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for i, ax in enumerate(AXES):
+        out[f"velocity_{ax}"] = float(np.max(np.abs(smp.velocity[:, i])) / lim.vmax[i])
+        out[f"acceleration_{ax}"] = float(np.max(np.abs(smp.acceleration[:, i])) / lim.amax[i])
+        out[f"jerk_{ax}"] = float(np.max(np.abs(smp.jerk[:, i])) / lim.jmax[i])
+    if lim.feed_max is not None:
+        out["feed"] = float(np.max(smp.feed) / lim.feed_max)
+    return out
+
+
+def _binding(toolpath: Toolpath, profiles: list[PieceProfile], lim: LimitSet, opt: Options) -> dict[str, Any]:
+    """Where each constraint is within 2% of its limit, at the checkpoints."""
+    found: dict[str, list[FloatArray]] = {}
+    for piece, prof in zip(toolpath.pieces, profiles, strict=True):
+        s_local = np.linspace(0.0, piece.length, prof.n_int * opt.checkpoints_per_interval + 1)
+        _, f, v, a, j = _kinematics(toolpath, piece, prof, s_local)
+        s_glob = s_local + piece.s_start
+        util = {
+            "velocity": np.max(np.abs(v) / lim.vmax, axis=1),
+            "acceleration": np.max(np.abs(a) / lim.amax, axis=1),
+        }
+        if opt.jerk:
+            util["jerk"] = np.max(np.abs(j) / lim.jmax, axis=1)
+        if lim.feed_max is not None:
+            util["feed"] = f / lim.feed_max
+        for kind, u in util.items():
+            found.setdefault(kind, []).append(s_glob[u >= BINDING_UTILISATION])
+    out: dict[str, Any] = {}
+    for kind, parts in found.items():
+        s_all = np.concatenate(parts)
+        out[kind] = {"count": int(s_all.size), "s": [float(x) for x in s_all[:: max(1, s_all.size // 50)]]}
+    return out

@@ -1,0 +1,74 @@
+"""Bad machine and option input raises typed errors naming the field."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from solvers.errors import InvalidMachineError, InvalidOptionsError, ScheduleError
+from solvers.machine import Axis, AxisLimits, DriveModel, Machine, derive_limits, preset, router
+from solvers.pipeline import Options
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"method": "magic"}, "options.method"),
+        ({"solver": "gurobi"}, "options.solver"),
+        ({"sample_period": 0.0}, "options.sample_period"),
+        ({"sample_period": math.nan}, "options.sample_period"),
+        ({"sample_period": True}, "options.sample_period"),
+        ({"knot_spacing": -1.0}, "options.knot_spacing"),
+        ({"knot_spacing": math.inf}, "options.knot_spacing"),
+        ({"checkpoints_per_interval": 0}, "options.checkpoints_per_interval"),
+        ({"lp_window": 4}, "options.lp_window"),
+        ({"lp_window": 40, "lp_overlap": 30}, "options.lp_overlap"),
+    ],
+)
+def test_bad_options(kwargs: dict[str, object], field: str) -> None:
+    with pytest.raises(InvalidOptionsError) as err:
+        Options(**kwargs)  # type: ignore[arg-type]
+    assert err.value.field == field
+    assert isinstance(err.value, ScheduleError)
+
+
+@pytest.mark.parametrize("bad", [0.0, -5.0, math.nan, math.inf])
+def test_bad_axis_limit(bad: float) -> None:
+    axes = list(router().axes)
+    axes[1] = Axis("y", AxisLimits(vmax=100.0, amax=bad, jmax=1e4))
+    with pytest.raises(InvalidMachineError) as err:
+        Machine("custom", tuple(axes))  # type: ignore[arg-type]
+    assert err.value.field == "machine.axes.y.amax"
+
+
+def test_unknown_preset() -> None:
+    with pytest.raises(InvalidMachineError) as err:
+        preset("mill9000")
+    assert err.value.field == "machine"
+
+
+def test_router_derived_limits_match_thesis_table() -> None:
+    """Spec §4: derived from the drive model, X: amax ~ 500, jmax ~ 6.4e4; Y: ~3.3e3, ~1.56e5."""
+    m = router()
+    x = derive_limits(m.axes[0].drive, 150.0)  # type: ignore[arg-type]
+    y = derive_limits(m.axes[1].drive, 150.0)  # type: ignore[arg-type]
+    assert x.amax == pytest.approx(500.0, rel=0.01)
+    assert x.jmax == pytest.approx(6.4e4, rel=0.02)
+    assert y.amax == pytest.approx(3.34e3, rel=0.01)
+    assert y.jmax == pytest.approx(1.56e5, rel=0.02)
+    # the derived limits keep |u| <= umax and |e| <= emax at the corner of the box
+    for axis, lim in (("x", x), ("y", y), ("z", m.axes[2].limits)):
+        drv = m.axes["xyz".index(axis)].drive
+        assert drv is not None
+        u = drv.M * lim.amax + drv.b * lim.vmax + abs(drv.c) + drv.d
+        e = drv.Kv * lim.vmax + drv.Ka * lim.amax + drv.Kj * lim.jmax
+        assert u <= drv.umax * (1 + 1e-12)
+        assert e <= drv.emax * (1 + 1e-12)
+
+
+def test_drive_without_headroom_rejected() -> None:
+    drv = DriveModel(M=1e-3, b=0.05, c=9.0, d=1.5, Kv=1e-5, Ka=1e-5, Kj=1e-8, umax=10.0, emax=0.02)
+    with pytest.raises(InvalidMachineError) as err:
+        derive_limits(drv, 100.0, "x")
+    assert err.value.field == "machine.axes.x.drive.umax"
