@@ -33,7 +33,7 @@ SOLVERS = ("highs", "clarabel")
 #: Fewest knot intervals in a piece.
 MIN_INTERVALS = 3
 #: Default knot spacing as a fraction of the machine's stopping distance.
-KNOT_SPACING_PER_STOP = 0.2
+KNOT_SPACING_PER_STOP = 0.1
 #: Overlap safety factor over the stopping distance (spec §6).
 OVERLAP_SAFETY = 2.0
 DEFAULT_LP_WINDOW = 200
@@ -50,7 +50,7 @@ class Options:
     Attributes:
         method: "lp" (velocity/acceleration/pseudo-jerk).
         sample_period: Ts of the output, s.
-        knot_spacing: feed-profile knot spacing d, mm; default 0.2 x stopping distance.
+        knot_spacing: feed-profile knot spacing d, mm; default 0.1 x stopping distance (2.3 mm on the router).
         checkpoints_per_interval: N, constraint checkpoints per knot interval.
         lp_window: LP window size in knot intervals.
         lp_overlap: LP window overlap in knot intervals; default from the stopping distance.
