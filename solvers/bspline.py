@@ -51,13 +51,15 @@ def design(k: IntArray, W: FloatArray, col0: int, ncols: int) -> sp.csr_matrix:
 def evaluate(c: FloatArray, s: FloatArray, d: float) -> tuple[FloatArray, FloatArray, FloatArray]:
     """q, q', q'' of the profile with control points c at piece-local s."""
     n_int = c.size - 2
-    k, W0, W1, W2 = basis(s, d, n_int)
-    C = np.column_stack([c[k], c[k + 1], c[k + 2]])
-    return (
-        np.einsum("ij,ij->i", W0, C),
-        np.einsum("ij,ij->i", W1, C),
-        np.einsum("ij,ij->i", W2, C),
-    )
+    x = np.asarray(s, dtype=np.float64) / d
+    k = np.clip(np.floor(x), 0, n_int - 1).astype(np.int64)
+    t = x - k
+    c0, c1, c2 = c[k], c[k + 1], c[k + 2]
+    # q = (c0 + c1)/2 + (c1 - c0) t + (c0 - 2 c1 + c2) t^2 / 2
+    a2 = c0 - 2.0 * c1 + c2
+    a1 = c1 - c0
+    q = 0.5 * (c0 + c1) + t * (a1 + 0.5 * a2 * t)
+    return q, (a1 + a2 * t) / d, a2 / (d * d)
 
 
 def integral_weights(k0: int, k1: int, d: float, col0: int, ncols: int) -> FloatArray:

@@ -134,6 +134,9 @@ class _Rows:
         self.blocks: list[sp.csr_matrix] = []
         self.lo: list[FloatArray] = []
         self.hi: list[FloatArray] = []
+        #: HiGHS model holding the first ``passed`` blocks (cut rounds add only new rows)
+        self.highs: highspy.Highs | None = None
+        self.passed = 0
 
     def add(self, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray) -> None:
         if A.shape[0]:
@@ -141,13 +144,14 @@ class _Rows:
             self.lo.append(np.asarray(lo, dtype=np.float64))
             self.hi.append(np.asarray(hi, dtype=np.float64))
 
-    def build(self) -> tuple[sp.csr_matrix, FloatArray, FloatArray]:
-        if not self.blocks:
+    def build(self, first: int = 0) -> tuple[sp.csr_matrix, FloatArray, FloatArray]:
+        """Rows of blocks[first:] as one cleaned CSR matrix with bounds."""
+        if len(self.blocks) <= first:
             return sp.csr_matrix((0, self.ncols)), np.zeros(0), np.zeros(0)
-        A = sp.vstack(self.blocks, format="csr")
+        A = sp.vstack(self.blocks[first:], format="csr")
         A.data[np.abs(A.data) < TINY_COEF] = 0.0
         A.eliminate_zeros()
-        return A, np.concatenate(self.lo), np.concatenate(self.hi)
+        return A, np.concatenate(self.lo[first:]), np.concatenate(self.hi[first:])
 
 
 def _velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
@@ -354,15 +358,34 @@ class WindowLP:
         return np.asarray(bad)
 
     def _run(self, rows: _Rows, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray) -> FloatArray:
-        A, lo, hi = rows.build()
         if self.solver == "highs":
-            return self._highs(A, lo, hi, w, col_lo, col_hi)
+            return self._highs(rows, w, col_lo, col_hi)
+        A, lo, hi = rows.build()
         return self._clarabel(A, lo, hi, w, col_lo, col_hi)
 
-    def _highs(
-        self, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray
-    ) -> FloatArray:
+    def _highs(self, rows: _Rows, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray) -> FloatArray:
+        """Solve with HiGHS; after the first call only the new (cut) rows are added and
+        the dual simplex restarts from the previous basis."""
+        inf = highspy.kHighsInf
+        if rows.highs is not None:
+            h = rows.highs
+            A, lo, hi = rows.build(rows.passed)
+            rows.passed = len(rows.blocks)
+            if A.shape[0]:
+                h.addRows(
+                    A.shape[0],
+                    np.where(np.isfinite(lo), lo, -inf),
+                    np.where(np.isfinite(hi), hi, inf),
+                    A.nnz,
+                    A.indptr[:-1].astype(np.int32),
+                    A.indices.astype(np.int32),
+                    A.data,
+                )
+            return self._highs_run(h)
+        A, lo, hi = rows.build()
+        rows.passed = len(rows.blocks)
         h = highspy.Highs()  # type: ignore[no-untyped-call]
+        rows.highs = h
         h.setOptionValue("output_flag", False)
         lp = highspy.HighsLp()
         lp.num_col_ = A.shape[1]
@@ -378,6 +401,9 @@ class WindowLP:
         lp.a_matrix_.index_ = Acsc.indices.astype(np.int32)
         lp.a_matrix_.value_ = Acsc.data
         h.passModel(lp)
+        return self._highs_run(h)
+
+    def _highs_run(self, h: highspy.Highs) -> FloatArray:
         h.run()
         status = h.getModelStatus()
         if status != highspy.HighsModelStatus.kOptimal:
