@@ -129,6 +129,9 @@ def main() -> dict[str, Any]:
         "max_fd_utilisation": worst_util,
         "ruckig_time_sync_max_dev_mm": max_dev_time_sync,
         "ruckig_phase_sync_max_dev_mm": max_dev_phase,
+        "ruckig_time_sync_same_duration": all(
+            abs(c["ruckig"]["phase_duration"] - c["ruckig"]["time_sync_duration"]) < 1e-9 for c in out["cases"]
+        ),
         "ruckig_phase_equals_1dof": all(
             abs(c["ruckig"]["phase_duration"] - c["ruckig"]["one_dof_duration"]) < 1e-9 for c in out["cases"]
         ),
