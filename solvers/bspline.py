@@ -48,13 +48,17 @@ def design(k: IntArray, W: FloatArray, col0: int, ncols: int) -> sp.csr_matrix:
     return sp.csr_matrix((W.ravel(), (rows, cols)), shape=(K, ncols))
 
 
-def evaluate(c: FloatArray, s: FloatArray, d: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """q, q', q'' of the profile with control points c at piece-local s."""
-    n_int = c.size - 2
+def evaluate(
+    c: FloatArray, s: FloatArray, d: float, k_lo: int = 0, k_hi: int | None = None, col0: int = 0
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """q, q', q'' at piece-local s of the profile whose control points c start at
+    global index ``col0``; knot intervals clamped to [k_lo, k_hi] (default: all of c)."""
     x = np.asarray(s, dtype=np.float64) / d
-    k = np.clip(np.floor(x), 0, n_int - 1).astype(np.int64)
+    hi = col0 + c.size - 3 if k_hi is None else k_hi
+    k = np.clip(np.floor(x), k_lo, hi).astype(np.int64)
     t = x - k
-    c0, c1, c2 = c[k], c[k + 1], c[k + 2]
+    i = k - col0
+    c0, c1, c2 = c[i], c[i + 1], c[i + 2]
     # q = (c0 + c1)/2 + (c1 - c0) t + (c0 - 2 c1 + c2) t^2 / 2
     a2 = c0 - 2.0 * c1 + c2
     a1 = c1 - c0

@@ -119,9 +119,7 @@ class LimitSet:
 
     @classmethod
     def from_machine(cls, m: Machine, sample_period: float, jerk: bool) -> LimitSet:
-        vmax = np.array([a.limits.vmax for a in m.axes])
-        amax = np.array([a.limits.amax for a in m.axes])
-        jmax = np.array([a.limits.jmax for a in m.axes])
+        vmax, amax, jmax = m.limit_arrays()
         a_rest = np.minimum(amax, jmax * sample_period / 2.0) if jerk else amax
         return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk)
 
@@ -245,27 +243,20 @@ class WindowLP:
     def _eval(self, c: FloatArray, s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """q, q', q'' at piece-local s of a window-local control vector c."""
         spec = self.spec
-        k, W0, W1, W2 = bspline.basis(s, spec.d, spec.n_int, spec.k0, spec.k1 - 1)
-        C = c[k[:, None] - spec.k0 + np.arange(3)[None, :]]
-        return (
-            np.einsum("ij,ij->i", W0, C),
-            np.einsum("ij,ij->i", W1, C),
-            np.einsum("ij,ij->i", W2, C),
-        )
+        return bspline.evaluate(c, s, spec.d, k_lo=spec.k0, k_hi=spec.k1 - 1, col0=spec.k0)
 
     def _qstar(self, c_star: FloatArray, s: FloatArray) -> FloatArray:
         """q*(s) of this window, or of the previous window on the inherited intervals."""
         spec = self.spec
-        k, W0, _, _ = bspline.basis(s, spec.d, spec.n_int, spec.k0, spec.k1 - 1)
-        cols = k[:, None] - spec.k0 + np.arange(3)[None, :]
-        q = np.einsum("ij,ij->i", W0, c_star[cols])
+        q = self._eval(c_star, s)[0]
         if spec.prev_qstar is not None:
             k_prev, c_prev = spec.prev_qstar
             near = s < (spec.k0 + INHERITED_INTERVALS) * spec.d
             if near.any():
-                cp = k[near, None] - k_prev + np.arange(3)[None, :]
-                q[near] = np.einsum("ij,ij->i", W0[near], c_prev[cp])
-        return np.asarray(q, dtype=np.float64)
+                q[near] = bspline.evaluate(
+                    c_prev, s[near], spec.d, k_lo=spec.k0, k_hi=spec.k1 - 1, col0=k_prev
+                )[0]
+        return q
 
     # ----- solve -------------------------------------------------------------
     def solve(self, s_check: FloatArray) -> WindowResult:

@@ -20,6 +20,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
+from numpy.typing import NDArray
+
 from solvers.errors import InvalidMachineError
 
 AXES = ("x", "y", "z")
@@ -104,6 +107,14 @@ class Machine:
                     )
         if self.feed_max is not None:
             _positive(self.feed_max, "machine.feed_max")
+
+    def limit_arrays(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Per-axis (vmax, amax, jmax), each (3,) in mm/s, mm/s^2, mm/s^3."""
+        return (
+            np.array([a.limits.vmax for a in self.axes]),
+            np.array([a.limits.amax for a in self.axes]),
+            np.array([a.limits.jmax for a in self.axes]),
+        )
 
     def stopping_distance(self) -> float:
         """Longest distance (mm) any axis needs to stop from vmax under amax, jmax (spec §6)."""

@@ -24,11 +24,8 @@ TS = 1e-3
 
 
 def _limits(m: Machine) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return (
-        np.array([a.limits.vmax for a in m.axes]),
-        np.array([a.limits.amax for a in m.axes]),
-        np.array([a.limits.jmax for a in m.axes]),
-    )
+    """Per-axis (vmax, amax, jmax) arrays (3,): the machine's input limits."""
+    return m.limit_arrays()
 
 
 CASES = {
