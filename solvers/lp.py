@@ -105,6 +105,8 @@ class WindowResult:
     iterations: int
     cut_rounds: int
     added_points: int
+    #: verification points still over a limit (by > VERIFY_TOL) after the last cut round
+    unverified: int = 0
     binding: dict[str, FloatArray] = field(default_factory=dict)  # kind -> piece-local s
 
 
@@ -289,7 +291,7 @@ class WindowLP:
         chat1, pts1 = self._cuts(chat1, r1, w, col_lo, col_hi, Q, s_check, None)
         c_star = chat1 * Q
         if not self.lim.jerk:
-            return WindowResult(chat1 * Q, c_star, self.iterations, *pts1)
+            return WindowResult(chat1 * Q, c_star, self.iterations, pts1[0], pts1[1], pts1[2])
 
         # stage 2: + q <= q*, pseudo-jerk
         qstar = self._qstar(c_star, g.s)
@@ -299,7 +301,7 @@ class WindowLP:
         self._jerk_rows(r2, g, Q, qstar)
         chat2 = self._run(r2, w, col_lo, col_hi)
         chat2, pts2 = self._cuts(chat2, r2, w, col_lo, col_hi, Q, s_check, c_star)
-        return WindowResult(chat2 * Q, c_star, self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1])
+        return WindowResult(chat2 * Q, c_star, self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1], pts2[2])
 
     def _cuts(
         self,
@@ -311,7 +313,7 @@ class WindowLP:
         Q: float,
         s_check: FloatArray,
         c_star: FloatArray | None,
-    ) -> tuple[FloatArray, tuple[int, int]]:
+    ) -> tuple[FloatArray, tuple[int, int, int]]:
         """Verify on a finer grid; add violated points as rows and re-solve."""
         frac = np.arange(1, VERIFY_SUBDIV) / VERIFY_SUBDIV
         s_fine = (s_check[:-1, None] + np.diff(s_check)[:, None] * frac[None, :]).ravel()
@@ -320,9 +322,9 @@ class WindowLP:
         s_fine = np.sort(np.concatenate([s_fine, br - BREAK_EPS_MM, br]))
         g = self.geometry(s_fine)
         rounds = added = 0
-        for _ in range(MAX_CUT_ROUNDS):
+        for i in range(MAX_CUT_ROUNDS + 1):
             viol = self._violations(chat * Q, g, c_star)
-            if not viol.any():
+            if not viol.any() or i == MAX_CUT_ROUNDS:
                 break
             gv = PathSamples(g.s[viol], g.position[viol], g.d1[viol], g.d2[viol], g.d3[viol])
             if c_star is None:
@@ -334,7 +336,7 @@ class WindowLP:
             chat = self._run(rows, w, col_lo, col_hi)
             rounds += 1
             added += int(viol.sum())
-        return chat, (rounds, added)
+        return chat, (rounds, added, int(viol.sum()))
 
     def _violations(self, c: FloatArray, g: PathSamples, c_star: FloatArray | None) -> NDArray[np.bool_]:
         q, q1, q2 = self._eval(c, g.s)

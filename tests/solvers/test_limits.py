@@ -43,6 +43,8 @@ def _check(tp: Toolpath, m: Machine, sch: Schedule) -> dict[str, float]:
     util = utilisation(smp.position, TS, vmax, amax, jmax)
     worst = max(util.values())
     assert worst <= LIMIT_FACTOR, util
+    # every verification point ended within tolerance (nothing left over after the cut rounds)
+    assert sch.summary["unverified_points"] == 0
     for arr in (smp.t, smp.s, smp.feed, smp.position, smp.velocity, smp.acceleration, smp.jerk):
         assert np.all(np.isfinite(arr))
     # fixed period from t = 0
