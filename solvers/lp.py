@@ -154,6 +154,21 @@ class _Rows:
         return A, np.concatenate(self.lo[first:]), np.concatenate(self.hi[first:])
 
 
+def axis_kinematics(
+    g: PathSamples, q: FloatArray, q1: FloatArray, q2: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Feed f (K,) and axis v, a, j (K, 3) from q, q', q'' (spec §2):
+
+        v = x_s sqrt(q),  a = x_ss q + x_s q'/2,  j = sqrt(q) (x_sss q + 1.5 x_ss q' + 0.5 x_s q'')
+    """
+    q = np.maximum(q, 0.0)
+    f = np.sqrt(q)
+    v = g.d1 * f[:, None]
+    a = g.d2 * q[:, None] + 0.5 * g.d1 * q1[:, None]
+    j = f[:, None] * (g.d3 * q[:, None] + 1.5 * g.d2 * q1[:, None] + 0.5 * g.d1 * q2[:, None])
+    return f, v, a, j
+
+
 def _velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
     x2 = g.d1**2
     with np.errstate(divide="ignore"):
@@ -339,14 +354,11 @@ class WindowLP:
         return chat, (rounds, added, int(viol.sum()))
 
     def _violations(self, c: FloatArray, g: PathSamples, c_star: FloatArray | None) -> NDArray[np.bool_]:
-        q, q1, q2 = self._eval(c, g.s)
-        q = np.maximum(q, 0.0)
+        f, _, a, j = axis_kinematics(g, *self._eval(c, g.s))
         tol = 1.0 + VERIFY_TOL
-        bad = q > _velocity_bound(g, self.lim) * tol**2
-        a = g.d2 * q[:, None] + 0.5 * g.d1 * q1[:, None]
+        bad = f * f > _velocity_bound(g, self.lim) * tol**2
         bad |= np.any(np.abs(a) > self.lim.amax[None, :] * tol, axis=1)
         if c_star is not None:
-            j = np.sqrt(q)[:, None] * (g.d3 * q[:, None] + 1.5 * g.d2 * q1[:, None] + 0.5 * g.d1 * q2[:, None])
             bad |= np.any(np.abs(j) > self.lim.jmax[None, :] * tol, axis=1)
         return np.asarray(bad)
 

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from geometry.toolpath import PathSamples, Piece, Toolpath
 from solvers import bspline
 from solvers.errors import InvalidOptionsError
-from solvers.lp import LimitSet, WindowLP, WindowSpec
+from solvers.lp import LimitSet, WindowLP, WindowSpec, axis_kinematics
 from solvers.machine import AXES, Machine
 from solvers.timing import PieceProfile, PieceTiming
 
@@ -205,14 +205,7 @@ def _kinematics(
 ) -> tuple[PathSamples, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Geometry and v, a, j (K, 3) and feed (K,) at piece-local s."""
     g = toolpath.evaluate(s_local + piece.s_start, piece)
-    q, q1, q2 = bspline.evaluate(prof.c, s_local, prof.d)
-    q = np.maximum(q, 0.0)
-    f = np.sqrt(q)
-    sdd = 0.5 * q1
-    sddd = 0.5 * q2 * f
-    v = g.d1 * f[:, None]
-    a = g.d2 * q[:, None] + g.d1 * sdd[:, None]
-    j = g.d3 * (q * f)[:, None] + 3.0 * g.d2 * (f * sdd)[:, None] + g.d1 * sddd[:, None]
+    f, v, a, j = axis_kinematics(g, *bspline.evaluate(prof.c, s_local, prof.d))
     return g, f, v, a, j
 
 
