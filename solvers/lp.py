@@ -28,7 +28,7 @@ Clarabel (interior point), both fed the same sparse rows.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import clarabel
 import highspy
@@ -107,7 +107,6 @@ class WindowResult:
     added_points: int
     #: verification points still over a limit (by > VERIFY_TOL) after the last cut round
     unverified: int = 0
-    binding: dict[str, FloatArray] = field(default_factory=dict)  # kind -> piece-local s
 
 
 @dataclass(frozen=True)
@@ -144,6 +143,12 @@ class _Rows:
             self.lo.append(np.asarray(lo, dtype=np.float64))
             self.hi.append(np.asarray(hi, dtype=np.float64))
 
+    def copy(self) -> _Rows:
+        """A new row set starting with these rows (no solver state)."""
+        out = _Rows(self.ncols)
+        out.blocks, out.lo, out.hi = list(self.blocks), list(self.lo), list(self.hi)
+        return out
+
     def build(self, first: int = 0) -> tuple[sp.csr_matrix, FloatArray, FloatArray]:
         """Rows of blocks[first:] as one cleaned CSR matrix with bounds."""
         if len(self.blocks) <= first:
@@ -167,6 +172,11 @@ def axis_kinematics(
     a = g.d2 * q[:, None] + 0.5 * g.d1 * q1[:, None]
     j = f[:, None] * (g.d3 * q[:, None] + 1.5 * g.d2 * q1[:, None] + 0.5 * g.d1 * q2[:, None])
     return f, v, a, j
+
+
+def _moving(g: PathSamples, ax: int) -> bool:
+    """Whether axis ``ax`` moves along these points (else its rows are all zero)."""
+    return bool(np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS)
 
 
 def _velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
@@ -228,7 +238,7 @@ class WindowLP:
             ub = np.minimum(ub, np.maximum(qstar, 0.0))
         self._add(rows, B0, np.zeros(ub.size), ub / Q, g.s)
         for ax in range(3):
-            if np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) <= AXIS_EPS:
+            if not _moving(g, ax):
                 continue
             A = (sp.diags(g.d2[:, ax]) @ B0 + sp.diags(0.5 * g.d1[:, ax]) @ B1) * (Q / self.lim.amax[ax])
             one = np.ones(g.s.size)
@@ -242,7 +252,7 @@ class WindowLP:
         rq = np.sqrt(qstar[keep])
         B0, B1, B2 = self._mats(g.s)
         for ax in range(3):
-            if np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) <= AXIS_EPS:
+            if not _moving(g, ax):
                 continue
             J = sp.diags(g.d3[:, ax]) @ B0 + sp.diags(1.5 * g.d2[:, ax]) @ B1 + sp.diags(0.5 * g.d1[:, ax]) @ B2
             A = sp.diags(rq * Q / self.lim.jmax[ax]) @ J
@@ -299,8 +309,7 @@ class WindowLP:
             self._rest_rows(base, spec.k1 * spec.d, -1.0, Q)
 
         # stage 1: velocity + acceleration
-        r1 = _Rows(n)
-        r1.blocks, r1.lo, r1.hi = list(base.blocks), list(base.lo), list(base.hi)
+        r1 = base.copy()
         self._stage1_rows(r1, g, Q, None)
         chat1 = self._run(r1, w, col_lo, col_hi)
         chat1, pts1 = self._cuts(chat1, r1, w, col_lo, col_hi, Q, s_check, None)
@@ -310,8 +319,7 @@ class WindowLP:
 
         # stage 2: + q <= q*, pseudo-jerk
         qstar = self._qstar(c_star, g.s)
-        r2 = _Rows(n)
-        r2.blocks, r2.lo, r2.hi = list(base.blocks), list(base.lo), list(base.hi)
+        r2 = base.copy()
         self._stage1_rows(r2, g, Q, qstar)
         self._jerk_rows(r2, g, Q, qstar)
         chat2 = self._run(r2, w, col_lo, col_hi)
