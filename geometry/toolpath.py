@@ -146,8 +146,10 @@ class Toolpath:
         self.knot_s = np.concatenate(
             [off + t.s_of_u(t.segment.breakpoints[1:-1]) for off, t in zip(self.offsets[:-1], subs, strict=True)]
         )
-        self._check_gaps(gap_tol)
-        self.corners = self._find_corners(np.radians(corner_tol_deg))
+        # end derivatives at every junction, computed once: (out of sub k, into sub k+1)
+        junctions = [(self._end_derivs(k, True), self._end_derivs(k + 1, False)) for k in range(len(subs) - 1)]
+        self._check_gaps(junctions, gap_tol)
+        self.corners = self._find_corners(junctions, np.radians(corner_tol_deg))
         self.pieces = self._pieces()
 
     @property
@@ -165,11 +167,9 @@ class Toolpath:
             D[1:] = seg.derivatives(u)[1:, 0, :]
         return D
 
-    def _check_gaps(self, gap_tol: float) -> None:
-        for k in range(len(self.subs) - 1):
-            end = self._end_derivs(k, True)[0]
-            start = self._end_derivs(k + 1, False)[0]
-            gap = float(np.linalg.norm(start - end))
+    def _check_gaps(self, junctions: list[tuple[FloatArray, FloatArray]], gap_tol: float) -> None:
+        for k, (D_out, D_in) in enumerate(junctions):
+            gap = float(np.linalg.norm(D_in[0] - D_out[0]))
             if gap > gap_tol:
                 i = int(self.sub_origin[k + 1])
                 raise GeometryError(
@@ -179,12 +179,10 @@ class Toolpath:
                     i,
                 )
 
-    def _find_corners(self, tol_rad: float) -> list[Corner]:
+    def _find_corners(self, junctions: list[tuple[FloatArray, FloatArray]], tol_rad: float) -> list[Corner]:
         corners: list[Corner] = []
-        for k in range(len(self.subs) - 1):
-            t_out = self._end_derivs(k, True)[1]
-            D_in = self._end_derivs(k + 1, False)
-            t_in = D_in[1]
+        for k, (D_out, D_in) in enumerate(junctions):
+            t_out, t_in = D_out[1], D_in[1]
             c = float(np.dot(t_out, t_in) / (np.linalg.norm(t_out) * np.linalg.norm(t_in)))
             angle = float(np.arccos(np.clip(c, -1.0, 1.0)))
             if angle > tol_rad:
