@@ -43,5 +43,9 @@ def from_schedule(sch: Schedule) -> dict[str, Any]:
     for name, arr in (("v", smp.velocity), ("a", smp.acceleration), ("j", smp.jerk)):
         for i, ax in enumerate(AXES):
             cols[f"{name}_{ax}"] = arr[:, i].tolist()
+    for name, arr in (("u", smp.control_signal), ("e", smp.servo_error)):
+        if arr is not None:
+            for i, ax in enumerate(AXES):
+                cols[f"{name}_{ax}"] = arr[:, i].tolist()
     summary = {k: v for k, v in sch.summary.items() if k != "window_times"}
     return {"summary": summary, "diagnostics": sch.diagnostics, "samples": cols}

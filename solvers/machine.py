@@ -127,8 +127,38 @@ class Machine:
             worst = max(worst, D)
         return worst
 
+    @property
+    def has_drives(self) -> bool:
+        """Whether every axis has a drive model (needed for control signal and servo error)."""
+        return all(a.drive is not None for a in self.axes)
+
+    def drive_arrays(self) -> dict[str, NDArray[np.float64]]:
+        """Per-axis drive parameters {M, b, c, d, Kv, Ka, Kj, umax, emax}, each (3,).
+
+        Raises InvalidMachineError if an axis has no drive model.
+        """
+        missing = [a.name for a in self.axes if a.drive is None]
+        if missing:
+            raise InvalidMachineError(
+                "the drive model is needed (control signal / servo error)", field=f"machine.axes.{missing[0]}.drive"
+            )
+        keys = ("M", "b", "c", "d", "Kv", "Ka", "Kj", "umax", "emax")
+        return {k: np.array([getattr(a.drive, k) for a in self.axes], dtype=np.float64) for k in keys}
+
     def with_feed_max(self, feed_max: float | None) -> Machine:
         return replace(self, feed_max=feed_max)
+
+
+def drive_outputs(
+    drives: dict[str, NDArray[np.float64]], v: NDArray[np.float64], a: NDArray[np.float64], j: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Control signal u (V) and servo error e (mm), each (K, 3), from axis v, a, j (K, 3):
+
+        u = M a + b v + c + d sign(v),   e = Kv v + Ka a + Kj j
+    """
+    u = drives["M"] * a + drives["b"] * v + drives["c"] + drives["d"] * np.sign(v)
+    e = drives["Kv"] * v + drives["Ka"] * a + drives["Kj"] * j
+    return u, e
 
 
 def _positive(v: float, fld: str) -> None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -23,7 +23,7 @@ from geometry.toolpath import PathSamples, Piece, Toolpath
 from solvers import bspline
 from solvers.errors import InvalidOptionsError
 from solvers.lp import LimitSet, WindowLP, WindowSpec, axis_kinematics
-from solvers.machine import AXES, Machine
+from solvers.machine import AXES, Machine, drive_outputs
 from solvers.timing import PieceProfile, PieceTiming
 
 FloatArray = NDArray[np.float64]
@@ -108,6 +108,8 @@ class TimeSamples:
         t: (K,) s.  s: (K,) arc length, mm.  feed: (K,) mm/s.
         position, velocity, acceleration, jerk: (K, 3) per axis x, y, z in
             mm, mm/s, mm/s^2, mm/s^3.
+        control_signal, servo_error: (K, 3) predicted by the drive model, V and
+            mm (spec §5); None when the machine has no drive model.
     """
 
     t: FloatArray
@@ -117,6 +119,8 @@ class TimeSamples:
     velocity: FloatArray
     acceleration: FloatArray
     jerk: FloatArray
+    control_signal: FloatArray | None = None
+    servo_error: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -253,6 +257,9 @@ def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = Non
     # the last sample sits exactly on the path end, at rest
     samples.feed[-1] = 0.0
     samples.velocity[-1] = 0.0
+    if machine.has_drives:
+        u, e = drive_outputs(machine.drive_arrays(), samples.velocity, samples.acceleration, samples.jerk)
+        samples = replace(samples, control_signal=u, servo_error=e)
     compute_time = time.perf_counter() - t_start
     summary = {
         "method": opt.method,
@@ -271,7 +278,7 @@ def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = Non
         "knot_spacing": float(np.min(stats["knot_spacing"])),
         "samples": int(n_samples),
         "sample_period": Ts,
-        "peak_utilisation": _peak_utilisation(samples, lim),
+        "peak_utilisation": _peak_utilisation(samples, lim, machine.drive_arrays() if machine.has_drives else None),
         "window_times": stats["window_times"],
     }
     diagnostics = {
@@ -285,12 +292,18 @@ def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = Non
     return Schedule(samples=samples, summary=summary, diagnostics=diagnostics, profiles=tuple(profiles))
 
 
-def _peak_utilisation(smp: TimeSamples, lim: LimitSet) -> dict[str, float]:
+def _peak_utilisation(
+    smp: TimeSamples, lim: LimitSet, drives: dict[str, FloatArray] | None = None
+) -> dict[str, float]:
     out: dict[str, float] = {}
     for i, ax in enumerate(AXES):
         out[f"velocity_{ax}"] = float(np.max(np.abs(smp.velocity[:, i])) / lim.vmax[i])
         out[f"acceleration_{ax}"] = float(np.max(np.abs(smp.acceleration[:, i])) / lim.amax[i])
         out[f"jerk_{ax}"] = float(np.max(np.abs(smp.jerk[:, i])) / lim.jmax[i])
+    if drives is not None and smp.control_signal is not None and smp.servo_error is not None:
+        for i, ax in enumerate(AXES):
+            out[f"control_signal_{ax}"] = float(np.max(np.abs(smp.control_signal[:, i])) / drives["umax"][i])
+            out[f"servo_error_{ax}"] = float(np.max(np.abs(smp.servo_error[:, i])) / drives["emax"][i])
     if lim.feed_max is not None:
         out["feed"] = float(np.max(smp.feed) / lim.feed_max)
     return out
