@@ -37,7 +37,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from geometry.toolpath import PathSamples
-from solvers import bspline
+from solvers import bspline, kinematics
 from solvers.errors import InfeasibleError, SolverFailure
 from solvers.machine import Machine
 
@@ -162,16 +162,9 @@ class _Rows:
 def axis_kinematics(
     g: PathSamples, q: FloatArray, q1: FloatArray, q2: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Feed f (K,) and axis v, a, j (K, 3) from q, q', q'' (spec §2):
-
-        v = x_s sqrt(q),  a = x_ss q + x_s q'/2,  j = sqrt(q) (x_sss q + 1.5 x_ss q' + 0.5 x_s q'')
-    """
-    q = np.maximum(q, 0.0)
-    f = np.sqrt(q)
-    v = g.d1 * f[:, None]
-    a = g.d2 * q[:, None] + 0.5 * g.d1 * q1[:, None]
-    j = f[:, None] * (g.d3 * q[:, None] + 1.5 * g.d2 * q1[:, None] + 0.5 * g.d1 * q2[:, None])
-    return f, v, a, j
+    """Feed f (K,) and axis v, a, j (K, 3) from q, q', q'' (``solvers.kinematics``)."""
+    fd = kinematics.from_q(q, q1, q2)
+    return (fd[0], *kinematics.axis_kinematics(g, *fd))
 
 
 def _moving(g: PathSamples, ax: int) -> bool:

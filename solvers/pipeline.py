@@ -20,9 +20,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.toolpath import PathSamples, Piece, Toolpath
-from solvers import bspline
+from solvers import kinematics
 from solvers.errors import InvalidOptionsError
-from solvers.lp import LimitSet, WindowLP, WindowSpec, axis_kinematics
+from solvers.lp import LimitSet, WindowLP, WindowSpec
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.timing import PieceProfile, PieceTiming
 
@@ -209,8 +209,8 @@ def _kinematics(
 ) -> tuple[PathSamples, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Geometry and v, a, j (K, 3) and feed (K,) at piece-local s."""
     g = toolpath.evaluate(s_local + piece.s_start, piece)
-    f, v, a, j = axis_kinematics(g, *bspline.evaluate(prof.c, s_local, prof.d))
-    return g, f, v, a, j
+    fd = prof.feed(s_local)
+    return (g, fd[0], *kinematics.axis_kinematics(g, *fd))
 
 
 def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = None) -> Schedule:

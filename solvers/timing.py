@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.quadrature import MonotoneTable
-from solvers import bspline
+from solvers import bspline, kinematics
 from solvers.errors import ScheduleError
 
 FloatArray = NDArray[np.float64]
@@ -35,23 +35,48 @@ TIME_GUESS_TOL_S = 1e-6
 
 @dataclass(frozen=True, eq=False)
 class PieceProfile:
-    """Feed-squared profile q over one rest-to-rest piece.
+    """Feed profile over one rest-to-rest piece: the LP's q, optionally refined by the NLP's f.
+
+    Knot interval k is [k d, (k+1) d].  Where ``f_mask[k]`` the feed is
+    sdot = f(s) (control points ``p``), elsewhere sdot = sqrt(q(s)) (control
+    points ``c``).  The two agree in value and slope at every knot where they
+    meet (the NLP fixes p there from q), so feed and tangential acceleration
+    are continuous.  The first and last intervals (rest) are always q.
 
     Attributes:
         s_start: global arc length of the piece start, mm.
         length: piece length L, mm.
         d: knot spacing, mm.
         c: (n_int + 2,) control points of q, mm^2/s^2.
+        p: (n_int + 2,) control points of f, mm/s, or None (LP only).
+        f_mask: (n_int,) bool, intervals that use f, or None.
     """
 
     s_start: float
     length: float
     d: float
     c: FloatArray
+    p: FloatArray | None = None
+    f_mask: NDArray[np.bool_] | None = None
 
     @property
     def n_int(self) -> int:
         return int(self.c.size - 2)
+
+    def feed(self, s: FloatArray) -> kinematics.FeedDerivs:
+        """(sdot, sddot, sdddot) at piece-local s, each (K,)."""
+        s = np.asarray(s, dtype=np.float64)
+        out = kinematics.from_q(*bspline.evaluate(self.c, s, self.d))
+        if self.p is None or self.f_mask is None:
+            return out
+        k = np.clip(np.floor(s / self.d), 0, self.n_int - 1).astype(np.int64)
+        use = self.f_mask[k]
+        if not use.any():
+            return out
+        fd = kinematics.from_f(*bspline.evaluate(self.p, s[use], self.d))
+        for o, v in zip(out, fd, strict=True):
+            o[use] = v
+        return out
 
     def s_of_x(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Piece-local s(x) and ds/dx."""
@@ -71,7 +96,7 @@ class PieceProfile:
         c, d, n = self.c, self.d, self.n_int
         x = np.clip(np.asarray(x, dtype=np.float64), 0.0, float(n))
         s, ds = self.s_of_x(x)
-        q = bspline.evaluate(c, s, d)[0]
+        sdot = self.feed(s)[0]
         q1_0 = (c[1] - c[0]) / d
         q2_0 = (c[0] - 2 * c[1] + c[2]) / d**2
         q1_L = (c[-1] - c[-2]) / d
@@ -79,7 +104,7 @@ class PieceProfile:
         w0 = x
         wL = n - x
         with np.errstate(divide="ignore", invalid="ignore"):
-            mid = ds / np.sqrt(q)
+            mid = ds / sdot
             head = 2.0 * np.sqrt(d) / np.sqrt(q1_0 + 0.5 * q2_0 * d * w0 * w0)
             tail = 2.0 * np.sqrt(d) / np.sqrt(-q1_L + 0.5 * q2_L * d * wL * wL)
         out = np.where(x < 1.0, head, np.where(x > n - 1.0, tail, mid))

@@ -1,0 +1,49 @@
+r"""Axis kinematics along the path from the feed and its time derivatives (spec §2).
+
+With sdot = ds/dt, sddot, sdddot and the geometric derivatives x_s, x_ss,
+x_sss of each axis (``PathSamples.d1, d2, d3``):
+
+    v = x_s sdot
+    a = x_ss sdot^2 + x_s sddot
+    j = x_sss sdot^3 + 3 x_ss sdot sddot + x_s sdddot
+
+The feed is either the LP's q = sdot^2 or the NLP's f = sdot, each a function
+of s with derivatives ' = d/ds:
+
+    from q:  sdot = sqrt(q),  sddot = q'/2,         sdddot = sqrt(q) q''/2
+    from f:  sdot = f,        sddot = f f',         sdddot = f f'^2 + f^2 f''
+
+Shapes: s-like arrays (K,), axis arrays (K, 3); units mm, s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from geometry.toolpath import PathSamples
+
+FloatArray = NDArray[np.float64]
+FeedDerivs = tuple[FloatArray, FloatArray, FloatArray]
+
+
+def from_q(q: FloatArray, q1: FloatArray, q2: FloatArray) -> FeedDerivs:
+    """(sdot, sddot, sdddot) from q, q', q'' (q clipped at 0)."""
+    f = np.sqrt(np.maximum(q, 0.0))
+    return f, 0.5 * q1, 0.5 * f * q2
+
+
+def from_f(f: FloatArray, f1: FloatArray, f2: FloatArray) -> FeedDerivs:
+    """(sdot, sddot, sdddot) from f, f', f''."""
+    return f, f * f1, f * f1 * f1 + f * f * f2
+
+
+def axis_kinematics(g: PathSamples, sdot: FloatArray, sddot: FloatArray, sdddot: FloatArray) -> tuple[
+    FloatArray, FloatArray, FloatArray
+]:
+    """Axis v, a, j, each (K, 3)."""
+    f = sdot[:, None]
+    v = g.d1 * f
+    a = g.d2 * f * f + g.d1 * sddot[:, None]
+    j = g.d3 * f**3 + 3.0 * g.d2 * f * sddot[:, None] + g.d1 * sdddot[:, None]
+    return v, a, j
