@@ -158,7 +158,7 @@ def main() -> dict[str, Any]:
     ours: dict[str, Any] = {}
     for knot in KNOTS:
         label = "default" if knot is None else f"{knot:g}"
-        sch, t = run_ours(tp, m, Options(knot_spacing=knot))
+        sch, t = run_ours(tp, m, Options(method="lp", knot_spacing=knot))
         u = utilisation(sch.samples.position, TS, vmax, amax, jmax)
         ours[label] = {**summary_subset(sch), **t, "fd_utilisation": u,
                        "peak_utilisation_solver": sch.summary["peak_utilisation"]}

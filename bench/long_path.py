@@ -96,7 +96,7 @@ def child(solver: str, jerk: bool, loops: int) -> None:
                            "rss_mb_before_schedule": rss_before,
                            "hwm_reset": hwm_reset}
     if solver != "none":
-        sch = schedule(tp, router(), Options(knot_spacing=KNOT, jerk=jerk, solver=solver))
+        sch = schedule(tp, router(), Options(method="lp", knot_spacing=KNOT, jerk=jerk, solver=solver))
         res["compute_time"] = sch.summary["compute_time"]
         res["motion_time"] = sch.summary["motion_time"]
     res["maxrss_mb"] = _maxrss_mb()
@@ -124,14 +124,14 @@ def main() -> dict[str, Any]:
     build = time.perf_counter() - t0
     one = ex.flower(1)
     out: dict[str, Any] = {"bench": "long_path", "path": f"flower({LOOPS})", "path_length_mm": tp.length,
-                           "path_build_time": build, "knot_spacing": KNOT, "lp_window": Options().lp_window,
+                           "path_build_time": build, "knot_spacing": KNOT, "lp_window": Options(method="lp").lp_window,
                            "env": env_info(), "long": {}, "one_loop": {}, "rows": []}
     # warm-up for both solvers on the short path (imports, first-call costs); the long runs are then
     # timed REPEATS times each with no further warm-up (each takes seconds)
     for _, solver, jerk in CONFIGS:
-        schedule(one, m, Options(knot_spacing=KNOT, jerk=jerk, solver=solver))
+        schedule(one, m, Options(method="lp", knot_spacing=KNOT, jerk=jerk, solver=solver))
     for label, solver, jerk in CONFIGS:
-        opts = Options(knot_spacing=KNOT, jerk=jerk, solver=solver)
+        opts = Options(method="lp", knot_spacing=KNOT, jerk=jerk, solver=solver)
         sch, t = run_ours(tp, m, opts, repeats=REPEATS, warmup=0)
         out["long"][label] = _stats(sch, t)
         del sch

@@ -104,7 +104,7 @@ def main() -> dict[str, Any]:
                 "ours": {},
             }
             for label, knot in (("default", None), ("L/50", L / 50.0)):
-                sch, t = run_ours(tp, m, Options(knot_spacing=knot), repeats=OURS_REPEATS)
+                sch, t = run_ours(tp, m, Options(method="lp", knot_spacing=knot), repeats=OURS_REPEATS)
                 util = utilisation(sch.samples.position, TS, vmax, amax, jmax)
                 mt = sch.summary["motion_time"]
                 g = gap_pct(mt, t_phase)

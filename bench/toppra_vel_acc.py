@@ -95,7 +95,7 @@ def main() -> dict[str, Any]:
     ours_by_knot: dict[str, Any] = {}
     for knot in KNOTS:
         label = "default" if knot is None else f"{knot:g}"
-        sch, t = run_ours(tp, m, Options(jerk=False, knot_spacing=knot))
+        sch, t = run_ours(tp, m, Options(method="lp", jerk=False, knot_spacing=knot))
         n = int(sch.summary["checkpoints"])
         t_tp, times_tp, traj = repeat(lambda n=n: toppra_run(path, vmax, amax, n, L))
         u_ours = utilisation(sch.samples.position, TS, vmax, amax, jmax)

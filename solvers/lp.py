@@ -13,7 +13,10 @@ velocity bound (mm^2/s^2), so all rows are O(1).
         -jmax_x <= sqrt(q*_k) (x_sss q + 1.5 x_ss q' + 0.5 x_s q'') <= jmax_x  (pseudo-jerk)
       rest at a piece end (s = 0 or L):  q = 0 and |x_s q'/2| <= a_rest_x,
         a_rest_x = min(amax_x, jmax_x Ts / 2) (the acceleration step at rest,
-        seen over one sample period, stays inside jmax)
+        seen over one sample period, stays inside jmax); when the NLP refines
+        the feed (jerk is then limited through the servo error instead),
+        a_rest_x = min(amax_x, REST_SHARE emax_x / (Ka_x + Kj_x / (2 Ts))), which
+        keeps the servo error of that step, seen over one sample, inside emax
       artificial window end: c_{k1} = c_{k1+1} = 0 (q = q' = 0, discarded)
       inherited window start: c_{k0}, c_{k0+1} fixed (q, q' continuous)
 
@@ -56,6 +59,8 @@ MAX_CUT_ROUNDS = 6
 BREAK_EPS_MM = 1e-6
 #: Knot intervals after an inherited window start whose jerk rows use the previous q*.
 INHERITED_INTERVALS = 2
+#: Share of the servo-error budget the acceleration step at rest may use (lp+nlp).
+REST_SHARE = 0.9
 #: An axis whose path-derivative coefficients are all below this is not moving.
 AXIS_EPS = 1e-12
 
@@ -119,9 +124,13 @@ class LimitSet:
     jerk: bool
 
     @classmethod
-    def from_machine(cls, m: Machine, sample_period: float, jerk: bool) -> LimitSet:
+    def from_machine(cls, m: Machine, sample_period: float, jerk: bool, rest_from_drive: bool = False) -> LimitSet:
         vmax, amax, jmax = m.limit_arrays()
-        a_rest = np.minimum(amax, jmax * sample_period / 2.0) if jerk else amax
+        if rest_from_drive:
+            dr = m.drive_arrays()
+            a_rest = np.minimum(amax, REST_SHARE * dr["emax"] / (dr["Ka"] + dr["Kj"] / (2.0 * sample_period)))
+        else:
+            a_rest = np.minimum(amax, jmax * sample_period / 2.0) if jerk else amax
         return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk)
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -21,14 +22,15 @@ from numpy.typing import NDArray
 
 from geometry.toolpath import PathSamples, Piece, Toolpath
 from solvers import kinematics
-from solvers.errors import InvalidOptionsError
+from solvers.errors import InvalidMachineError, InvalidOptionsError
 from solvers.lp import LimitSet, WindowLP, WindowSpec
 from solvers.machine import AXES, Machine, drive_outputs
+from solvers.nlp import NlpLimits, NlpRefiner, NlpStats
 from solvers.timing import PieceProfile, PieceTiming
 
 FloatArray = NDArray[np.float64]
 
-METHODS = ("lp",)
+METHODS = ("lp+nlp", "lp")
 SOLVERS = ("highs", "clarabel")
 #: Fewest knot intervals in a piece (short pieces need knots to shape their
 #: accelerate/decelerate ramps: 3 made 1-5 mm lines 2.1x slower than Ruckig).
@@ -38,6 +40,8 @@ KNOT_SPACING_PER_STOP = 0.1
 #: Overlap safety factor over the stopping distance (spec §6).
 OVERLAP_SAFETY = 2.0
 DEFAULT_LP_WINDOW = 200
+#: Default NLP window as a multiple of its overlap.
+NLP_WINDOW_PER_OVERLAP = 3
 #: Utilisation at or above which a constraint is reported as binding.
 BINDING_UTILISATION = 0.98
 #: Samples computed per chunk (bounds memory in the reconstruction).
@@ -49,7 +53,8 @@ class Options:
     """Scheduling options (all lengths mm, times s).
 
     Attributes:
-        method: "lp" (velocity/acceleration/pseudo-jerk).
+        method: "lp+nlp" (default: the LP's feed refined under the drive's control-signal and
+            servo-error limits, spec §5) or "lp" (velocity/acceleration/pseudo-jerk only).
         sample_period: Ts of the output, s.
         knot_spacing: feed-profile knot spacing d, mm; default 0.1 x stopping distance (2.3 mm on the router).
         checkpoints_per_interval: N, constraint checkpoints per knot interval.
@@ -57,9 +62,13 @@ class Options:
         lp_overlap: LP window overlap in knot intervals; default from the stopping distance.
         jerk: include the pseudo-jerk stage.
         solver: "highs" or "clarabel".
+        nlp_window: NLP window size in knot intervals; default 3 x nlp_overlap.
+        nlp_overlap: NLP window overlap in knot intervals; default from the stopping distance.
+        nlp_axis_velocity: keep |v| <= vmax per axis in the NLP (drive speed limit).
+        nlp_kinematic: keep the velocity, acceleration and true-jerk limits in the NLP too.
     """
 
-    method: str = "lp"
+    method: str = "lp+nlp"
     sample_period: float = 1e-3
     knot_spacing: float | None = None
     checkpoints_per_interval: int = 5
@@ -67,6 +76,12 @@ class Options:
     lp_overlap: int | None = None
     jerk: bool = True
     solver: str = "highs"
+    nlp_window: int | None = None
+    nlp_overlap: int | None = None
+    nlp_axis_velocity: bool = True
+    nlp_kinematic: bool = False
+    #: test hook: called with each NLP window's index before it is solved (may raise to inject a fault)
+    nlp_fault: Callable[[int], None] | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -92,6 +107,18 @@ class Options:
         ):
             raise InvalidOptionsError(
                 "must be an integer in [3, lp_window / 2]", field="options.lp_overlap", value=self.lp_overlap
+            )
+        if self.nlp_overlap is not None and not (isinstance(self.nlp_overlap, int) and 2 <= self.nlp_overlap <= 10_000):
+            raise InvalidOptionsError(
+                "must be an integer in [2, 10000]", field="options.nlp_overlap", value=self.nlp_overlap
+            )
+        if self.nlp_window is not None and not (
+            isinstance(self.nlp_window, int) and 4 <= self.nlp_window <= 100_000
+            and (self.nlp_overlap is None or self.nlp_window >= 2 * self.nlp_overlap)
+        ):
+            raise InvalidOptionsError(
+                "must be an integer in [4, 100000] and at least 2 x nlp_overlap", field="options.nlp_window",
+                value=self.nlp_window,
             )
 
 
@@ -137,6 +164,8 @@ class WindowPlan:
     n_int: int
     window: int
     overlap: int
+    nlp_window: int
+    nlp_overlap: int
 
 
 def plan_piece(piece: Piece, machine: Machine, opt: Options) -> WindowPlan:
@@ -146,7 +175,9 @@ def plan_piece(piece: Piece, machine: Machine, opt: Options) -> WindowPlan:
     d = piece.length / n_int
     overlap = opt.lp_overlap if opt.lp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
     window = max(opt.lp_window, 3 * overlap)
-    return WindowPlan(d=d, n_int=n_int, window=window, overlap=overlap)
+    nlp_overlap = opt.nlp_overlap if opt.nlp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
+    nlp_window = opt.nlp_window if opt.nlp_window is not None else NLP_WINDOW_PER_OVERLAP * nlp_overlap
+    return WindowPlan(d, n_int, window, overlap, max(nlp_window, 2 * nlp_overlap), nlp_overlap)
 
 
 def _local(toolpath: Toolpath, piece: Piece) -> Any:
@@ -159,12 +190,14 @@ def _local(toolpath: Toolpath, piece: Piece) -> Any:
 
 def solve_piece(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any]
-) -> PieceProfile:
-    """Walk LP windows over one piece and assemble its control points."""
+) -> tuple[PieceProfile, list[int]]:
+    """Walk LP windows over one piece and assemble its control points.
+
+    Returns the profile and the knots where consecutive LP windows meet."""
     plan = plan_piece(piece, machine, opt)
     geometry = _local(toolpath, piece)
-    ks = toolpath.knot_s
-    breaks = ks[(ks > piece.s_start) & (ks < piece.s_end)] - piece.s_start
+    breaks = _breaks(toolpath, piece)
+    joins: list[int] = []
     c = np.zeros(plan.n_int + 2)
     k0 = 0
     start: tuple[float, float] | None = None
@@ -190,6 +223,7 @@ def solve_piece(
             c[k0 : k1 + 2] = res.c
             break
         k_next = k1 - plan.overlap
+        joins.append(k_next)
         c[k0 : k_next + 2] = res.c[: k_next - k0 + 2]
         start = (float(res.c[k_next - k0]), float(res.c[k_next - k0 + 1]))
         prev_qstar = (k0, res.c_star)
@@ -201,7 +235,31 @@ def solve_piece(
     stats["control_points"] += c.size
     stats["checkpoints"] += plan.n_int * N + 1
     stats["knot_spacing"].append(plan.d)
-    return PieceProfile(s_start=piece.s_start, length=piece.length, d=plan.d, c=c)
+    return PieceProfile(s_start=piece.s_start, length=piece.length, d=plan.d, c=c), joins
+
+
+def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
+    """Piece-local arc lengths of the geometry knots strictly inside the piece."""
+    ks = toolpath.knot_s
+    return np.asarray(ks[(ks > piece.s_start) & (ks < piece.s_end)] - piece.s_start, dtype=np.float64)
+
+
+def refine_pieces(
+    toolpath: Toolpath, machine: Machine, opt: Options, lp_profiles: list[PieceProfile], joins: list[list[int]]
+) -> tuple[list[PieceProfile], NlpStats]:
+    """The NLP stage (spec §5-6): each piece's LP feed refined under the drive limits."""
+    lim = NlpLimits.from_machine(machine, opt.nlp_axis_velocity, opt.nlp_kinematic)
+    out = []
+    refiners: dict[tuple[int, int], NlpRefiner] = {}
+    stats = NlpStats()
+    for piece, prof, jn in zip(toolpath.pieces, lp_profiles, joins, strict=True):
+        plan = plan_piece(piece, machine, opt)
+        key = (plan.nlp_window, plan.nlp_overlap)
+        if key not in refiners:
+            refiners[key] = NlpRefiner(lim, opt.checkpoints_per_interval, *key, fault=opt.nlp_fault, stats=stats)
+        p, mask = refiners[key].refine(_local(toolpath, piece), prof.c, prof.d, jn, _breaks(toolpath, piece))
+        out.append(replace(prof, p=p, f_mask=mask))
+    return out, stats
 
 
 def _kinematics(
@@ -217,13 +275,25 @@ def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = Non
     """Fastest feed along ``toolpath`` within ``machine``'s limits, sampled at Ts."""
     opt = options or Options()
     t_start = time.perf_counter()
-    lim = LimitSet.from_machine(machine, opt.sample_period, opt.jerk)
+    lim = LimitSet.from_machine(
+        machine, opt.sample_period, opt.jerk, rest_from_drive=opt.method == "lp+nlp" and machine.has_drives
+    )
     stats: dict[str, Any] = {
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
         "control_points": 0, "checkpoints": 0, "unverified": 0, "knot_spacing": [], "window_times": [],
     }
-    profiles = [solve_piece(toolpath, p, machine, opt, lim, stats) for p in toolpath.pieces]
+    if opt.method == "lp+nlp" and not machine.has_drives:
+        raise InvalidMachineError(
+            "method lp+nlp needs a drive model on every axis (use method lp otherwise)", field="machine.axes"
+        )
+    solved = [solve_piece(toolpath, p, machine, opt, lim, stats) for p in toolpath.pieces]
+    profiles = [sp for sp, _ in solved]
     t_lp = time.perf_counter() - t_start
+    lp_motion_time = float(sum(PieceTiming.build(p).duration for p in profiles))
+    nlp_stats: NlpStats | None = None
+    if opt.method == "lp+nlp":
+        profiles, nlp_stats = refine_pieces(toolpath, machine, opt, profiles, [j for _, j in solved])
+    t_nlp = time.perf_counter() - t_start - t_lp
     timings = [PieceTiming.build(p) for p in profiles]
     durations = np.array([tm.duration for tm in timings])
     t_offsets = np.concatenate([[0.0], np.cumsum(durations)])
@@ -268,6 +338,8 @@ def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = Non
         "motion_time": motion_time,
         "compute_time": compute_time,
         "lp_time": t_lp,
+        "nlp_time": t_nlp,
+        "lp_motion_time": lp_motion_time,
         "windows": stats["windows"],
         "solver_iterations": stats["iterations"],
         "cut_rounds": stats["cut_rounds"],
@@ -281,6 +353,14 @@ def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = Non
         "peak_utilisation": _peak_utilisation(samples, lim, machine.drive_arrays() if machine.has_drives else None),
         "window_times": stats["window_times"],
     }
+    if nlp_stats is not None:
+        summary.update({
+            "nlp_windows": nlp_stats.windows,
+            "nlp_iterations": nlp_stats.iterations,
+            "nlp_cut_rounds": nlp_stats.cut_rounds,
+            "nlp_failures": len(nlp_stats.failures),
+            "nlp_window_times": nlp_stats.window_times,
+        })
     diagnostics = {
         "corners": [
             {"s": c.s, "angle_deg": c.angle_deg, "segment": c.segment, "position": list(c.position)}
@@ -289,6 +369,8 @@ def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = Non
         "binding": _binding(toolpath, profiles, lim, opt),
         "rest_acceleration": {ax: float(v) for ax, v in zip(AXES, lim.a_rest, strict=True)},
     }
+    if nlp_stats is not None:
+        diagnostics["nlp_fallbacks"] = nlp_stats.failures
     return Schedule(samples=samples, summary=summary, diagnostics=diagnostics, profiles=tuple(profiles))
 
 

@@ -36,3 +36,20 @@ def utilisation(
         out[f"a{ax}"] = float(np.max(np.abs(a[:, i])) / amax[i])
         out[f"j{ax}"] = float(np.max(np.abs(j[:, i])) / jmax[i])
     return out
+
+
+def fd_drive(position: FloatArray, Ts: float, drive: dict[str, FloatArray]) -> tuple[FloatArray, FloatArray]:
+    """Control signal u and servo error e (K'', 3) from finite differences of the positions.
+
+    At each interior point: central velocity (mean of the two adjacent first
+    differences), the second difference, and the mean of the two adjacent
+    third differences; then u = M a + b v + c + d sign(v), e = Kv v + Ka a + Kj j.
+    """
+    v, a, j = fd_kinematics(position, Ts)
+    L = a.shape[0] + 2  # padded point count
+    vc = 0.5 * (v[1 : L - 3] + v[2 : L - 2])
+    ac = a[1 : L - 3]
+    jc = 0.5 * (j[0 : L - 4] + j[1 : L - 3])
+    u = drive["M"] * ac + drive["b"] * vc + drive["c"] + drive["d"] * np.sign(vc)
+    e = drive["Kv"] * vc + drive["Ka"] * ac + drive["Kj"] * jc
+    return u, e

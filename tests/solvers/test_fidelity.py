@@ -17,7 +17,7 @@ TS = 1e-3
 
 def test_circle_samples_on_circle() -> None:
     R = 20.0
-    sch = schedule(Toolpath([ex.circle(R)]), router(), Options())
+    sch = schedule(Toolpath([ex.circle(R)]), router(), Options(method="lp"))
     r = np.linalg.norm(sch.samples.position[:, :2], axis=1)
     assert np.max(np.abs(r - R)) < PATH_TOL_MM
     assert np.all(sch.samples.position[:, 2] == 0.0)
@@ -25,7 +25,7 @@ def test_circle_samples_on_circle() -> None:
 
 def test_line_samples_on_line() -> None:
     a, b = np.array([1.0, 2.0, 3.0]), np.array([101.0, -40.0, 20.0])
-    sch = schedule(Toolpath([ex.line(tuple(a), tuple(b))]), router(), Options())
+    sch = schedule(Toolpath([ex.line(tuple(a), tuple(b))]), router(), Options(method="lp"))
     p = sch.samples.position - a
     u = (b - a) / np.linalg.norm(b - a)
     off = p - np.outer(p @ u, u)
@@ -38,7 +38,7 @@ def test_flower_samples_on_analytic_flower() -> None:
     """Samples lie on r = 40 + 15 cos(5 theta) (the NURBS is fitted through 2000
     points, fit error < 1e-7 mm): Newton projection onto the analytic curve."""
     tp = ex.flower(1, points_per_loop=2000)
-    sch = schedule(tp, router(), Options())
+    sch = schedule(tp, router(), Options(method="lp"))
     p = sch.samples.position[:, :2]
     th = np.arctan2(p[:, 1], p[:, 0])
     for _ in range(20):
@@ -61,7 +61,7 @@ def test_constant_feed_fluctuation() -> None:
     """Feed limit binding on a gentle curve: sampled chord feed constant to 0.01 %."""
     F = 50.0
     m = router().with_feed_max(F)
-    sch = schedule(Toolpath([ex.circle(100.0)]), m, Options())
+    sch = schedule(Toolpath([ex.circle(100.0)]), m, Options(method="lp"))
     smp = sch.samples
     chord = np.linalg.norm(np.diff(smp.position, axis=0), axis=1) / TS
     plateau = chord[(smp.t[1:] > 1.0) & (smp.t[1:] < smp.t[-1] - 1.0)]

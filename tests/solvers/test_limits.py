@@ -67,7 +67,7 @@ def _check(tp: Toolpath, m: Machine, sch: Schedule) -> dict[str, float]:
 def test_sampled_limits_router(name: str) -> None:
     tp = CASES[name]()
     m = router()
-    sch = schedule(tp, m, Options())
+    sch = schedule(tp, m, Options(method="lp"))
     util = _check(tp, m, sch)
     # the schedule actually uses the machine (not trivially slow)
     assert max(util.values()) > 0.95
@@ -77,7 +77,7 @@ def test_sampled_limits_router(name: str) -> None:
 def test_sampled_limits_fine_knots_clarabel(name: str) -> None:
     tp = CASES[name]()
     m = router()
-    sch = schedule(tp, m, Options(knot_spacing=1.0, solver="clarabel"))
+    sch = schedule(tp, m, Options(method="lp", knot_spacing=1.0, solver="clarabel"))
     _check(tp, m, sch)
 
 
@@ -85,10 +85,10 @@ def test_many_windows_match_single_window() -> None:
     """Three flower loops in 30-interval LP windows: limits hold across every seam."""
     tp = ex.flower(3)
     m = router()
-    small = schedule(tp, m, Options(lp_window=30))
+    small = schedule(tp, m, Options(method="lp", lp_window=30))
     assert small.summary["windows"] >= 8
     _check(tp, m, small)
-    big = schedule(tp, m, Options(lp_window=2000))
+    big = schedule(tp, m, Options(method="lp", lp_window=2000))
     assert big.summary["windows"] == 1
     # windowing costs little motion time
     assert small.summary["motion_time"] <= 1.01 * big.summary["motion_time"]
@@ -97,7 +97,7 @@ def test_many_windows_match_single_window() -> None:
 def test_corner_comes_to_rest() -> None:
     tp = ex.square_corner(50.0)
     m = router()
-    sch = schedule(tp, m, Options())
+    sch = schedule(tp, m, Options(method="lp"))
     corners = sch.diagnostics["corners"]
     assert len(corners) == 1 and abs(corners[0]["angle_deg"] - 90.0) < 1e-9
     s_c = corners[0]["s"]
@@ -115,10 +115,10 @@ def test_jerk_rows_matter() -> None:
     tp = ex.flower(1)
     m = router()
     vmax, amax, jmax = _limits(m)
-    no_jerk = schedule(tp, m, Options(jerk=False))
+    no_jerk = schedule(tp, m, Options(method="lp", jerk=False))
     u = utilisation(no_jerk.samples.position, TS, vmax, amax, jmax)
     assert max(u["jx"], u["jy"]) > 1.5
-    with_jerk = schedule(tp, m, Options())
+    with_jerk = schedule(tp, m, Options(method="lp"))
     u = utilisation(with_jerk.samples.position, TS, vmax, amax, jmax)
     assert max(u["jx"], u["jy"]) <= LIMIT_FACTOR
     assert with_jerk.summary["motion_time"] > no_jerk.summary["motion_time"]

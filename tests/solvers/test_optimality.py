@@ -22,7 +22,7 @@ def test_flower_lp_within_one_percent_of_toppra() -> None:
     ta.setup_logging("WARNING")
     tp = ex.flower(1)
     m = router()
-    ours = schedule(tp, m, Options(jerk=False, knot_spacing=1.0)).summary["motion_time"]
+    ours = schedule(tp, m, Options(method="lp", jerk=False, knot_spacing=1.0)).summary["motion_time"]
     s = np.linspace(0.0, tp.length, 8001)
     path = ta.SplineInterpolator(s, tp.evaluate(s).position)
     vm = np.array([a.limits.vmax for a in m.axes])

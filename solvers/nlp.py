@@ -1,0 +1,709 @@
+r"""NLP refinement of the feed under drive limits (spec §5), in windows (spec §6).
+
+Variable: control points p of the uniform quadratic B-spline f(s) = sdot
+(mm/s) on the LP's knot grid (spacing d), scaled as p = Fs phat.  At
+checkpoint s_k (N per knot interval) and for every moving axis x, with
+geometry x_s, x_ss, x_sss (``PathSamples.d1, d2, d3``):
+
+    v = x_s f
+    a = x_ss f^2 + x_s f f'
+    j = x_sss f^3 + 3 x_ss f^2 f' + x_s (f f'^2 + f^2 f'')
+    control signal  u = M a + b v + c + d sign(v),   |u| <= umax
+    servo error     e = Kv v + Ka a + Kj j,          |e| <= emax
+    optional        |v| <= vmax,  f <= Fmax,  |a| <= amax,  |j| <= jmax (true jerk)
+    f >= 0
+
+Since f >= 0, sign(v) = sign(x_s): the friction term is a constant per
+checkpoint and moves into the bounds,
+
+    -umax - c - d sigma <= M a + b v <= umax - c - d sigma,   sigma = sign(x_s);
+
+at checkpoints next to a reversal of x_s (or with |x_s| < SIGN_EPS) both
+signs are taken (conservative: upper with +d, lower with -d).
+
+Objective: travel time over the window's committed intervals,
+sum_k w_k / (f_k + delta), minus a small reward LAMBDA_TAIL sum f_k over
+the overlap (which the next window solves again).  The travel-time integral
+is singular at rest (spec §10); rest intervals never enter an NLP window.
+
+Window: knot intervals [a, b) -> control points p_a .. p_{b+1}.  p_a, p_{a+1}
+are fixed (the inherited state: f and f' at knot a); p_b, p_{b+1} are fixed
+too, either to 0 (artificial rest at the window's far end) or to the LP's
+state at knot b (a join).  One CasADi ``nlpsol`` is built per window shape
+(knot intervals, moving axes, optional rows), with the geometry, drive
+coefficients and weights as parameters and the fixed control points and row
+bounds given per call, then re-called window after window.
+
+Between checkpoints the limits are verified on a VERIFY_SUBDIV-times finer
+grid (and both sides of geometry knots); the bounds at the two checkpoints
+around a violated point are tightened by the overshoot and the window is
+re-solved warm (at most MAX_CUT_ROUNDS times).
+
+Dual windows (spec §6): the LP walks the piece in large windows; within each
+LP window's committed span [K_m, K_{m+1}] the NLP windows walk a *chain* that
+starts from the LP's state at K_m and ends joined to the LP's state at
+K_{m+1}, so every LP window starts from a state the LP produced.  If any NLP
+window of a chain fails (Ipopt status, or limits still violated after the cut
+rounds), the whole chain keeps the LP feed, which is feasible, and the
+diagnostics say which window and why.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import osqp
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from geometry.toolpath import PathSamples
+from solvers import bspline, kinematics
+from solvers.machine import Machine
+
+FloatArray = NDArray[np.float64]
+GeometryFn = Callable[[FloatArray], PathSamples]
+
+#: |x_s| below which the friction sign is taken both ways.
+SIGN_EPS = 0.02
+#: Relative overshoot at a verification point that triggers a tightening round.
+VERIFY_TOL = 2e-3
+VERIFY_SUBDIV = 4
+MAX_CUT_ROUNDS = 4
+#: Tightened bounds never go below this fraction of the limit.
+MIN_BOUND_FACTOR = 0.5
+#: Extra margin applied with each tightening (beyond the measured overshoot).
+TIGHTEN_MARGIN = 1e-3
+#: A violated point's checkpoint bounds are scaled by overshoot^-TIGHTEN_POWER ...
+TIGHTEN_POWER = 2.0
+#: ... at these checkpoints relative to the one before the point.
+TIGHTEN_SPREAD = np.arange(-1, 3)
+#: Sub-points per checkpoint cell used for the x_sss envelope.
+ENVELOPE_SUBDIV = 2
+#: Reward on sum f over a window's overlap, relative to the time weights.
+LAMBDA_TAIL = 1e-2
+#: Offset added to f in 1/f of the time objective (scaled units).
+DELTA_F = 1e-3
+#: Offset (mm) used to evaluate the left side of a geometry knot.
+BREAK_EPS_MM = 1e-6
+#: An axis whose path derivatives are all below this in a window has no rows there.
+AXIS_EPS = 1e-12
+#: Scale-down steps of the LP hand-over until it meets the NLP's limits.
+HANDOVER_SHRINK = 0.97
+HANDOVER_MAX_STEPS = 30
+DEBUG = False
+
+IPOPT_OPTIONS: dict[str, Any] = {
+    "ipopt.print_level": 0,
+    "ipopt.sb": "yes",
+    "print_time": False,
+    "ipopt.max_iter": 300,
+    "ipopt.tol": 1e-7,
+    "ipopt.acceptable_tol": 1e-5,
+    # fewer iterations than the monotone default on this problem class (249 vs 337 on two flower loops)
+    "ipopt.mu_strategy": "adaptive",
+    "ipopt.linear_solver": "mumps",
+    # spec §10: MUMPS scaling off cut NLP time ~2.5x on this problem class
+    "ipopt.mumps_permuting_scaling": 0,
+    "ipopt.mumps_scaling": 0,
+    "error_on_fail": False,
+}
+
+
+class NlpFailure(Exception):
+    """An NLP window did not produce a verified feasible feed (handled by falling back to the LP)."""
+
+    def __init__(self, reason: str, window: int, status: str = "") -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.window = window
+        self.status = status
+
+
+@dataclass(frozen=True)
+class NlpLimits:
+    """Per-axis drive coefficients and the optional kinematic limits, each (3,)."""
+
+    M: FloatArray
+    b: FloatArray
+    c: FloatArray
+    d: FloatArray
+    Kv: FloatArray
+    Ka: FloatArray
+    Kj: FloatArray
+    umax: FloatArray
+    emax: FloatArray
+    vmax: FloatArray | None
+    amax: FloatArray | None
+    jmax: FloatArray | None
+    feed_max: float | None
+
+    @classmethod
+    def from_machine(cls, m: Machine, axis_velocity: bool, kinematic: bool) -> NlpLimits:
+        dr = m.drive_arrays()
+        vmax, amax, jmax = m.limit_arrays()
+        return cls(
+            dr["M"], dr["b"], dr["c"], dr["d"], dr["Kv"], dr["Ka"], dr["Kj"], dr["umax"], dr["emax"],
+            vmax if (axis_velocity or kinematic) else None,
+            amax if kinematic else None,
+            jmax if kinematic else None,
+            m.feed_max,
+        )
+
+    def utilisation(self, g: PathSamples, fd: kinematics.FeedDerivs) -> dict[str, FloatArray]:
+        """|u|/umax, |e|/emax (and v, a, j, feed when limited) at points g, each (K, 3) or (K,).
+
+        Friction uses sign(x_s), the sign of v for f > 0.
+        """
+        v, a, j = kinematics.axis_kinematics(g, *fd)
+        u = self.M * a + self.b * v + self.c + self.d * np.sign(g.d1)
+        e = self.Kv * v + self.Ka * a + self.Kj * j
+        out = {"control_signal": np.abs(u) / self.umax, "servo_error": np.abs(e) / self.emax}
+        if self.vmax is not None:
+            out["velocity"] = np.abs(v) / self.vmax
+        if self.amax is not None and self.jmax is not None:
+            out["acceleration"] = np.abs(a) / self.amax
+            out["jerk"] = np.abs(j) / self.jmax
+        if self.feed_max is not None:
+            out["feed"] = fd[0] / self.feed_max
+        return out
+
+
+# ----- one window shape ----------------------------------------------------------
+def checkpoint_layout(n: int, N: int) -> tuple[NDArray[np.int64], FloatArray]:
+    """Knot interval k (window-local) and tau in [0, 1] of each NLP checkpoint, each (n (N+1),).
+
+    Every interval is checked at tau = 0, 1/N, .., 1, so a knot is checked
+    from both sides (f'' and the geometry's third derivative jump there).
+    """
+    k = np.repeat(np.arange(n, dtype=np.int64), N + 1)
+    tau = np.tile(np.linspace(0.0, 1.0, N + 1), n)
+    return k, tau
+
+
+def _interval_basis(k: NDArray[np.int64], tau: FloatArray, ncols: int) -> tuple[sp.csr_matrix, ...]:
+    """B0, B1, B2 (K, ncols) for unit knot spacing at explicit (interval, tau) points."""
+    W0 = np.column_stack([(1 - tau) ** 2 / 2, (-2 * tau * tau + 2 * tau + 1) / 2, tau * tau / 2])
+    W1 = np.column_stack([-(1 - tau), 1 - 2 * tau, tau])
+    W2 = np.broadcast_to(np.array([1.0, -2.0, 1.0]), W0.shape)
+    return tuple(bspline.design(k, W, 0, ncols) for W in (W0, W1, W2))
+
+
+def eval_f(p: FloatArray, k: NDArray[np.int64], tau: FloatArray, d: float) -> kinematics.FeedDerivs:
+    """f, f', f'' of window control points p at explicit (interval, tau) points."""
+    c0, c1, c2 = p[k], p[k + 1], p[k + 2]
+    a2 = c0 - 2.0 * c1 + c2
+    a1 = c1 - c0
+    return 0.5 * (c0 + c1) + tau * (a1 + 0.5 * a2 * tau), (a1 + a2 * tau) / d, a2 / (d * d)
+
+
+class _Shape:
+    """The NLP of one window shape: n knot intervals, N + 1 checkpoints each, given moving axes.
+
+    Parameter vector (per call):
+        [Fs, 1/d, x_s (na K), x_ss (na K), x_sss_hi (na K), x_sss_lo (na K), w_time (K), w_feed (K),
+         per moving axis: M/umax, b/umax, Kv/emax, Ka/emax, Kj/emax, 1/vmax, 1/amax, 1/jmax]
+    x_sss_hi/lo: the largest/smallest x_sss around each checkpoint.  e and j
+    are increasing in x_sss (its factor Kj f^3 >= 0), so the upper row with
+    x_sss_hi and the lower row with x_sss_lo bound them wherever the geometry's
+    third derivative jumps near a checkpoint (NURBS knots).
+    Rows, per moving axis: u, e_hi (upper bound only), e_lo (lower only), [a, j_hi, j_lo]; then f,
+    whose upper bound min(Fmax, min_x vmax_x / |x_s|) carries the feed and axis velocity limits.
+    """
+
+    def __init__(self, n: int, N: int, axes: tuple[int, ...], with_aj: bool) -> None:
+        self.n, self.N, self.axes, self.with_aj = n, N, axes, with_aj
+        k, tau = checkpoint_layout(n, N)
+        K = k.size
+        self.K = K
+        ncols = n + 2
+        self.B0, B1, B2 = _interval_basis(k, tau, ncols)
+        na = len(axes)
+        x = ca.SX.sym("p", ncols)
+        P = ca.SX.sym("P", 2 + 4 * na * K + 2 * K + 8 * na)
+        Fs, inv_d = P[0], P[1]
+        off = 2
+
+        def take(m: int) -> Any:
+            nonlocal off
+            out = P[off : off + m]
+            off += m
+            return out
+
+        xs = [take(K) for _ in axes]
+        xss = [take(K) for _ in axes]
+        xsss_hi = [take(K) for _ in axes]
+        xsss_lo = [take(K) for _ in axes]
+        wt = take(K)
+        wf = take(K)
+        coef = [take(8) for _ in axes]
+        fh = ca.mtimes(ca.DM(self.B0), x)
+        f = Fs * fh
+        f1 = Fs * inv_d * ca.mtimes(ca.DM(B1), x)
+        f2 = Fs * inv_d * inv_d * ca.mtimes(ca.DM(B2), x)
+        f_sq = f * f
+        f_cu = f_sq * f
+        rows = []
+        for i in range(na):
+            v = xs[i] * f
+            a = xss[i] * f_sq + xs[i] * f * f1
+            j_rest = 3.0 * xss[i] * f_sq * f1 + xs[i] * (f * f1 * f1 + f_sq * f2)
+            j_hi = xsss_hi[i] * f_cu + j_rest
+            j_lo = xsss_lo[i] * f_cu + j_rest
+            cf = coef[i]
+            rows.append(cf[0] * a + cf[1] * v)
+            e_va = cf[2] * v + cf[3] * a
+            rows.append(e_va + cf[4] * j_hi)
+            rows.append(e_va + cf[4] * j_lo)
+            if with_aj:
+                rows.append(cf[6] * a)
+                rows.append(cf[7] * j_hi)
+                rows.append(cf[7] * j_lo)
+        rows.append(fh)
+        g = ca.vertcat(*rows)
+        obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh)
+        self.solver = ca.nlpsol("feed_nlp", "ipopt", {"x": x, "p": P, "f": obj, "g": g}, IPOPT_OPTIONS)
+        # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
+        Pm = sp.triu(self.B0.T @ self.B0, format="csc")
+        A = sp.vstack([sp.eye(ncols), self.B0], format="csc")
+        self.fit = osqp.OSQP()
+        self.fit.setup(
+            Pm, np.zeros(ncols), A, np.full(ncols + K, -np.inf), np.full(ncols + K, np.inf),
+            verbose=False, eps_abs=1e-6, eps_rel=1e-6, polishing=True,
+        )
+
+    def handover(self, y: FloatArray, fixed: dict[int, float]) -> FloatArray:
+        """Control points (scaled) fitting y (K,) at the checkpoints with f >= 0 and fixed points held."""
+        ncols = self.n + 2
+        lo = np.full(ncols + self.K, -np.inf)
+        hi = np.full(ncols + self.K, np.inf)
+        lo[ncols:] = 0.0
+        for i, val in fixed.items():
+            lo[i] = hi[i] = val
+        self.fit.update(q=-(self.B0.T @ y), l=lo, u=hi)
+        res = self.fit.solve(raise_error=False)
+        x = np.asarray(res.x, dtype=np.float64)
+        if x.size != ncols or not np.all(np.isfinite(x)):
+            x = np.interp(np.arange(ncols) - 0.5, np.linspace(0, self.n, self.K), y)
+        for i, val in fixed.items():
+            x[i] = val
+        return x
+
+
+@dataclass
+class NlpStats:
+    """Counters accumulated over all NLP windows of a schedule."""
+
+    windows: int = 0
+    iterations: int = 0
+    cut_rounds: int = 0
+    failures: list[dict[str, Any]] = field(default_factory=list)
+    window_times: list[float] = field(default_factory=list)
+    handover_scaled: int = 0
+
+
+class NlpRefiner:
+    """Builds NLP shapes on demand (cached) and refines LP feed profiles piece by piece."""
+
+    def __init__(
+        self,
+        lim: NlpLimits,
+        N: int,
+        window: int,
+        overlap: int,
+        fault: Callable[[int], None] | None = None,
+        stats: NlpStats | None = None,
+    ) -> None:
+        """``fault``: test hook called with the NLP window index before each solve (may raise)."""
+        self.lim = lim
+        self.N = N
+        self.window = window
+        self.overlap = overlap
+        self.fault = fault
+        self.shapes: dict[tuple[int, tuple[int, ...]], _Shape] = {}
+        self.stats = stats if stats is not None else NlpStats()
+
+    def _shape(self, n: int, axes: tuple[int, ...]) -> _Shape:
+        key = (n, axes)
+        if key not in self.shapes:
+            lim = self.lim
+            self.shapes[key] = _Shape(n, self.N, axes, lim.amax is not None)
+        return self.shapes[key]
+
+    # ----- a piece -------------------------------------------------------------------
+    def refine(
+        self, geometry: GeometryFn, c: FloatArray, d: float, joins: list[int], breaks: FloatArray
+    ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """f control points (n_int + 2,) and the mask of knot intervals that use them.
+
+        ``c``: the LP's q control points over the piece; ``joins``: knots where LP
+        windows meet (chains end and start there); ``breaks``: piece-local s of
+        geometry knots.
+        """
+        n_int = c.size - 2
+        p = np.zeros(n_int + 2)
+        mask = np.zeros(n_int, dtype=bool)
+        knots = [1] + [k for k in joins if 1 < k < n_int - 1] + [n_int - 1]
+        for A, B in itertools.pairwise(knots):
+            if B - A < 2:
+                continue
+            try:
+                p[A : B + 2] = self._chain(geometry, c, d, A, B, breaks)
+                mask[A:B] = True
+            except NlpFailure as exc:
+                self._record(A, B, d, exc.window, exc.reason, exc.status)
+            except Exception as exc:
+                self._record(A, B, d, self.stats.windows - 1, f"{type(exc).__name__}: {exc}", "exception")
+        return p, mask
+
+    def _record(self, A: int, B: int, d: float, window: int, reason: str, status: str) -> None:
+        self.stats.failures.append({
+            "nlp_window": window, "s_range": [A * d, B * d], "reason": reason, "status": status,
+            "fallback": "lp feed kept on this span",
+        })
+
+    def _chain(self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray) -> FloatArray:
+        """NLP windows over knot intervals [A, B), from and back to the LP state; p_A .. p_{B+1}.
+
+        A window inheriting from the previous NLP window fixes three control
+        points (so its first knot interval is the one the previous window
+        verified) and takes the previous solution as its initial guess.
+        """
+        out = np.zeros(B - A + 2)
+        a = A
+        start: tuple[float, ...] = _lp_state(c, d, A)
+        end = _lp_state(c, d, B)
+        prev: FloatArray | None = None
+        W, P = self.window, self.overlap
+        while True:
+            b = B if B - a <= W else a + W
+            if b == B:
+                commit = B
+            else:
+                commit = a + W - P
+                if B - commit < W:
+                    commit = max(B - W, a + 1)
+            sol = self._window(geometry, c, d, a, b, commit, start, end if b == B else (0.0, 0.0), breaks, prev)
+            if b == B:
+                out[a - A :] = sol
+                return out
+            out[a - A : commit - A + 3] = sol[: commit - a + 3]
+            start = tuple(float(x) for x in sol[commit - a : commit - a + 3])
+            prev = sol[commit - a :]
+            a = commit
+
+    def _window(
+        self,
+        geometry: GeometryFn,
+        c: FloatArray,
+        d: float,
+        a: int,
+        b: int,
+        commit: int,
+        start: tuple[float, ...],
+        end: tuple[float, float],
+        breaks: FloatArray,
+        prev: FloatArray | None,
+    ) -> FloatArray:
+        """Solve one NLP window over knot intervals [a, b); returns p_a .. p_{b+1} (mm/s).
+
+        ``start``: the first 2 (from the LP) or 3 (from the previous window)
+        control points, fixed; ``end``: p_b, p_{b+1}, fixed; ``prev``: the
+        previous window's solution from p_a on (initial guess), or None.
+        Limits are verified over [a, commit + 1] (one interval past the
+        commit, which the next window inherits whole).
+        """
+        t0 = time.perf_counter()
+        index = self.stats.windows
+        self.stats.windows += 1
+        lim, N = self.lim, self.N
+        n = b - a
+        k_loc, tau = checkpoint_layout(n, N)
+        s_chk = (a + k_loc + tau) * d
+        g = geometry(s_chk)
+        xsss_hi, xsss_lo = _third_derivative_envelope(geometry, g, k_loc, tau, a, d, N, breaks)
+        moving = tuple(
+            ax for ax in range(3) if np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS
+        )
+        shape = self._shape(n, moving)
+        K = shape.K
+        q_lp = bspline.evaluate(c, s_chk, d)[0]
+        f_lp = np.sqrt(np.maximum(q_lp, 0.0))
+        Fs = max(float(np.max(f_lp)), *(abs(x) for x in start), 1e-6) * 1.5
+        fixed = {i: x / Fs for i, x in enumerate(start)}
+        fixed.update({n: end[0] / Fs, n + 1: end[1] / Fs})
+        x0 = shape.handover(f_lp / Fs, fixed)
+        if prev is not None:
+            m = min(prev.size, n + 2) - self.overlap // 2
+            x0[:m] = prev[:m] / Fs
+        x0 = self._shrink_to_feasible(x0, fixed, g, k_loc, tau, d, Fs)
+        # parameters
+        ds = np.where((tau == 0.0) | (tau == 1.0), d / (2 * N), d / N)
+        in_commit = k_loc < commit - a
+        L = n * d
+        wt = np.where(in_commit, ds / L, 0.0)
+        wf = np.where(in_commit, 0.0, LAMBDA_TAIL * ds / L)
+        coefs = []
+        for ax in moving:
+            coefs.append([
+                lim.M[ax] / lim.umax[ax], lim.b[ax] / lim.umax[ax],
+                lim.Kv[ax] / lim.emax[ax], lim.Ka[ax] / lim.emax[ax], lim.Kj[ax] / lim.emax[ax],
+                1.0 / lim.vmax[ax] if lim.vmax is not None else 0.0,
+                1.0 / lim.amax[ax] if lim.amax is not None else 0.0,
+                1.0 / lim.jmax[ax] if lim.jmax is not None else 0.0,
+            ])
+        pvec = np.concatenate([
+            [Fs, 1.0 / d],
+            *(g.d1[:, ax] for ax in moving), *(g.d2[:, ax] for ax in moving),
+            *(xsss_hi[:, ax] for ax in moving), *(xsss_lo[:, ax] for ax in moving),
+            wt, wf, np.ravel(coefs),
+        ])
+        lbx = np.full(n + 2, -np.inf)
+        ubx = np.full(n + 2, np.inf)
+        for i, val in fixed.items():
+            lbx[i] = ubx[i] = val
+        fac_u = np.ones((K, len(moving)))
+        fac_e = np.ones((K, len(moving)))
+        fac_k = np.ones(K)
+        # checkpoints fully determined by fixed control points carry no rows
+        free_rows = np.ones(K, dtype=bool)
+        if len(start) == 3:
+            free_rows[k_loc == 0] = False
+        sig_hi, sig_lo = _friction_signs(g.d1)
+        feed_ub = self._feed_bound(g)
+        fine = self._fine_points(a * d, min(b, commit + 1) * d, d, breaks)
+        g_fine = geometry(fine)
+        x = x0
+        lam_g = None
+        worst = math.inf
+        for rnd in range(MAX_CUT_ROUNDS + 1):
+            lbg, ubg = self._row_bounds(moving, fac_u, fac_e, fac_k, sig_hi, sig_lo, feed_ub, Fs, free_rows)
+            if self.fault is not None:
+                self.fault(index)
+            args: dict[str, Any] = {"x0": x, "p": pvec, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
+            if lam_g is not None:
+                args["lam_g0"] = lam_g
+            res = shape.solver(**args)
+            st = shape.solver.stats()
+            self.stats.iterations += int(st.get("iter_count", 0))
+            status = str(st.get("return_status", "unknown"))
+            if not st.get("success", False) and status != "Solved_To_Acceptable_Level":
+                self.stats.window_times.append(time.perf_counter() - t0)
+                raise NlpFailure("Ipopt did not converge", index, status)
+            x = np.asarray(res["x"], dtype=np.float64).ravel()
+            lam_g = res["lam_g"]
+            if not np.all(np.isfinite(x)):
+                self.stats.window_times.append(time.perf_counter() - t0)
+                raise NlpFailure("Ipopt returned a non-finite point", index, status)
+            # verify on the fine grid
+            pw = x * Fs
+            fd = kinematics.from_f(*bspline.evaluate(pw, fine, d, col0=a, k_lo=a, k_hi=b - 1))
+            if np.any(fd[0] <= 0.0):
+                self.stats.window_times.append(time.perf_counter() - t0)
+                raise NlpFailure("feed reaches zero inside the window", index, "nonpositive feed")
+            util = lim.utilisation(g_fine, fd)
+            worst = max(float(np.max(u)) for u in util.values())
+            if DEBUG:
+                print("  round", rnd, "iters", st.get("iter_count"),
+                      {k: round(float(np.max(u)), 4) for k, u in util.items()},
+                      {k: int(np.sum(u > 1 + VERIFY_TOL)) for k, u in util.items()})
+                bad = np.any(util["servo_error"] > 1 + VERIFY_TOL, axis=1)
+                if bad.any() and breaks.size:
+                    dist = np.min(np.abs(fine[bad][:, None] - breaks[None, :]), axis=1)
+                    print("   dist to break (mm)", np.round(dist[:12], 4), "spacing", d / N)
+            if worst <= 1.0 + VERIFY_TOL:
+                self.stats.window_times.append(time.perf_counter() - t0)
+                return pw
+            if rnd == MAX_CUT_ROUNDS:
+                break
+            self.stats.cut_rounds += 1
+            self._tighten(util, fine, a * d, d, moving, fac_u, fac_e, fac_k)
+        self.stats.window_times.append(time.perf_counter() - t0)
+        raise NlpFailure(
+            f"limits exceeded between checkpoints after {MAX_CUT_ROUNDS} rounds (worst {worst:.4f})",
+            index, "unverified",
+        )
+
+    def _tighten(
+        self,
+        util: dict[str, FloatArray],
+        fine: FloatArray,
+        s0: float,
+        d: float,
+        moving: tuple[int, ...],
+        fac_u: FloatArray,
+        fac_e: FloatArray,
+        fac_k: FloatArray,
+    ) -> None:
+        """Scale the bounds of the checkpoints around each violated fine point by TIGHTEN_POWER x the overshoot."""
+        K = fac_k.size
+        N = self.N
+        x = (fine - s0) / d
+        kint = np.clip(np.floor(x), 0, K // (N + 1) - 1).astype(np.int64)
+        kk = kint * (N + 1) + np.clip(np.floor((x - kint) * N), 0, N - 1).astype(np.int64)
+        for name, arr in util.items():
+            ratio = arr if arr.ndim == 2 else arr[:, None]
+            for i, col in np.argwhere(ratio > 1.0 + VERIFY_TOL):
+                scale = float(ratio[i, col]) ** -TIGHTEN_POWER - TIGHTEN_MARGIN
+                ks = np.clip(kk[i] + TIGHTEN_SPREAD, 0, K - 1)
+                if name == "control_signal" and col in moving:
+                    m = moving.index(int(col))
+                    fac_u[ks, m] = np.maximum(MIN_BOUND_FACTOR, fac_u[ks, m] * scale)
+                elif name == "servo_error" and col in moving:
+                    m = moving.index(int(col))
+                    fac_e[ks, m] = np.maximum(MIN_BOUND_FACTOR, fac_e[ks, m] * scale)
+                else:
+                    fac_k[ks] = np.maximum(MIN_BOUND_FACTOR, fac_k[ks] * scale)
+
+    def _row_bounds(
+        self,
+        moving: tuple[int, ...],
+        fac_u: FloatArray,
+        fac_e: FloatArray,
+        fac_k: FloatArray,
+        sig_hi: FloatArray,
+        sig_lo: FloatArray,
+        feed_ub: FloatArray,
+        Fs: float,
+        free_rows: NDArray[np.bool_],
+    ) -> tuple[FloatArray, FloatArray]:
+        """Row bounds in the order of ``_Shape``'s rows (scaled units); rows not in ``free_rows`` are unbounded."""
+        lim = self.lim
+        K = free_rows.size
+        lo: list[FloatArray] = []
+        hi: list[FloatArray] = []
+        for m, ax in enumerate(moving):
+            um, c, dd = lim.umax[ax], lim.c[ax], lim.d[ax]
+            hi.append((um * fac_u[:, m] - c - dd * sig_hi[:, ax]) / um)
+            lo.append((-um * fac_u[:, m] - c - dd * sig_lo[:, ax]) / um)
+            inf = np.full(K, np.inf)
+            hi.extend([fac_e[:, m].copy(), inf.copy()])
+            lo.extend([-inf, -fac_e[:, m]])
+            if lim.amax is not None:
+                hi.extend([fac_k.copy(), fac_k.copy(), inf.copy()])
+                lo.extend([-fac_k, -inf, -fac_k])
+        lo.append(np.zeros(K))
+        hi.append(feed_ub / Fs * fac_k)
+        off = ~free_rows
+        for lo_i, hi_i in zip(lo, hi, strict=True):
+            lo_i[off] = -np.inf
+            hi_i[off] = np.inf
+        return np.concatenate(lo), np.concatenate(hi)
+
+    def _feed_bound(self, g: PathSamples) -> FloatArray:
+        """Upper bound on f at points g: min(Fmax, min_x vmax_x / |x_s|) (inf if neither applies), (K,)."""
+        ub = np.full(g.s.size, np.inf if self.lim.feed_max is None else self.lim.feed_max)
+        if self.lim.vmax is not None:
+            with np.errstate(divide="ignore"):
+                ub = np.minimum(ub, np.min(self.lim.vmax / np.abs(g.d1), axis=1))
+        return ub
+
+    def _fine_points(self, s0: float, s1: float, d: float, breaks: FloatArray) -> FloatArray:
+        n_fine = max(1, round((s1 - s0) / d)) * self.N * VERIFY_SUBDIV
+        s = np.linspace(s0, s1, n_fine + 1)
+        br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
+        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br]))
+
+    def _shrink_to_feasible(
+        self,
+        x0: FloatArray,
+        fixed: dict[int, float],
+        g: PathSamples,
+        k_loc: NDArray[np.int64],
+        tau: FloatArray,
+        d: float,
+        Fs: float,
+    ) -> FloatArray:
+        """Scale the free control points down until the hand-over meets the limits at the checkpoints."""
+        free = np.ones(x0.size, dtype=bool)
+        free[list(fixed)] = False
+        x = x0.copy()
+        for _ in range(HANDOVER_MAX_STEPS):
+            fd = kinematics.from_f(*eval_f(x * Fs, k_loc, tau, d))
+            util = self.lim.utilisation(g, fd)
+            if max(float(np.max(u)) for u in util.values()) <= 1.0 and np.all(fd[0] >= 0):
+                break
+            x[free] *= HANDOVER_SHRINK
+            self.stats.handover_scaled += 1
+        return x
+
+
+def _lp_state(c: FloatArray, d: float, k: int) -> tuple[float, float]:
+    """f control points (p_k, p_{k+1}) reproducing the LP's feed and its slope at knot k.
+
+    q = (c_k + c_{k+1})/2, q' = (c_{k+1} - c_k)/d; f = sqrt(q), f' = q'/(2 f);
+    p_k = f - f' d/2, p_{k+1} = f + f' d/2.
+    """
+    q = 0.5 * (c[k] + c[k + 1])
+    q1 = (c[k + 1] - c[k]) / d
+    if not q > 0:
+        raise NlpFailure("the LP feed is zero at a window join", -1, "rest")
+    f = math.sqrt(q)
+    f1 = q1 / (2.0 * f)
+    return f - 0.5 * f1 * d, f + 0.5 * f1 * d
+
+
+def _friction_signs(d1: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Friction sign used in the upper and lower control-signal bounds at each checkpoint, (K, 3).
+
+    sign(x_s) where the axis moves one way around the checkpoint; +1 (upper)
+    and -1 (lower) where |x_s| < SIGN_EPS or the sign differs at a neighbour.
+    """
+    sg = np.sign(d1)
+    unsure = np.abs(d1) < SIGN_EPS
+    unsure[1:] |= sg[1:] != sg[:-1]
+    unsure[:-1] |= sg[:-1] != sg[1:]
+    hi = np.where(unsure, 1.0, sg)
+    lo = np.where(unsure, -1.0, sg)
+    return hi, lo
+
+
+def _third_derivative_envelope(
+    geometry: GeometryFn,
+    g: PathSamples,
+    k_loc: NDArray[np.int64],
+    tau: FloatArray,
+    a: int,
+    d: float,
+    N: int,
+    breaks: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Largest and smallest x_sss (K, 3) over each checkpoint's cell.
+
+    The cell of a checkpoint at tau is [tau - 1/(2N), tau + 1/(2N)] clipped to its
+    knot interval; x_sss is sampled at ENVELOPE_SUBDIV points on each side and on
+    both sides of every geometry knot inside the cell.
+    """
+    h = 0.5 / N
+    lo = np.clip(tau - h, 0.0, 1.0)
+    hi = np.clip(tau + h, 0.0, 1.0)
+    frac = np.linspace(0.0, 1.0, 2 * ENVELOPE_SUBDIV + 1)
+    sub = (a + k_loc[:, None] + lo[:, None] + (hi - lo)[:, None] * frac[None, :]) * d  # (K, M)
+    gs = geometry(sub.ravel())
+    d3 = gs.d3.reshape(sub.shape[0], sub.shape[1], 3)
+    top = np.maximum(np.max(d3, axis=1), g.d3)
+    bot = np.minimum(np.min(d3, axis=1), g.d3)
+    s_lo, s_hi = sub[:, 0], sub[:, -1]
+    br = breaks[(breaks > s_lo[0]) & (breaks < s_hi[-1])]
+    if br.size:
+        gb = geometry(np.concatenate([br - BREAK_EPS_MM, br]))
+        d3b = gb.d3.reshape(2, br.size, 3)
+        # cells containing each break (a break lies in at most a few cells)
+        i0 = np.searchsorted(s_hi, br, side="left")
+        i1 = np.searchsorted(s_lo, br, side="right")
+        for side in range(2):
+            for off in range(int(np.max(i1 - i0, initial=0)) + 1):
+                idx = i0 + off
+                ok = idx < i1
+                if not ok.any():
+                    continue
+                ii = idx[ok]
+                np.maximum.at(top, ii, d3b[side][ok])
+                np.minimum.at(bot, ii, d3b[side][ok])
+    return top, bot

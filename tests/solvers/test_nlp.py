@@ -1,0 +1,143 @@
+"""LP + NLP under the drive's control-signal and servo-error limits (spec §5-6).
+
+Limits are checked independently: finite differences of the returned 1 kHz
+positions give v, a, j (tests/fdcheck.py), and the drive model's parameters,
+read straight from the machine's axes, give u and e.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from geometry import Toolpath
+from geometry import examples as ex
+from solvers.errors import InvalidMachineError
+from solvers.machine import Axis, Machine, router
+from solvers.pipeline import Options, Schedule, schedule
+from tests.fdcheck import fd_drive
+
+TS = 1e-3
+#: Allowed overshoot of umax / emax in the sampled output (issue: 1.01 x).
+LIMIT_FACTOR = 1.01
+#: Feed and tangential acceleration across a seam: relative jump allowed.
+SEAM_REL_TOL = 1e-6
+#: Gain of lp+nlp over lp on the flower (issue: at least 25%).
+MIN_GAIN = 0.25
+#: Windowed NLP vs one full-horizon NLP window (issue: within 1%).
+WINDOW_COST = 0.01
+
+
+def _drive(m: Machine) -> dict[str, np.ndarray]:
+    keys = ("M", "b", "c", "d", "Kv", "Ka", "Kj", "umax", "emax")
+    return {k: np.array([getattr(ax.drive, k) for ax in m.axes]) for k in keys}
+
+
+def _check_drive(m: Machine, sch: Schedule) -> tuple[float, float]:
+    dr = _drive(m)
+    pos = sch.samples.position
+    assert np.all(np.isfinite(pos)) and np.all(np.isfinite(sch.samples.feed))
+    u, e = fd_drive(pos, TS, dr)
+    u_util = float(np.max(np.abs(u) / dr["umax"]))
+    e_util = float(np.max(np.abs(e) / dr["emax"]))
+    assert u_util <= LIMIT_FACTOR, u_util
+    assert e_util <= LIMIT_FACTOR, e_util
+    return u_util, e_util
+
+
+CASES = {
+    "flower": lambda: ex.flower(1),
+    "wave3d": lambda: Toolpath([ex.wave3d()]),
+    "corner": lambda: ex.square_corner(50.0),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_drive_limits_hold_sampled(name: str) -> None:
+    tp = CASES[name]()
+    m = router()
+    sch = schedule(tp, m, Options(method="lp+nlp"))
+    assert sch.diagnostics["nlp_fallbacks"] == []
+    u_util, e_util = _check_drive(m, sch)
+    # the NLP actually drives the machine to its limits (not trivially slow)
+    assert max(u_util, e_util) > 0.95
+    # reported columns agree with the independent recomputation's scale
+    assert sch.samples.control_signal is not None and sch.samples.servo_error is not None
+    lp = schedule(tp, m, Options(method="lp"))
+    assert sch.summary["motion_time"] < lp.summary["motion_time"]
+
+
+def test_long_chain_across_many_windows() -> None:
+    """Three loops in 60-interval LP windows: many LP and NLP seams; limits hold and seams are smooth."""
+    tp = ex.flower(3)
+    m = router()
+    sch = schedule(tp, m, Options(method="lp+nlp", lp_window=60))
+    assert sch.summary["windows"] >= 5
+    assert sch.summary["nlp_windows"] >= 10
+    assert sch.diagnostics["nlp_fallbacks"] == []
+    _check_drive(m, sch)
+    _assert_seams_continuous(sch)
+
+
+def _assert_seams_continuous(sch: Schedule) -> None:
+    """Feed and tangential acceleration agree from both sides of every knot (NLP and LP seams are knots)."""
+    for prof in sch.profiles:
+        assert prof.f_mask is not None and prof.f_mask.any()
+        knots = np.arange(1, prof.n_int) * prof.d
+        eps = 1e-9 * prof.d
+        left = prof.feed(knots - eps)
+        right = prof.feed(knots + eps)
+        scale_f = float(np.max(left[0]))
+        scale_a = float(np.max(np.abs(left[1])))
+        np.testing.assert_allclose(left[0], right[0], rtol=0, atol=SEAM_REL_TOL * scale_f + 1e-12)
+        np.testing.assert_allclose(left[1], right[1], rtol=0, atol=SEAM_REL_TOL * scale_a + 1e-9)
+
+
+def test_windowed_within_one_percent_of_full_horizon() -> None:
+    tp = ex.flower(1)
+    m = router()
+    win = schedule(tp, m, Options(method="lp+nlp"))
+    full = schedule(tp, m, Options(method="lp+nlp", nlp_window=100_000))
+    assert win.summary["nlp_windows"] >= 3
+    assert full.summary["nlp_windows"] == 1
+    assert win.summary["motion_time"] <= (1 + WINDOW_COST) * full.summary["motion_time"]
+    _check_drive(m, full)
+
+
+def test_gain_over_lp_on_flower() -> None:
+    tp = ex.flower(1)
+    m = router()
+    lp = schedule(tp, m, Options(method="lp")).summary["motion_time"]
+    nlp = schedule(tp, m, Options(method="lp+nlp")).summary["motion_time"]
+    assert nlp <= (1 - MIN_GAIN) * lp, (lp, nlp)
+
+
+@pytest.mark.parametrize("exc", [RuntimeError("injected Ipopt crash"), ValueError("bad")])
+def test_failed_window_falls_back_to_lp_feed(exc: Exception) -> None:
+    tp = ex.flower(1)
+    m = router()
+
+    def fault(index: int) -> None:
+        if index == 1:
+            raise exc
+
+    sch = schedule(tp, m, Options(method="lp+nlp", nlp_fault=fault))
+    fb = sch.diagnostics["nlp_fallbacks"]
+    assert len(fb) == 1 and fb[0]["nlp_window"] == 1 and type(exc).__name__ in fb[0]["reason"]
+    assert sch.summary["nlp_failures"] == 1
+    # the span keeps the LP feed: it is feasible for the drive limits too
+    _check_drive(m, sch)
+    prof = sch.profiles[0]
+    assert prof.f_mask is not None and not prof.f_mask.any()
+    assert np.all(np.isfinite(sch.samples.position))
+
+
+def test_lp_nlp_needs_drive_model() -> None:
+    m = router()
+    bare = Machine("bare", tuple(Axis(a.name, a.limits, None) for a in m.axes))  # type: ignore[arg-type]
+    with pytest.raises(InvalidMachineError) as err:
+        schedule(ex.flower(1), bare, Options(method="lp+nlp"))
+    assert err.value.field == "machine.axes"
+    # the LP alone still works without a drive model
+    sch = schedule(Toolpath([ex.line((0, 0, 0), (10, 0, 0))]), bare, Options(method="lp"))
+    assert sch.samples.control_signal is None
