@@ -64,6 +64,8 @@ class Options:
         solver: "highs" or "clarabel".
         nlp_window: NLP window size in knot intervals; default 3 x nlp_overlap.
         nlp_overlap: NLP window overlap in knot intervals; default from the stopping distance.
+        nlp_checkpoints_per_interval: N of the NLP (each interval is also checked at both knots,
+            and the limits are verified between checkpoints).
         nlp_axis_velocity: keep |v| <= vmax per axis in the NLP (drive speed limit).
         nlp_kinematic: keep the velocity, acceleration and true-jerk limits in the NLP too.
     """
@@ -78,6 +80,7 @@ class Options:
     solver: str = "highs"
     nlp_window: int | None = None
     nlp_overlap: int | None = None
+    nlp_checkpoints_per_interval: int = 4
     nlp_axis_velocity: bool = True
     nlp_kinematic: bool = False
     #: test hook: called with each NLP window's index before it is solved (may raise to inject a fault)
@@ -107,6 +110,11 @@ class Options:
         ):
             raise InvalidOptionsError(
                 "must be an integer in [3, lp_window / 2]", field="options.lp_overlap", value=self.lp_overlap
+            )
+        if not (isinstance(self.nlp_checkpoints_per_interval, int) and 1 <= self.nlp_checkpoints_per_interval <= 64):
+            raise InvalidOptionsError(
+                "must be an integer in [1, 64]", field="options.nlp_checkpoints_per_interval",
+                value=self.nlp_checkpoints_per_interval,
             )
         if self.nlp_overlap is not None and not (isinstance(self.nlp_overlap, int) and 2 <= self.nlp_overlap <= 10_000):
             raise InvalidOptionsError(
@@ -256,7 +264,7 @@ def refine_pieces(
         plan = plan_piece(piece, machine, opt)
         key = (plan.nlp_window, plan.nlp_overlap)
         if key not in refiners:
-            refiners[key] = NlpRefiner(lim, opt.checkpoints_per_interval, *key, fault=opt.nlp_fault, stats=stats)
+            refiners[key] = NlpRefiner(lim, opt.nlp_checkpoints_per_interval, *key, fault=opt.nlp_fault, stats=stats)
         p, mask = refiners[key].refine(_local(toolpath, piece), prof.c, prof.d, jn, _breaks(toolpath, piece))
         out.append(replace(prof, p=p, f_mask=mask))
     return out, stats
