@@ -21,11 +21,11 @@ from typing import Any
 
 from bench._common import emit
 
-BENCHES = ("toppra_vel_acc", "copp_jerk", "ruckig_lines", "long_path")
+BENCHES = ("toppra_vel_acc", "copp_jerk", "ruckig_lines", "long_path", "nlp_gain")
 ROOT = Path(__file__).resolve().parents[1]
 OUT_JSON = ROOT / "bench" / "results.json"
 OUT_MD = ROOT / "bench" / "results.md"
-TIMEOUT_S = 900
+TIMEOUT_S = 1800
 
 
 def run_one(name: str) -> dict[str, Any]:

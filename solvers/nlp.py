@@ -79,6 +79,11 @@ MAX_CUT_ROUNDS = 4
 #: A window whose best round is over a limit by at most this (fine grid) is accepted when
 #: tightening stalls (Ipopt fails on tightened bounds, or the rounds run out).
 ACCEPT_TOL = 5e-3
+#: A window's limits are verified this many knot intervals past its commit (the next window
+#: inherits the first of them whole and the second's start state).
+VERIFY_PAST_COMMIT = 2
+#: Retries with half the tightening when a tightened window is infeasible.
+MAX_SOFTER_RETRIES = 2
 #: Row bounds start at this fraction of each limit (fewer tightening rounds).
 BOUND_FACTOR = 0.995
 #: Tightened bounds never go below this fraction of the limit.
@@ -311,6 +316,7 @@ class NlpStats:
     failures: list[dict[str, Any]] = field(default_factory=list)
     window_times: list[float] = field(default_factory=list)
     handover_scaled: int = 0
+    softer_retries: int = 0
     #: worst fine-grid utilisation of any accepted window (<= 1 + ACCEPT_TOL)
     worst_verified: float = 0.0
 
@@ -477,7 +483,7 @@ class NlpRefiner:
             lbx[i] = ubx[i] = val
         fac_u = np.full((K, len(moving)), BOUND_FACTOR)
         fac_e = np.full((K, len(moving)), BOUND_FACTOR)
-        fac_k = np.full(K, BOUND_FACTOR)
+        fac_k = np.ones(K)  # velocity/feed rows are linear in f: no margin needed
         # checkpoints fully determined by fixed control points carry no rows; where only f and f'
         # are fixed (the knots of the fixed states) the rows without f'' (u, a, f) are constant
         free_rows = np.ones(K, dtype=bool)
@@ -488,13 +494,25 @@ class NlpRefiner:
         keep = free_rows & ~state_fixed
         sig_hi, sig_lo = _friction_signs(g.d1)
         feed_ub = self._feed_bound(g)
-        fine = self._fine_points(a * d, min(b, commit + 1) * d, d, breaks)
+        # next to a state taken from the LP (chain start, join end) the LP's own feed is admissible
+        # (the LP met the velocity bound to its verification tolerance)
+        near_lp = np.zeros(K, dtype=bool)
+        if len(start) == 2:
+            near_lp |= k_loc == 0
+        if end[0] != 0.0 or end[1] != 0.0:
+            near_lp |= k_loc == n - 1
+        feed_ub = np.where(near_lp, np.maximum(feed_ub, f_lp * (1.0 + 1e-9)), feed_ub)
+        fine = self._fine_points(a * d, min(b, commit + VERIFY_PAST_COMMIT) * d, d, breaks)
+        floor_u, floor_e = self._inherited_floor(prev, g, xsss_hi, xsss_lo, k_loc, tau, d, moving)
         g_fine = geometry(fine)
         x = x0
         lam_g = None
         worst = math.inf
         best: tuple[float, FloatArray] | None = None
-        for rnd in range(MAX_CUT_ROUNDS + 1):
+        prev_fac: tuple[FloatArray, FloatArray, FloatArray] | None = None
+        retries = 0
+        rnd = 0
+        while rnd <= MAX_CUT_ROUNDS:
             lbg, ubg = self._row_bounds(moving, fac_u, fac_e, fac_k, sig_hi, sig_lo, feed_ub, Fs, free_rows, keep)
             if self.fault is not None:
                 self.fault(index)
@@ -508,6 +526,15 @@ class NlpRefiner:
             if not st.get("success", False) and status != "Solved_To_Acceptable_Level":
                 if best is not None and best[0] <= 1.0 + ACCEPT_TOL:
                     return self._accept(best, t0)
+                if rnd > 0 and prev_fac is not None and retries < MAX_SOFTER_RETRIES:
+                    # tightening made the window infeasible: retry with half of it (geometric mean)
+                    retries += 1
+                    self.stats.softer_retries += 1
+                    for cur, old in zip((fac_u, fac_e, fac_k), prev_fac, strict=True):
+                        cur[...] = np.sqrt(cur * old)
+                    x = best[1] / Fs if best is not None else x0
+                    lam_g = None
+                    continue
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure(f"Ipopt did not converge (round {rnd})", index, status)
             x = np.asarray(res["x"], dtype=np.float64).ravel()
@@ -529,12 +556,16 @@ class NlpRefiner:
                 return self._accept(best, t0)
             if rnd == MAX_CUT_ROUNDS:
                 break
+            rnd += 1
             self.stats.cut_rounds += 1
+            prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy())
             self._tighten(util, fine, a * d, d, moving, fac_u, fac_e, fac_k)
             # bounds of constant rows stay as they are (tightening them could only make the window infeasible)
             fac_u[~keep] = BOUND_FACTOR
             fac_e[~free_rows] = BOUND_FACTOR
-            fac_k[~keep] = BOUND_FACTOR
+            np.maximum(fac_u, floor_u, out=fac_u)
+            np.maximum(fac_e, floor_e, out=fac_e)
+            fac_k[~keep] = 1.0
         if best is not None and best[0] <= 1.0 + ACCEPT_TOL:
             return self._accept(best, t0)
         self.stats.window_times.append(time.perf_counter() - t0)
@@ -542,6 +573,46 @@ class NlpRefiner:
             f"limits exceeded between checkpoints after {MAX_CUT_ROUNDS} rounds (worst {worst:.4f})",
             index, "unverified",
         )
+
+    def _inherited_floor(
+        self,
+        prev: FloatArray | None,
+        g: PathSamples,
+        xsss_hi: FloatArray,
+        xsss_lo: FloatArray,
+        k_loc: NDArray[np.int64],
+        tau: FloatArray,
+        d: float,
+        moving: tuple[int, ...],
+    ) -> tuple[FloatArray, FloatArray]:
+        """Lowest bound factors (K, na) for u and e rows: on the first VERIFY_PAST_COMMIT intervals of
+        an inherited window, the previous window's solution (verified there on the fine grid) stays
+        admissible, so tightening can never make the window infeasible there."""
+        K = k_loc.size
+        fu = np.zeros((K, len(moving)))
+        fe = np.zeros((K, len(moving)))
+        if prev is None:
+            return fu, fe
+        sel = k_loc < VERIFY_PAST_COMMIT
+        sel &= k_loc + 2 < prev.size
+        if not sel.any():
+            return fu, fe
+        f, f1, f2 = eval_f(prev, k_loc[sel], tau[sel], d)
+        lim = self.lim
+        for m, ax in enumerate(moving):
+            xs, xss = g.d1[sel, ax], g.d2[sel, ax]
+            v = xs * f
+            acc = xss * f * f + xs * f * f1
+            j_rest = 3.0 * xss * f * f * f1 + xs * (f * f1 * f1 + f * f * f2)
+            sig = np.sign(xs)
+            u_hi = lim.M[ax] * acc + lim.b[ax] * v + lim.c[ax] + lim.d[ax] * np.where(np.abs(xs) < SIGN_EPS, 1, sig)
+            u_lo = lim.M[ax] * acc + lim.b[ax] * v + lim.c[ax] + lim.d[ax] * np.where(np.abs(xs) < SIGN_EPS, -1, sig)
+            e_va = lim.Kv[ax] * v + lim.Ka[ax] * acc
+            e_hi = e_va + lim.Kj[ax] * (xsss_hi[sel, ax] * f**3 + j_rest)
+            e_lo = e_va + lim.Kj[ax] * (xsss_lo[sel, ax] * f**3 + j_rest)
+            fu[sel, m] = np.maximum(np.abs(u_hi), np.abs(u_lo)) / lim.umax[ax] * (1 + 1e-9)
+            fe[sel, m] = np.maximum(e_hi, -e_lo) / lim.emax[ax] * (1 + 1e-9)
+        return fu, fe
 
     def _accept(self, best: tuple[float, FloatArray], t0: float) -> FloatArray:
         self.stats.window_times.append(time.perf_counter() - t0)

@@ -231,6 +231,8 @@ def solve_piece(
             c[k0 : k1 + 2] = res.c
             break
         k_next = k1 - plan.overlap
+        if opt.method == "lp+nlp":
+            k_next = _join_knot(geometry, res.c, k0, k_next, plan, lim)
         joins.append(k_next)
         c[k0 : k_next + 2] = res.c[: k_next - k0 + 2]
         start = (float(res.c[k_next - k0]), float(res.c[k_next - k0 + 1]))
@@ -244,6 +246,31 @@ def solve_piece(
     stats["checkpoints"] += plan.n_int * N + 1
     stats["knot_spacing"].append(plan.d)
     return PieceProfile(s_start=piece.s_start, length=piece.length, d=plan.d, c=c), joins
+
+
+def _join_knot(geometry: Any, c_win: FloatArray, k0: int, k_last: int, plan: WindowPlan, lim: LimitSet) -> int:
+    """Where the next LP window starts when the NLP follows: the knot in
+    [k_last - overlap, k_last] where the LP feed is closest to the velocity bound.
+
+    NLP chains end and start at the LP's state at these knots; where the LP is
+    velocity-bound the NLP (same axis velocity limits) is too, so the join costs
+    little motion time.
+    """
+    lo = max(k0 + 1, k_last - plan.overlap)
+    ks = np.arange(lo, k_last + 1)
+    q = 0.5 * (c_win[ks - k0] + c_win[ks - k0 + 1])
+    ub = _velocity_bound_at(geometry(ks * plan.d), lim)
+    score = np.where(np.isfinite(ub) & (ub > 0), q / np.where(ub > 0, ub, 1.0), 0.0)
+    return int(ks[len(ks) - 1 - int(np.argmax(score[::-1]))])
+
+
+def _velocity_bound_at(g: PathSamples, lim: LimitSet) -> FloatArray:
+    x2 = g.d1**2
+    with np.errstate(divide="ignore"):
+        ub = np.min(np.where(x2 > 1e-24, lim.vmax[None, :] ** 2 / np.where(x2 > 1e-24, x2, 1.0), np.inf), axis=1)
+    if lim.feed_max is not None:
+        ub = np.minimum(ub, lim.feed_max**2)
+    return np.asarray(ub, dtype=np.float64)
 
 
 def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:

@@ -1,0 +1,200 @@
+"""LP + NLP (issue 3): gain over LP, cost of windowing, distance to the model's limit, long-path speed and memory.
+
+1. One flower loop, router preset: motion time of method ``lp`` vs ``lp+nlp``
+   (target: at least 25 % shorter), the windowed NLP vs one full-horizon NLP
+   window at the same knots (target: within 1 %), and vs one full-horizon NLP
+   at 4x finer knots (the best schedule this model admits; target: within 2 %).
+2. The long path (45 loops, about 18.35 m) at the default knot spacing:
+   ``lp`` vs ``lp+nlp`` motion (target: at least 25 % shorter) and compute /
+   motion of ``lp+nlp`` (target: at most 5 %), per-window LP and NLP times,
+   Ipopt iterations, fallbacks, and the peak memory of a fresh subprocess
+   (VmHWM) for 18.35 m and, with ``--long-memory``, 183.5 m.
+Every schedule's sampled u and e are recomputed by finite differences
+(tests/fdcheck.py) and the worst utilisation is reported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench._common import emit, env_info, row, verdict
+from geometry import examples as ex
+from solvers.machine import Machine, router
+from solvers.pipeline import Options, Schedule, schedule
+from tests.fdcheck import fd_drive
+
+LOOPS = 45
+GAIN_TARGET = 0.25
+WINDOW_TARGET = 0.01
+LIMIT_TARGET = 0.02
+RATIO_TARGET_PCT = 5.0
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _drive_util(m: Machine, sch: Schedule) -> dict[str, float]:
+    keys = ("M", "b", "c", "d", "Kv", "Ka", "Kj", "umax", "emax")
+    dr = {k: np.array([getattr(ax.drive, k) for ax in m.axes]) for k in keys}
+    u, e = fd_drive(sch.samples.position, sch.summary["sample_period"], dr)
+    return {"u": float(np.max(np.abs(u) / dr["umax"])), "e": float(np.max(np.abs(e) / dr["emax"]))}
+
+
+def _timed(tp: Any, m: Machine, opts: Options) -> tuple[Schedule, float]:
+    t0 = time.perf_counter()
+    sch = schedule(tp, m, opts)
+    return sch, time.perf_counter() - t0
+
+
+def one_loop(out: dict[str, Any]) -> None:
+    m = router()
+    tp = ex.flower(1)
+    schedule(tp, m, Options())  # warm-up: imports, first nlpsol builds
+    lp, t_lp = _timed(tp, m, Options(method="lp"))
+    win, t_win = _timed(tp, m, Options())
+    full, t_full = _timed(tp, m, Options(nlp_window=100_000))
+    d = win.summary["knot_spacing"]
+    fine, t_fine = _timed(tp, m, Options(knot_spacing=d / 4, lp_window=100_000, nlp_window=100_000))
+    res = {
+        "lp": lp.summary["motion_time"], "lp+nlp": win.summary["motion_time"],
+        "full_horizon": full.summary["motion_time"], "full_horizon_4x_finer": fine.summary["motion_time"],
+        "compute": {"lp": t_lp, "lp+nlp": t_win, "full": t_full, "fine": t_fine},
+        "knot_spacing": d, "nlp_windows": win.summary["nlp_windows"],
+        "fd_util": {k: _drive_util(m, s) for k, s in (("lp+nlp", win), ("full", full), ("fine", fine))},
+        "fallbacks": len(win.diagnostics["nlp_fallbacks"]),
+    }
+    out["one_loop"] = res
+    gain = 1 - res["lp+nlp"] / res["lp"]
+    wcost = res["lp+nlp"] / res["full_horizon"] - 1
+    lcost = res["lp+nlp"] / res["full_horizon_4x_finer"] - 1
+    u = res["fd_util"]["lp+nlp"]
+    out["rows"] += [
+        row("1 flower loop: lp+nlp vs lp motion time",
+            f"{res['lp+nlp']:.4f} s ({t_win:.2f} s compute, {res['nlp_windows']} NLP windows)",
+            f"lp {res['lp']:.4f} s ({t_lp:.2f} s)", f"{100 * gain:.1f} % shorter",
+            f">= {100 * GAIN_TARGET:.0f} %", verdict(gain >= GAIN_TARGET)),
+        row("1 flower loop: windowed vs one full-horizon NLP (same knots)",
+            f"{res['lp+nlp']:.4f} s", f"full {res['full_horizon']:.4f} s ({t_full:.2f} s)",
+            f"{100 * wcost:+.2f} %", f"<= {100 * WINDOW_TARGET:.0f} %", verdict(wcost <= WINDOW_TARGET)),
+        row(f"1 flower loop: vs full-horizon NLP at 4x finer knots ({d / 4:.3f} mm)",
+            f"{res['lp+nlp']:.4f} s", f"fine {res['full_horizon_4x_finer']:.4f} s ({t_fine:.1f} s)",
+            f"{100 * lcost:+.2f} %", f"<= {100 * LIMIT_TARGET:.0f} %", verdict(lcost <= LIMIT_TARGET)),
+        row("1 flower loop lp+nlp: sampled |u|/umax, |e|/emax (FD of 1 kHz positions)",
+            f"u {u['u']:.4f}, e {u['e']:.4f}", "—", "—", "<= 1.01", verdict(max(u.values()) <= 1.01)),
+    ]
+
+
+def child(method: str, loops: int) -> None:
+    """Fresh process: build the path, schedule once, print the scheduling's peak RSS (VmHWM)."""
+    tp = ex.flower(loops)
+    rss0 = _status_mb("VmRSS")
+    reset = _reset_hwm()
+    t0 = time.perf_counter()
+    sch = schedule(tp, router(), Options(method=method))
+    el = time.perf_counter() - t0
+    n = sch.samples.t.size
+    print(json.dumps({"loops": loops, "method": method, "compute_time": el, "motion_time": sch.summary["motion_time"],
+                      "rss_before_mb": rss0, "peak_mb": _status_mb("VmHWM") if reset else None,
+                      "samples": n, "sample_mb": 8.0 * n * 21 / 2**20}), flush=True)
+
+
+def _status_mb(key: str) -> float:
+    for ln in Path("/proc/self/status").read_text().splitlines():
+        if ln.startswith(key + ":"):
+            return float(ln.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _reset_hwm() -> bool:
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+        return True
+    except OSError:
+        return False
+
+
+def run_child(method: str, loops: int, timeout: float = 3600) -> dict[str, Any]:
+    cmd = [sys.executable, "-m", "bench.nlp_gain", "--child", method, "--loops", str(loops)]
+    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
+    if p.returncode != 0:
+        return {"error": p.stderr.strip()[-500:]}
+    return dict(json.loads(p.stdout.strip().splitlines()[-1]))
+
+
+def long_path(out: dict[str, Any], long_memory: bool) -> None:
+    m = router()
+    tp = ex.flower(LOOPS)
+    schedule(ex.flower(1), m, Options())
+    lp, t_lp = _timed(tp, m, Options(method="lp"))
+    nl, t_nl = _timed(tp, m, Options())
+    s = nl.summary
+    res = {
+        "path_length": tp.length, "lp_motion": lp.summary["motion_time"], "lp_compute": t_lp,
+        "nlp_motion": s["motion_time"], "nlp_compute": t_nl, "lp_stage_time": s["lp_time"],
+        "nlp_stage_time": s["nlp_time"], "lp_windows": s["windows"], "nlp_windows": s["nlp_windows"],
+        "ipopt_iterations": s["nlp_iterations"], "nlp_cut_rounds": s["nlp_cut_rounds"],
+        "fallbacks": nl.diagnostics["nlp_fallbacks"], "control_points": s["control_points"],
+        "checkpoints": s["checkpoints"],
+        "lp_window_ms": {"median": 1e3 * statistics.median(s["window_times"]), "max": 1e3 * max(s["window_times"])},
+        "nlp_window_ms": {"median": 1e3 * statistics.median(s["nlp_window_times"]),
+                          "max": 1e3 * max(s["nlp_window_times"])},
+        "fd_util": _drive_util(m, nl),
+    }
+    del lp, nl
+    res["memory"] = {"18m": run_child("lp+nlp", LOOPS)}
+    if long_memory:
+        res["memory"]["183m"] = run_child("lp+nlp", 10 * LOOPS)
+    out["long"] = res
+    gain = 1 - res["nlp_motion"] / res["lp_motion"]
+    ratio = 100 * t_nl / res["nlp_motion"]
+    what = f"long path {tp.length / 1000:.2f} m"
+    out["rows"] += [
+        row(f"{what}: lp+nlp vs lp motion time", f"{res['nlp_motion']:.2f} s", f"lp {res['lp_motion']:.2f} s",
+            f"{100 * gain:.1f} % shorter", f">= {100 * GAIN_TARGET:.0f} %", verdict(gain >= GAIN_TARGET)),
+        row(f"{what}: lp+nlp compute / motion",
+            f"{t_nl:.1f} s / {res['nlp_motion']:.1f} s (LP {res['lp_stage_time']:.1f} s, NLP "
+            f"{res['nlp_stage_time']:.1f} s)", "—", f"{ratio:.1f} %", f"<= {RATIO_TARGET_PCT:g} %",
+            verdict(ratio <= RATIO_TARGET_PCT)),
+        row(f"{what}: windows, per-window times, Ipopt iterations, fallbacks",
+            f"{res['lp_windows']} LP windows (median {res['lp_window_ms']['median']:.0f} ms), "
+            f"{res['nlp_windows']} NLP windows (median {res['nlp_window_ms']['median']:.0f} ms, max "
+            f"{res['nlp_window_ms']['max']:.0f} ms), {res['ipopt_iterations']} it, "
+            f"{res['nlp_cut_rounds']} tightening rounds, {len(res['fallbacks'])} fallbacks",
+            "—", "—", "—", "info"),
+        row(f"{what}: sampled |u|/umax, |e|/emax", f"u {res['fd_util']['u']:.4f}, e {res['fd_util']['e']:.4f}",
+            "—", "—", "<= 1.01", verdict(max(res["fd_util"].values()) <= 1.01)),
+    ]
+    for key, mem in res["memory"].items():
+        if "peak_mb" in mem:
+            out["rows"].append(row(
+                f"peak memory, lp+nlp, {key} path (fresh process, VmHWM)",
+                f"{mem['peak_mb']:.0f} MB (RSS before {mem['rss_before_mb']:.0f} MB; samples "
+                f"{mem['samples']} x 21 columns = {mem['sample_mb']:.0f} MB)", "—", "—", "bounded", "info"))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--child", default=None)
+    ap.add_argument("--loops", type=int, default=LOOPS)
+    ap.add_argument("--long-memory", action="store_true", help="also run the 183.5 m path (slow)")
+    ap.add_argument("--skip-long", action="store_true")
+    a = ap.parse_args()
+    if a.child is not None:
+        child(a.child, a.loops)
+        return
+    out: dict[str, Any] = {"bench": "nlp_gain", "env": env_info(), "rows": []}
+    one_loop(out)
+    if not a.skip_long:
+        long_path(out, a.long_memory)
+    emit(out)
+
+
+if __name__ == "__main__":
+    main()
