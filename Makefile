@@ -26,7 +26,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check geometry solvers service tests bench
 
 typecheck: $(STAMP)
-	$(BIN)/mypy geometry solvers
+	$(BIN)/mypy geometry solvers service
 
 pytest: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 $(PYTEST_ARGS)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -158,9 +159,13 @@ def _local(toolpath: Toolpath, piece: Piece) -> Any:
 
 
 def solve_piece(
-    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any]
+    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any],
+    on_window: Callable[[float], None] | None = None,
 ) -> PieceProfile:
-    """Walk LP windows over one piece and assemble its control points."""
+    """Walk LP windows over one piece and assemble its control points.
+
+    ``on_window(s_done)``, if given, is called after each window with the piece-local arc length (mm) fixed so far.
+    """
     plan = plan_piece(piece, machine, opt)
     geometry = _local(toolpath, piece)
     ks = toolpath.knot_s
@@ -190,6 +195,8 @@ def solve_piece(
             c[k0 : k1 + 2] = res.c
             break
         k_next = k1 - plan.overlap
+        if on_window is not None:
+            on_window(k_next * plan.d)
         c[k0 : k_next + 2] = res.c[: k_next - k0 + 2]
         start = (float(res.c[k_next - k0]), float(res.c[k_next - k0 + 1]))
         prev_qstar = (k0, res.c_star)
@@ -213,8 +220,14 @@ def _kinematics(
     return g, f, v, a, j
 
 
-def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = None) -> Schedule:
-    """Fastest feed along ``toolpath`` within ``machine``'s limits, sampled at Ts."""
+def schedule(
+    toolpath: Toolpath, machine: Machine, options: Options | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> Schedule:
+    """Fastest feed along ``toolpath`` within ``machine``'s limits, sampled at Ts.
+
+    ``progress(fraction)``, if given, is called after each LP window with the fraction of the path length done.
+    """
     opt = options or Options()
     t_start = time.perf_counter()
     lim = LimitSet.from_machine(machine, opt.sample_period, opt.jerk)
@@ -222,7 +235,15 @@ def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = Non
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
         "control_points": 0, "checkpoints": 0, "unverified": 0, "knot_spacing": [], "window_times": [],
     }
-    profiles = [solve_piece(toolpath, p, machine, opt, lim, stats) for p in toolpath.pieces]
+    profiles: list[PieceProfile] = []
+    for p in toolpath.pieces:
+        def on_window(s_done: float, s0: float = p.s_start) -> None:
+            if progress is not None:
+                progress((s0 + s_done) / toolpath.length)
+
+        profiles.append(solve_piece(toolpath, p, machine, opt, lim, stats, on_window))
+        if progress is not None:
+            progress(p.s_end / toolpath.length)
     t_lp = time.perf_counter() - t_start
     timings = [PieceTiming.build(p) for p in profiles]
     durations = np.array([tm.duration for tm in timings])
