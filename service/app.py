@@ -29,7 +29,6 @@ from service.schemas import (
     JobOut,
     MachineList,
     MachineOut,
-    Problem,
     ScheduleRequest,
     ScheduleResponse,
 )
@@ -43,7 +42,7 @@ UNITS = {"vmax": "mm/s", "amax": "mm/s^2", "jmax": "mm/s^3", "M": "V s^2/mm", "b
 
 
 def _problems(*codes: int) -> dict[int | str, dict[str, Any]]:
-    return {c: {"model": Problem, "content": {MEDIA_PROBLEM: {"schema": {"$ref": "#/components/schemas/Problem"}}},
+    return {c: {"content": {MEDIA_PROBLEM: {"schema": {"$ref": "#/components/schemas/Problem"}}},
                 "description": "RFC 9457 problem details"} for c in codes}
 
 
@@ -127,7 +126,7 @@ def _routes(app: FastAPI) -> None:
     async def machines() -> dict[str, Any]:
         return {"machines": sorted(PRESETS)}
 
-    @app.get("/v1/machines/{name}", response_model=MachineOut, responses=_problems(404))
+    @app.get("/v1/machines/{name}", response_model=MachineOut, responses=_problems(404, 422))
     async def machine(name: Annotated[str, Path(max_length=100)]) -> dict[str, Any]:
         if name not in PRESETS:
             raise not_found(f"machine preset {name!r}", name)
@@ -145,7 +144,7 @@ def _routes(app: FastAPI) -> None:
         "/v1/schedule",
         response_model=ScheduleResponse,
         responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule (JSON columns, CSV or NDJSON rows "
-                         "by Accept)"}, **_problems(406, 413, 422, 503)},
+                         "by Accept)"}, **_problems(400, 406, 413, 422, 503)},
     )
     async def post_schedule(body: ScheduleRequest, request: Request) -> Response:
         """Schedule a toolpath now.  `Accept: text/csv` or `application/x-ndjson` for rows."""
@@ -162,7 +161,7 @@ def _routes(app: FastAPI) -> None:
 
     @app.post("/v1/jobs", status_code=202, response_model=JobOut,
               responses={200: {"model": JobOut, "description": "an existing job (same Idempotency-Key)"},
-                         **_problems(413, 422)})
+                         **_problems(400, 413, 422)})
     async def post_job(
         body: ScheduleRequest, request: Request,
         idempotency_key: Annotated[str | None, Header(alias="Idempotency-Key", max_length=200)] = None,
@@ -178,7 +177,7 @@ def _routes(app: FastAPI) -> None:
         return JSONResponse(_job_out(svc, job), status_code=202 if created else 200,
                             headers={"Location": f"/v1/jobs/{job.id}"})
 
-    @app.get("/v1/jobs/{job_id}", response_model=JobOut, responses=_problems(404))
+    @app.get("/v1/jobs/{job_id}", response_model=JobOut, responses=_problems(404, 422))
     async def get_job(job_id: JobId, request: Request) -> dict[str, Any]:
         svc = _svc(request)
         job = svc.store.get(job_id)
@@ -186,7 +185,7 @@ def _routes(app: FastAPI) -> None:
             raise not_found("job", job_id)
         return _job_out(svc, job)
 
-    @app.delete("/v1/jobs/{job_id}", response_model=JobOut, responses=_problems(404, 409))
+    @app.delete("/v1/jobs/{job_id}", response_model=JobOut, responses=_problems(404, 409, 422))
     async def delete_job(job_id: JobId, request: Request) -> dict[str, Any]:
         """Cancel a queued or running job (its solver process is killed)."""
         svc = _svc(request)
@@ -204,7 +203,7 @@ def _routes(app: FastAPI) -> None:
 
     @app.get("/v1/jobs/{job_id}/result", response_model=ScheduleResponse,
              responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule"},
-                        **_problems(404, 406, 409)})
+                        **_problems(404, 406, 409, 422)})
     async def get_result(job_id: JobId, request: Request) -> Response:
         svc = _svc(request)
         job = svc.store.get(job_id)

@@ -173,12 +173,14 @@ def install_handlers(app: FastAPI) -> None:
 
     async def _http(request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, StarletteHTTPException)
-        slug = {404: "not-found", 405: "method-not-allowed", 406: "not-acceptable", 413: "too-large",
-                415: "unsupported-media-type"}.get(exc.status_code, "http-error")
-        title = {404: "Not found", 405: "Method not allowed"}.get(exc.status_code, "HTTP error")
-        rule = {404: "no such route", 405: "method not allowed on this route"}.get(exc.status_code, str(exc.detail))
-        p = _problem(exc.status_code, slug, title, str(exc.detail),
-                     [_entry("path" if exc.status_code in (404, 405) else None, request.url.path, rule)])
+        slug = {400: "bad-request", 404: "not-found", 405: "method-not-allowed", 406: "not-acceptable",
+                413: "too-large", 415: "unsupported-media-type"}.get(exc.status_code, "http-error")
+        title = {400: "Bad request", 404: "Not found", 405: "Method not allowed"}.get(exc.status_code, "HTTP error")
+        rule = {400: "the body must be UTF-8 JSON", 404: "no such route",
+                405: "method not allowed on this route"}.get(exc.status_code, str(exc.detail))
+        field = {400: "body", 404: "path", 405: "path", 413: "body"}.get(exc.status_code)
+        value = None if exc.status_code in (400, 413) else request.url.path
+        p = _problem(exc.status_code, slug, title, str(exc.detail), [_entry(field, value, rule)])
         return problem_response(p, request.url.path, headers=dict(exc.headers or {}))
 
     for cls in (RequestValidationError, GeometryError, ScheduleError, ServiceError, WorkFailed, WorkTimeout,
