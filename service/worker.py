@@ -73,6 +73,7 @@ def child_main(conn: Connection, request: dict[str, Any], budget: Budget) -> Non
 
 # --- Dask -----------------------------------------------------------------------
 PROGRESS_TOPIC = "feedsched-progress"
+CANCELLED_TOPIC = "feedsched-cancelled"
 
 
 def dask_task(request: dict[str, Any], budget: Budget, job_key: str) -> tuple[str, Any]:
@@ -97,6 +98,7 @@ def dask_task(request: dict[str, Any], budget: Budget, job_key: str) -> tuple[st
     try:
         kind, payload = run_captured(request, budget, progress)
     except Cancelled:
+        worker.log_event(CANCELLED_TOPIC, {"job": job_key, "pid": os.getpid()})
         return "cancelled", None
     if kind == "ok":
         return "ok", result_bytes(payload)
