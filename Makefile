@@ -42,3 +42,8 @@ clean:
 
 openapi: $(STAMP)
 	$(BIN)/python -m service.openapi_dump openapi/openapi.json
+
+# 32 clients posting small toolpaths on loopback for DURATION s (starts its own server)
+DURATION ?= 60
+load: $(STAMP)
+	$(BIN)/python -m bench.load --duration $(DURATION)

@@ -7,6 +7,7 @@ touches the web app.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -60,8 +61,14 @@ def _watch_parent() -> None:
 
 
 def child_main(conn: Connection, request: dict[str, Any], budget: Budget) -> None:
-    """Entry point of a forked solver process: progress messages, then one result message."""
+    """Entry point of a forked solver process: progress messages, then one result message.
+
+    The process runs at a lower CPU priority (``FEEDSCHED_WORKER_NICE``, default 5) so that the service's event
+    loop is scheduled first when solvers saturate the cores.
+    """
     _watch_parent()
+    with contextlib.suppress(OSError, ValueError):
+        os.nice(int(os.environ.get("FEEDSCHED_WORKER_NICE", "5")))
 
     def progress(fraction: float) -> None:
         conn.send(("progress", float(fraction)))
