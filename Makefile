@@ -9,7 +9,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 PYTEST_ARGS ?=
 
-.PHONY: venv run test lint typecheck pytest bench clean
+.PHONY: venv run test lint typecheck pytest bench clean openapi load
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -26,7 +26,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check geometry solvers service tests bench
 
 typecheck: $(STAMP)
-	$(BIN)/mypy geometry solvers
+	$(BIN)/mypy geometry solvers service
 
 pytest: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 $(PYTEST_ARGS)
@@ -39,3 +39,11 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) .mypy_cache .pytest_cache .ruff_cache
+
+openapi: $(STAMP)
+	$(BIN)/python -m service.openapi_dump openapi/openapi.json
+
+# 32 clients posting small toolpaths on loopback for DURATION s (starts its own server)
+DURATION ?= 60
+load: $(STAMP)
+	$(BIN)/python -m bench.load --duration $(DURATION)

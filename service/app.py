@@ -1,90 +1,231 @@
-"""ASGI app: thin routes over the solver pipeline.  Errors are RFC 9457 problem+json."""
+"""ASGI app: thin routes over the executor, the job manager and the store.
+
+Errors are RFC 9457 problem+json (service/errors.py is the only mapping).
+Settings come from FEEDSCHED_* environment variables (service/config.py).
+"""
 
 from __future__ import annotations
 
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from dataclasses import asdict
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import FastAPI, Request
-from fastapi.concurrency import run_in_threadpool
-from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi import FastAPI, Header, Path, Request
+from fastapi.responses import JSONResponse, Response
 
-from geometry import GeometryError
-from service.convert import from_schedule, to_problem
-from service.schemas import ScheduleRequest, ScheduleResponse
-from solvers.errors import ScheduleError
-from solvers.machine import PRESETS, preset
-from solvers.pipeline import schedule
+from service.config import Settings
+from service.convert import Budget, control_point_count, load_result
+from service.errors import ServiceError, install_handlers, not_found, too_large
+from service.executor import Executor, make_executor
+from service.http import BodyLimit, negotiate, render
+from service.jobs import JobManager
+from service.schemas import (
+    MEDIA_CSV,
+    MEDIA_JSON,
+    MEDIA_NDJSON,
+    MEDIA_PROBLEM,
+    Health,
+    JobOut,
+    MachineList,
+    MachineOut,
+    ScheduleRequest,
+    ScheduleResponse,
+)
+from service.store import Job, JobStore
+from solvers.machine import PRESETS, derive_limits, preset
 
-app = FastAPI(title="feedsched", version="0.1.0", description="Time-optimal CNC feed scheduling along NURBS toolpaths")
-PROBLEM = "application/problem+json"
-
-
-def _problem(status: int, title: str, detail: str, **extra: Any) -> JSONResponse:
-    return JSONResponse({"type": "about:blank", "title": title, "status": status, "detail": detail, **extra},
-                        status_code=status, media_type=PROBLEM)
-
-
-@app.exception_handler(RequestValidationError)
-async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
-    errors = [
-        {"field": ".".join(str(p) for p in e["loc"]), "value": e.get("input"), "rule": e["msg"]}
-        for e in exc.errors()
-    ]
-    return _problem(422, "Invalid request", errors[0]["rule"] if errors else "invalid", errors=_jsonable(errors))
-
-
-@app.exception_handler(GeometryError)
-async def _geometry(_: Request, exc: GeometryError) -> JSONResponse:
-    return _problem(422, "Invalid toolpath", str(exc), errors=[{"field": exc.field, "value": _jsonable(exc.value),
-                                                                "rule": exc.rule}])
+VERSION = "0.2.0"
+UNITS = {"vmax": "mm/s", "amax": "mm/s^2", "jmax": "mm/s^3", "M": "V s^2/mm", "b": "V s/mm", "c": "V", "d": "V",
+         "Kv": "s", "Ka": "s^2", "Kj": "s^3", "umax": "V", "emax": "mm", "feed_max": "mm/s",
+         "stopping_distance_mm": "mm"}
 
 
-@app.exception_handler(ScheduleError)
-async def _schedule(_: Request, exc: ScheduleError) -> JSONResponse:
-    return _problem(422, "Cannot schedule", str(exc), errors=[{"field": exc.field, "value": _jsonable(exc.value),
-                                                               "rule": exc.rule}],
-                    window=exc.window, axis=exc.axis, status_detail=exc.status)
+def _problems(*codes: int) -> dict[int | str, dict[str, Any]]:
+    return {c: {"content": {MEDIA_PROBLEM: {"schema": {"$ref": "#/components/schemas/Problem"}}},
+                "description": "RFC 9457 problem details"} for c in codes}
 
 
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, float) and v != v:
-        return "NaN"
-    if isinstance(v, float) and v in (float("inf"), float("-inf")):
-        return str(v)
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, dict):
-        return {k: _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (str, int, float, bool)) or v is None:
-        return v
-    return repr(v)
+SAMPLE_FORMATS: dict[str, Any] = {
+    MEDIA_JSON: {},
+    MEDIA_CSV: {"schema": {"type": "string"}, "example": "t,s,feed,x,y,z,...\n0.0,0.0,0.0,0.0,0.0,0.0,...\n"},
+    MEDIA_NDJSON: {"schema": {"type": "string"}, "example": '{"t":0.0,"s":0.0,...}\n'},
+}
 
 
-@app.get("/healthz")
-async def healthz() -> dict[str, str]:
-    return {"status": "ok"}
+class Service:
+    """What the routes use; created in the app's lifespan."""
+
+    def __init__(self, settings: Settings) -> None:
+        self.settings = settings
+        self.store = JobStore(settings.data_dir)
+        self.executor: Executor = make_executor(settings.workers, settings.dask_scheduler)
+        self.jobs = JobManager(self.store, self.executor, settings)
+        self.sync_budget = Budget(settings.sync_max_samples, settings.sync_max_intervals,
+                                  where="the synchronous API (POST /v1/jobs takes more)")
+
+    async def start(self) -> None:
+        await self.executor.start()
+        await self.jobs.start()
+
+    async def close(self) -> None:
+        await self.jobs.close()
+        await self.executor.close()
+        self.store.close()
 
 
-@app.get("/v1/machines")
-async def machines() -> dict[str, Any]:
-    return {"machines": sorted(PRESETS)}
+def _svc(request: Request) -> Service:
+    svc: Service = request.app.state.service
+    return svc
 
 
-@app.get("/v1/machines/{name}")
-async def machine(name: str) -> dict[str, Any]:
-    m = preset(name)
-    return {"name": m.name, "feed_max": m.feed_max, "stopping_distance_mm": m.stopping_distance(),
-            "axes": [asdict(a) for a in m.axes],
-            "units": {"vmax": "mm/s", "amax": "mm/s^2", "jmax": "mm/s^3", "M": "V s^2/mm", "b": "V s/mm",
-                      "c": "V", "d": "V", "Kv": "s", "Ka": "s^2", "Kj": "s^3", "umax": "V", "emax": "mm"}}
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or Settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        svc = Service(settings)
+        app.state.service = svc
+        await svc.start()
+        try:
+            yield
+        finally:
+            await svc.close()
+
+    app = FastAPI(title="feedsched", version=VERSION, lifespan=lifespan,
+                  description="Time-optimal CNC feed scheduling along NURBS toolpaths. Errors are RFC 9457 "
+                  "problem+json naming the field path, value and rule.")
+    app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    install_handlers(app)
+    _routes(app)
+    return app
 
 
-@app.post("/v1/schedule", response_model=ScheduleResponse)
-async def post_schedule(req: ScheduleRequest) -> dict[str, Any]:
-    def work() -> dict[str, Any]:
-        tp, m, opts = to_problem(req)
-        return from_schedule(schedule(tp, m, opts))
+def _job_out(svc: Service, job: Job) -> dict[str, Any]:
+    timings: dict[str, Any] = {"created": job.created, "started": job.started, "finished": job.finished}
+    if job.started is not None:
+        timings["queued_s"] = job.started - job.created
+        if job.finished is not None:
+            timings["run_s"] = job.finished - job.started
+    base = f"/v1/jobs/{job.id}"
+    return {"id": job.id, "status": job.status, "progress": svc.jobs.progress(job), "attempts": job.attempts,
+            "worker_pid": svc.executor.running_pids().get(job.id) if job.status == "running" else None,
+            "timings": timings, "error": job.error, "summary": job.summary,
+            "links": {"self": base, "result": base + "/result", "cancel": base}}
 
-    return await run_in_threadpool(work)
+
+JobId = Annotated[str, Path(min_length=1, max_length=100, description="job id from POST /v1/jobs")]
+
+
+def _routes(app: FastAPI) -> None:
+    @app.get("/healthz", response_model=Health)
+    async def healthz() -> dict[str, str]:
+        return {"status": "ok"}
+
+    @app.get("/v1/machines", response_model=MachineList)
+    async def machines() -> dict[str, Any]:
+        return {"machines": sorted(PRESETS)}
+
+    @app.get("/v1/machines/{name}", response_model=MachineOut, responses=_problems(404, 422))
+    async def machine(name: Annotated[str, Path(max_length=100)]) -> dict[str, Any]:
+        if name not in PRESETS:
+            raise not_found(f"machine preset {name!r}", name)
+        m = preset(name)
+        axes = []
+        for a in m.axes:
+            d = asdict(a)
+            if a.drive is not None:
+                d["limits_from_drive"] = asdict(derive_limits(a.drive, a.limits.vmax, a.name))
+            axes.append(d)
+        return {"name": m.name, "feed_max": m.feed_max, "stopping_distance_mm": m.stopping_distance(),
+                "axes": axes, "units": UNITS}
+
+    @app.post(
+        "/v1/schedule",
+        response_model=ScheduleResponse,
+        responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule (JSON columns, CSV or NDJSON rows "
+                         "by Accept)"}, **_problems(400, 406, 413, 422, 503)},
+    )
+    async def post_schedule(body: ScheduleRequest, request: Request) -> Response:
+        """Schedule a toolpath now.  `Accept: text/csv` or `application/x-ndjson` for rows."""
+        svc = _svc(request)
+        media = negotiate(request.headers.get("accept"))
+        n = control_point_count(body)
+        if n > svc.settings.sync_max_control_points:
+            raise too_large(f"{n} control points exceed the synchronous limit of "
+                            f"{svc.settings.sync_max_control_points}; POST the same body to /v1/jobs",
+                            field="toolpath.segments", value=n,
+                            rule=f"at most {svc.settings.sync_max_control_points} control points")
+        res = await svc.executor.run(body.model_dump(mode="json"), svc.sync_budget, svc.settings.sync_timeout)
+        return await render(res, media)
+
+    @app.post("/v1/jobs", status_code=202, response_model=JobOut,
+              responses={200: {"model": JobOut, "description": "an existing job (same Idempotency-Key)"},
+                         **_problems(400, 413, 422)})
+    async def post_job(
+        body: ScheduleRequest, request: Request,
+        idempotency_key: Annotated[str | None, Header(alias="Idempotency-Key", max_length=200)] = None,
+    ) -> JSONResponse:
+        """Queue a toolpath; poll the job at `Location`."""
+        svc = _svc(request)
+        req = body.model_dump(mode="json")
+        job, created = svc.jobs.submit(req, idempotency_key)
+        if not created and job.request != req:
+            raise ServiceError(422, "idempotency-key-reused", "Idempotency-Key reused",
+                               "this Idempotency-Key was used for a different request", field="Idempotency-Key",
+                               value=idempotency_key, rule="one key, one request body")
+        return JSONResponse(_job_out(svc, job), status_code=202 if created else 200,
+                            headers={"Location": f"/v1/jobs/{job.id}"})
+
+    @app.get("/v1/jobs/{job_id}", response_model=JobOut, responses=_problems(404, 422))
+    async def get_job(job_id: JobId, request: Request) -> dict[str, Any]:
+        svc = _svc(request)
+        job = svc.store.get(job_id)
+        if job is None:
+            raise not_found("job", job_id)
+        return _job_out(svc, job)
+
+    @app.delete("/v1/jobs/{job_id}", response_model=JobOut, responses=_problems(404, 409, 422))
+    async def delete_job(job_id: JobId, request: Request) -> dict[str, Any]:
+        """Cancel a queued or running job (its solver process is killed)."""
+        svc = _svc(request)
+        job = svc.store.get(job_id)
+        if job is None:
+            raise not_found("job", job_id)
+        if job.status in ("queued", "running"):
+            await svc.jobs.cancel(job_id)
+        elif job.status != "cancelled":
+            raise ServiceError(409, "job-finished", "Job already finished", f"the job has {job.status}",
+                               field="job_id", value=job_id, rule="only queued or running jobs can be cancelled")
+        job = svc.store.get(job_id)
+        assert job is not None
+        return _job_out(svc, job)
+
+    @app.get("/v1/jobs/{job_id}/result", response_model=ScheduleResponse,
+             responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule"},
+                        **_problems(404, 406, 409, 422)})
+    async def get_result(job_id: JobId, request: Request) -> Response:
+        svc = _svc(request)
+        job = svc.store.get(job_id)
+        if job is None:
+            raise not_found("job", job_id)
+        media = negotiate(request.headers.get("accept"))
+        if job.status != "succeeded":
+            raise ServiceError(409, "job-not-succeeded", "No result", f"the job is {job.status}",
+                               field="job_id", value=job_id, rule="a result exists once the job has succeeded",
+                               job_status=job.status, job_error=job.error)
+        path = svc.store.result_path(job_id)
+        try:
+            res = await _load(path)
+        except FileNotFoundError:
+            raise not_found("job result file", job_id) from None
+        return await render(res, media)
+
+
+async def _load(path: Any) -> Any:
+    from starlette.concurrency import run_in_threadpool
+
+    return await run_in_threadpool(load_result, path)
+
+
+app = create_app()

@@ -1,13 +1,68 @@
-"""Conversion between API schemas and the pure solver/geometry types."""
+"""Conversion between API schemas and the pure solver/geometry types, and the output encodings.
+
+Every float leaves in full float64 precision: JSON and NDJSON through orjson
+(shortest representation that parses back to the same double), CSV through
+``repr`` (the same guarantee), stored results as ``.npz`` of raw float64.
+"""
 
 from __future__ import annotations
 
+import io
+import json
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+import numpy as np
+import orjson
+from numpy.typing import NDArray
+
 from geometry import NurbsSegment, Toolpath
-from service.schemas import ScheduleRequest
-from solvers.machine import AXES, Machine, preset
-from solvers.pipeline import Options, Schedule
+from service.errors import too_large
+from service.schemas import MachineIn, ScheduleRequest
+from solvers.machine import AXES, Axis, AxisLimits, DriveModel, Machine, derive_limits, preset
+from solvers.pipeline import Options, Schedule, plan_piece
+
+FloatArray = NDArray[np.float64]
+#: Rows per chunk when streaming CSV/NDJSON.
+CHUNK_ROWS = 2000
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Work allowed for one request: output samples and LP knot intervals (lower-bound estimates)."""
+
+    max_samples: int
+    max_intervals: int
+    where: str = "the synchronous API"
+
+
+@dataclass(frozen=True)
+class Result:
+    """A schedule as the service keeps it: summary, diagnostics and named float64 columns of equal length."""
+
+    summary: dict[str, Any]
+    diagnostics: dict[str, Any]
+    columns: dict[str, FloatArray]
+
+
+def to_machine(m: str | MachineIn) -> Machine:
+    if isinstance(m, str):
+        return preset(m)
+    axes = []
+    for name in AXES:
+        a = getattr(m.axes, name)
+        drive = DriveModel(**a.drive.model_dump()) if a.drive is not None else None
+        if a.limits is not None:
+            limits = AxisLimits(**a.limits.model_dump())
+        else:
+            assert drive is not None  # schema: limits or drive
+            vmax = math.inf if a.vmax_request is None else float(a.vmax_request)
+            limits = derive_limits(drive, vmax, name)
+        axes.append(Axis(name, limits, drive))
+    return Machine(name=m.name, axes=(axes[0], axes[1], axes[2]), feed_max=m.feed_max)
 
 
 def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
@@ -16,7 +71,7 @@ def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
         for i, s in enumerate(req.toolpath.segments)
     ]
     tp = Toolpath(segs, corner_tol_deg=float(req.toolpath.corner_tolerance_deg))
-    machine = preset(req.machine)
+    machine = to_machine(req.machine)
     o = req.options
     if o.feed_max is not None:
         machine = machine.with_feed_max(float(o.feed_max))
@@ -31,21 +86,108 @@ def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
     return tp, machine, opts
 
 
-def from_schedule(sch: Schedule) -> dict[str, Any]:
+def control_point_count(req: ScheduleRequest) -> int:
+    return sum(len(s.control_points) for s in req.toolpath.segments)
+
+
+def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) -> None:
+    """Raise a 413 ServiceError when the work certainly exceeds ``budget`` (estimates are lower bounds)."""
+    intervals = sum(plan_piece(p, machine, opts).n_int for p in tp.pieces)
+    if intervals > budget.max_intervals:
+        raise too_large(
+            f"{intervals} knot intervals exceed the {budget.max_intervals} allowed in {budget.where}",
+            field="options.knot_spacing", value=opts.knot_spacing,
+            rule=f"path length / knot spacing must be <= {budget.max_intervals}",
+        )
+    vmax, _, _ = machine.limit_arrays()
+    top = float(np.linalg.norm(vmax))
+    if machine.feed_max is not None:
+        top = min(top, machine.feed_max)
+    samples = tp.length / top / opts.sample_period
+    if samples > budget.max_samples:
+        raise too_large(
+            f"at least {samples:.0f} samples (path {tp.length:.6g} mm at <= {top:.6g} mm/s every "
+            f"{opts.sample_period} s) exceed the {budget.max_samples} allowed in {budget.where}",
+            field="options.sample_period", value=opts.sample_period,
+            rule=f"motion time / sample period must be <= {budget.max_samples}",
+        )
+
+
+def from_schedule(sch: Schedule) -> Result:
     smp = sch.samples
-    cols: dict[str, list[float]] = {
-        "t": smp.t.tolist(),
-        "s": smp.s.tolist(),
-        "feed": smp.feed.tolist(),
-    }
+    cols: dict[str, FloatArray] = {"t": smp.t, "s": smp.s, "feed": smp.feed}
     for i, ax in enumerate(AXES):
-        cols[ax] = smp.position[:, i].tolist()
-    for name, arr in (("v", smp.velocity), ("a", smp.acceleration), ("j", smp.jerk)):
-        for i, ax in enumerate(AXES):
-            cols[f"{name}_{ax}"] = arr[:, i].tolist()
-    for name, arr in (("u", smp.control_signal), ("e", smp.servo_error)):
+        cols[ax] = smp.position[:, i]
+    for name, arr in (("v", smp.velocity), ("a", smp.acceleration), ("j", smp.jerk),
+                      ("u", smp.control_signal), ("e", smp.servo_error)):
         if arr is not None:
             for i, ax in enumerate(AXES):
-                cols[f"{name}_{ax}"] = arr[:, i].tolist()
+                cols[f"{name}_{ax}"] = np.ascontiguousarray(arr[:, i], dtype=np.float64)
     summary = {k: v for k, v in sch.summary.items() if k != "window_times"}
-    return {"summary": summary, "diagnostics": sch.diagnostics, "samples": cols}
+    return Result(summary=_plain(summary), diagnostics=_plain(sch.diagnostics),
+                  columns={k: np.ascontiguousarray(v, dtype=np.float64) for k, v in cols.items()})
+
+
+def _plain(v: Any) -> Any:
+    """JSON-compatible copy (numpy scalars to Python numbers)."""
+    return json.loads(orjson.dumps(v, option=orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS))
+
+
+# --- encodings ----------------------------------------------------------------
+def encode_json(res: Result) -> bytes:
+    return orjson.dumps({"summary": res.summary, "diagnostics": res.diagnostics, "samples": res.columns},
+                        option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+def _rows(res: Result, a: int, b: int) -> tuple[list[str], Iterator[tuple[float, ...]]]:
+    names = list(res.columns)
+    return names, zip(*(res.columns[n][a:b].tolist() for n in names), strict=True)
+
+
+def _n(res: Result) -> int:
+    return len(next(iter(res.columns.values()))) if res.columns else 0
+
+
+def iter_csv(res: Result) -> Iterator[bytes]:
+    """Header line, then one line per sample; repr() keeps every float64 bit."""
+    yield (",".join(res.columns) + "\n").encode()
+    n = _n(res)
+    for a in range(0, n, CHUNK_ROWS):
+        _, rows = _rows(res, a, a + CHUNK_ROWS)
+        yield "".join(",".join(map(repr, row)) + "\n" for row in rows).encode()
+
+
+def iter_ndjson(res: Result) -> Iterator[bytes]:
+    """One JSON object per sample and line."""
+    n = _n(res)
+    for a in range(0, n, CHUNK_ROWS):
+        names, rows = _rows(res, a, a + CHUNK_ROWS)
+        yield b"".join(orjson.dumps(dict(zip(names, row, strict=True))) + b"\n" for row in rows)
+
+
+# --- storage (never pickle: float64 arrays in .npz, metadata as JSON) ----------------
+def result_bytes(res: Result) -> bytes:
+    """A result as .npz bytes: raw float64 columns plus JSON metadata."""
+    buf = io.BytesIO()
+    meta = json.dumps({"summary": res.summary, "diagnostics": res.diagnostics, "columns": list(res.columns)})
+    arrays: dict[str, Any] = {f"c{i}": v for i, v in enumerate(res.columns.values())}
+    arrays["__meta__"] = np.frombuffer(meta.encode(), dtype=np.uint8)
+    np.savez(buf, **arrays)
+    return buf.getvalue()
+
+
+def save_result(res: Result, path: Path) -> None:
+    tmp = path.with_suffix(".tmp")
+    tmp.write_bytes(result_bytes(res))
+    tmp.replace(path)
+
+
+def load_result(path: Path) -> Result:
+    return result_from_bytes(path.read_bytes())
+
+
+def result_from_bytes(data: bytes) -> Result:
+    with np.load(io.BytesIO(data), allow_pickle=False) as z:
+        meta = json.loads(bytes(z["__meta__"]).decode())
+        cols = {name: np.asarray(z[f"c{i}"], dtype=np.float64) for i, name in enumerate(meta["columns"])}
+    return Result(summary=meta["summary"], diagnostics=meta["diagnostics"], columns=cols)

@@ -1,41 +1,135 @@
-"""Request/response schemas of the HTTP API (pydantic).  No solver imports here."""
+"""Request/response schemas of the HTTP API (pydantic).  No solver imports here.
+
+Numbers are strict (booleans and strings are not numbers) and finite (JSON has
+no NaN/Inf; ``allow_inf_nan=False`` also rejects the ``NaN`` token Python's
+JSON parser would accept).  Bounds keep every accepted request physically
+meaningful and numerically safe for the solver.
+"""
 
 from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt
+from pydantic import (
+    AllowInfNan,
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Strict,
+    StrictInt,
+    Tag,
+    model_validator,
+)
 
-Number = StrictFloat | StrictInt
+#: A finite JSON number (integers accepted, booleans and strings not).
+Number = Annotated[float, Strict(), AllowInfNan(False)]
+Coord = Annotated[Number, Field(ge=-1e6, le=1e6)]
+
+
+Speed = Annotated[Number, Field(gt=0, le=1e5)]  # mm/s
+Accel = Annotated[Number, Field(gt=0, le=1e8)]  # mm/s^2
+Jerk = Annotated[Number, Field(gt=0, le=1e12)]  # mm/s^3
+
+MEDIA_JSON = "application/json"
+MEDIA_CSV = "text/csv"
+MEDIA_NDJSON = "application/x-ndjson"
+MEDIA_PROBLEM = "application/problem+json"
 
 
 class NurbsIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
     type: Literal["nurbs"] = "nurbs"
     degree: StrictInt = Field(ge=1, le=12)
-    knots: list[Number]
-    control_points: list[Annotated[list[Number], Field(min_length=2, max_length=3)]]
-    weights: list[Number] | None = None
+    knots: list[Annotated[Number, Field(ge=-1e9, le=1e9)]] = Field(min_length=2, max_length=200_000)
+    control_points: list[Annotated[list[Coord], Field(min_length=2, max_length=3)]] = Field(
+        min_length=2, max_length=200_000
+    )
+    weights: list[Annotated[Number, Field(gt=0, le=1e6)]] | None = Field(default=None, max_length=200_000)
 
 
 class ToolpathIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
     segments: list[NurbsIn] = Field(min_length=1, max_length=10_000)
-    corner_tolerance_deg: Number = 0.5
+    corner_tolerance_deg: Annotated[Number, Field(ge=0, le=180)] = 0.5
+
+
+class LimitsIn(BaseModel):
+    """Kinematic limits of one axis."""
+
+    model_config = ConfigDict(extra="forbid")
+    vmax: Speed = Field(description="mm/s")
+    amax: Accel = Field(description="mm/s^2")
+    jmax: Jerk = Field(description="mm/s^3")
+
+
+class DriveIn(BaseModel):
+    """Feed-drive model of one axis: u = M a + b v + c + d sign(v) [V], e = Kv v + Ka a + Kj j [mm]."""
+
+    model_config = ConfigDict(extra="forbid")
+    M: Annotated[Number, Field(gt=0, le=1e3)] = Field(description="V s^2/mm")
+    b: Annotated[Number, Field(ge=0, le=1e3)] = Field(description="V s/mm")
+    c: Annotated[Number, Field(ge=-1e3, le=1e3)] = Field(description="V (bias, e.g. gravity)")
+    d: Annotated[Number, Field(ge=0, le=1e3)] = Field(description="V (Coulomb friction)")
+    Kv: Annotated[Number, Field(gt=0, le=1e3)] = Field(description="s")
+    Ka: Annotated[Number, Field(ge=0, le=1e3)] = Field(description="s^2")
+    Kj: Annotated[Number, Field(gt=0, le=1e3)] = Field(description="s^3")
+    umax: Annotated[Number, Field(gt=0, le=1e4)] = Field(description="V")
+    emax: Annotated[Number, Field(gt=0, le=1e3)] = Field(description="mm")
+
+
+class AxisIn(BaseModel):
+    """One axis: limits, a drive model, or both.  Without limits they are derived from the drive model."""
+
+    model_config = ConfigDict(extra="forbid")
+    limits: LimitsIn | None = None
+    drive: DriveIn | None = None
+    vmax_request: Speed | None = Field(
+        default=None, description="mm/s; the speed asked of the drive when limits are derived (default: what the "
+        "drive can hold)",
+    )
+
+    @model_validator(mode="after")
+    def _limits_or_drive(self) -> AxisIn:
+        if self.limits is None and self.drive is None:
+            raise ValueError("give limits, a drive model, or both")
+        return self
+
+
+class AxesIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    x: AxisIn
+    y: AxisIn
+    z: AxisIn
+
+
+class MachineIn(BaseModel):
+    """A custom 3-axis machine."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str = Field(default="custom", max_length=64)
+    axes: AxesIn
+    feed_max: Speed | None = Field(default=None, description="tangential feed limit, mm/s")
 
 
 class OptionsIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    method: Literal["lp"] = "lp"
-    sample_period: Number = Field(default=0.001, gt=0, le=0.1)
-    knot_spacing: Number | None = Field(default=None, gt=0)
+    method: Literal["lp", "lp+nlp"] = Field(
+        default="lp+nlp",
+        description='"lp+nlp" (default: LP, then the NLP refinement under the drive\'s control-signal and servo-error '
+        'limits) or "lp" (velocity/acceleration/jerk limits only)'
+    )
+    sample_period: Annotated[Number, Field(ge=1e-5, le=0.1)] = Field(default=0.001, description="s")
+    knot_spacing: Annotated[Number, Field(ge=1e-3, le=1e4)] | None = Field(
+        default=None, description="mm; default 0.1 x the machine's stopping distance"
+    )
     checkpoints_per_interval: StrictInt = Field(default=5, ge=1, le=64)
     jerk: bool = True
     solver: Literal["highs", "clarabel"] = "highs"
-    feed_max: Number | None = Field(default=None, gt=0)
+    feed_max: Speed | None = Field(default=None, description="mm/s (overrides the machine's)")
 
 
-EXAMPLE = {
+EXAMPLE: dict[str, Any] = {
     "toolpath": {
         "segments": [
             {
@@ -48,18 +142,95 @@ EXAMPLE = {
         ]
     },
     "machine": "router",
-    "options": {"method": "lp", "sample_period": 0.001},
+    "options": {"method": "lp+nlp", "sample_period": 0.001},
 }
+
+
+#: Union-branch tags pydantic puts into error locations (service.errors drops them from field paths).
+UNION_TAGS = ("preset", "custom")
+
+
+def _machine_kind(v: Any) -> str:
+    return "custom" if isinstance(v, (dict, MachineIn)) else "preset"
+
+
+MachineField = Annotated[
+    Annotated[Literal["router"], Tag("preset")] | Annotated[MachineIn, Tag("custom")], Discriminator(_machine_kind)
+]
 
 
 class ScheduleRequest(BaseModel):
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [EXAMPLE]})
     toolpath: ToolpathIn
-    machine: Literal["router"] = "router"
+    machine: MachineField = Field(
+        default="router", description='a preset name ("router") or a custom per-axis machine'
+    )
     options: OptionsIn = OptionsIn()
 
 
 class ScheduleResponse(BaseModel):
     summary: dict[str, Any]
     diagnostics: dict[str, Any]
-    samples: dict[str, list[float]]
+    samples: dict[str, list[float]] = Field(
+        description="columns t, s, feed, x, y, z, v_x.., a_x.., j_x.. and, with a drive model, u_x.. (V), e_x.. (mm)"
+    )
+
+
+JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+
+
+class ProblemDetail(BaseModel):
+    """One offending input: where, what and which rule."""
+
+    field: str | None = None
+    pointer: str | None = None
+    value: Any = None
+    rule: str
+
+
+class Problem(BaseModel):
+    """RFC 9457 problem details."""
+
+    type: str
+    title: str
+    status: int
+    detail: str
+    instance: str | None = None
+    errors: list[ProblemDetail] = []
+
+
+class JobTimings(BaseModel):
+    created: float = Field(description="Unix time, s")
+    started: float | None = None
+    finished: float | None = None
+    queued_s: float | None = None
+    run_s: float | None = None
+
+
+class JobOut(BaseModel):
+    id: str
+    status: JobStatus
+    progress: float = Field(ge=0, le=1, description="fraction of the path length scheduled")
+    attempts: int
+    worker_pid: int | None = Field(default=None, description="pid of the solver process while running (local "
+                                   "executor) or last reported by the Dask worker")
+    timings: JobTimings
+    error: Problem | None = None
+    summary: dict[str, Any] | None = None
+    links: dict[str, str]
+
+
+class MachineList(BaseModel):
+    machines: list[str]
+
+
+class MachineOut(BaseModel):
+    name: str
+    feed_max: float | None
+    stopping_distance_mm: float
+    axes: list[dict[str, Any]]
+    units: dict[str, str]
+
+
+class Health(BaseModel):
+    status: Literal["ok"]

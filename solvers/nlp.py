@@ -351,13 +351,20 @@ class NlpRefiner:
 
     # ----- a piece -------------------------------------------------------------------
     def refine(
-        self, geometry: GeometryFn, c: FloatArray, d: float, joins: list[int], breaks: FloatArray
+        self,
+        geometry: GeometryFn,
+        c: FloatArray,
+        d: float,
+        joins: list[int],
+        breaks: FloatArray,
+        on_chain: Callable[[float], None] | None = None,
     ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """f control points (n_int + 2,) and the mask of knot intervals that use them.
 
         ``c``: the LP's q control points over the piece; ``joins``: knots where LP
         windows meet (chains end and start there); ``breaks``: piece-local s of
-        geometry knots.
+        geometry knots; ``on_chain(s)`` is called after each chain with the piece-local
+        arc length done (it may raise to cancel).
         """
         n_int = c.size - 2
         p = np.zeros(n_int + 2)
@@ -373,6 +380,8 @@ class NlpRefiner:
                 self._record(A, B, d, exc.window, exc.reason, exc.status)
             except Exception as exc:
                 self._record(A, B, d, self.stats.windows - 1, f"{type(exc).__name__}: {exc}", "exception")
+            if on_chain is not None:
+                on_chain(B * d)
         return p, mask
 
     def _record(self, A: int, B: int, d: float, window: int, reason: str, status: str) -> None:

@@ -42,6 +42,8 @@ OVERLAP_SAFETY = 2.0
 DEFAULT_LP_WINDOW = 200
 #: Default NLP window as a multiple of its overlap.
 NLP_WINDOW_PER_OVERLAP = 3
+#: Share of the reported progress given to the LP stage when the NLP follows.
+LP_PROGRESS_SHARE = 0.1
 #: Utilisation at or above which a constraint is reported as binding.
 BINDING_UTILISATION = 0.98
 #: Samples computed per chunk (bounds memory in the reconstruction).
@@ -197,11 +199,14 @@ def _local(toolpath: Toolpath, piece: Piece) -> Any:
 
 
 def solve_piece(
-    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any]
+    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any],
+    on_window: Callable[[float], None] | None = None,
 ) -> tuple[PieceProfile, list[int]]:
     """Walk LP windows over one piece and assemble its control points.
 
-    Returns the profile and the knots where consecutive LP windows meet."""
+    Returns the profile and the knots where consecutive LP windows meet.
+    ``on_window(s_done)``, if given, is called after each window with the piece-local arc length (mm) fixed so far.
+    """
     plan = plan_piece(piece, machine, opt)
     geometry = _local(toolpath, piece)
     breaks = _breaks(toolpath, piece)
@@ -234,6 +239,8 @@ def solve_piece(
         if opt.method == "lp+nlp":
             k_next = _join_knot(geometry, res.c, k0, k_next, plan, lim)
         joins.append(k_next)
+        if on_window is not None:
+            on_window(k_next * plan.d)
         c[k0 : k_next + 2] = res.c[: k_next - k0 + 2]
         start = (float(res.c[k_next - k0]), float(res.c[k_next - k0 + 1]))
         prev_qstar = (k0, res.c_star)
@@ -280,9 +287,12 @@ def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
 
 
 def refine_pieces(
-    toolpath: Toolpath, machine: Machine, opt: Options, lp_profiles: list[PieceProfile], joins: list[list[int]]
+    toolpath: Toolpath, machine: Machine, opt: Options, lp_profiles: list[PieceProfile], joins: list[list[int]],
+    on_chain: Callable[[float], None] | None = None,
 ) -> tuple[list[PieceProfile], NlpStats]:
-    """The NLP stage (spec §5-6): each piece's LP feed refined under the drive limits."""
+    """The NLP stage (spec §5-6): each piece's LP feed refined under the drive limits.
+
+    ``on_chain(s_done)``, if given, is called after each NLP chain with the global arc length (mm) done."""
     lim = NlpLimits.from_machine(machine, opt.nlp_axis_velocity, opt.nlp_kinematic)
     out = []
     refiners: dict[tuple[int, int], NlpRefiner] = {}
@@ -292,7 +302,17 @@ def refine_pieces(
         key = (plan.nlp_window, plan.nlp_overlap)
         if key not in refiners:
             refiners[key] = NlpRefiner(lim, opt.nlp_checkpoints_per_interval, *key, fault=opt.nlp_fault, stats=stats)
-        p, mask = refiners[key].refine(_local(toolpath, piece), prof.c, prof.d, jn, _breaks(toolpath, piece))
+        chain_done: Callable[[float], None] | None = None
+        if on_chain is not None:
+
+            def chain_done(
+                s_loc: float, s0: float = piece.s_start, report: Callable[[float], None] = on_chain
+            ) -> None:
+                report(s0 + s_loc)
+
+        p, mask = refiners[key].refine(
+            _local(toolpath, piece), prof.c, prof.d, jn, _breaks(toolpath, piece), chain_done
+        )
         out.append(replace(prof, p=p, f_mask=mask))
     return out, stats
 
@@ -306,8 +326,14 @@ def _kinematics(
     return (g, fd[0], *kinematics.axis_kinematics(g, *fd))
 
 
-def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = None) -> Schedule:
-    """Fastest feed along ``toolpath`` within ``machine``'s limits, sampled at Ts."""
+def schedule(
+    toolpath: Toolpath, machine: Machine, options: Options | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> Schedule:
+    """Fastest feed along ``toolpath`` within ``machine``'s limits, sampled at Ts.
+
+    ``progress(fraction)``, if given, is called after each LP window with the fraction of the path length done.
+    """
     opt = options or Options()
     t_start = time.perf_counter()
     lim = LimitSet.from_machine(
@@ -321,13 +347,29 @@ def schedule(toolpath: Toolpath, machine: Machine, options: Options | None = Non
         raise InvalidMachineError(
             "method lp+nlp needs a drive model on every axis (use method lp otherwise)", field="machine.axes"
         )
-    solved = [solve_piece(toolpath, p, machine, opt, lim, stats) for p in toolpath.pieces]
+    # progress: the LP stage is LP_PROGRESS_SHARE of the work when the NLP follows
+    lp_share = LP_PROGRESS_SHARE if opt.method == "lp+nlp" else 1.0
+
+    def report(fraction: float) -> None:
+        if progress is not None:
+            progress(min(1.0, fraction))
+
+    solved: list[tuple[PieceProfile, list[int]]] = []
+    for p in toolpath.pieces:
+        def on_window(s_done: float, s0: float = p.s_start) -> None:
+            report(lp_share * (s0 + s_done) / toolpath.length)
+
+        solved.append(solve_piece(toolpath, p, machine, opt, lim, stats, on_window))
+        report(lp_share * p.s_end / toolpath.length)
     profiles = [sp for sp, _ in solved]
     t_lp = time.perf_counter() - t_start
     lp_motion_time = float(sum(PieceTiming.build(p).duration for p in profiles))
     nlp_stats: NlpStats | None = None
     if opt.method == "lp+nlp":
-        profiles, nlp_stats = refine_pieces(toolpath, machine, opt, profiles, [j for _, j in solved])
+        profiles, nlp_stats = refine_pieces(
+            toolpath, machine, opt, profiles, [j for _, j in solved],
+            lambda s_done: report(lp_share + (1.0 - lp_share) * s_done / toolpath.length),
+        )
     t_nlp = time.perf_counter() - t_start - t_lp
     timings = [PieceTiming.build(p) for p in profiles]
     durations = np.array([tm.duration for tm in timings])

@@ -1,0 +1,190 @@
+"""The one place where failures become HTTP: RFC 9457 problem documents.
+
+``problem_from_exception`` turns any exception (validation, geometry, solver,
+budget, internal) into a plain dict ``{"type", "title", "status", "detail",
+"errors": [{"field", "pointer", "value", "rule"}]}``.  Worker processes use it
+too, so a failure crosses the process boundary as JSON-able data (typed
+exceptions with keyword-only fields do not survive pickling).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import ValidationError
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from geometry import GeometryError
+from service.schemas import MEDIA_PROBLEM, UNION_TAGS
+from solvers.errors import ScheduleError
+
+log = logging.getLogger("feedsched.service")
+TYPE_BASE = "urn:feedsched:problem:"
+
+
+class ServiceError(Exception):
+    """A failure the service itself detects (budget, missing job, conflict...)."""
+
+    def __init__(self, status: int, slug: str, title: str, detail: str, *, field: str | None = None,
+                 value: Any = None, rule: str | None = None, **extra: Any) -> None:
+        super().__init__(detail)
+        self.status = status
+        self.slug = slug
+        self.title = title
+        self.detail = detail
+        self.field = field
+        self.value = value
+        self.rule = rule or detail
+        self.extra = extra
+
+
+class WorkFailed(Exception):
+    """Solver-side work ended with a problem document (computed where the work ran)."""
+
+    def __init__(self, problem: dict[str, Any]) -> None:
+        super().__init__(problem.get("detail", "failed"))
+        self.problem = problem
+
+
+class WorkTimeout(Exception):
+    """Solver work ran over its time budget and was killed."""
+
+
+class WorkerLost(Exception):
+    """The process (or Dask worker) doing the work died without a result."""
+
+
+def too_large(detail: str, *, field: str | None = None, value: Any = None, rule: str | None = None) -> ServiceError:
+    """413 for work over the synchronous budget, pointing at the job API."""
+    return ServiceError(413, "too-large", "Request over the synchronous budget", detail, field=field, value=value,
+                        rule=rule, jobs="/v1/jobs")
+
+
+def not_found(what: str, value: Any = None) -> ServiceError:
+    return ServiceError(404, "not-found", "Not found", f"{what} not found", field="path", value=value,
+                        rule="must name an existing resource")
+
+
+def jsonable(v: Any) -> Any:
+    """Plain JSON value (NaN/Inf become strings, unknown objects their repr)."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return str(v)
+    if isinstance(v, (list, tuple)):
+        return [jsonable(x) for x in v[:20]] + (["..."] if len(v) > 20 else [])
+    if isinstance(v, dict):
+        return {str(k): jsonable(x) for k, x in list(v.items())[:20]}
+    if isinstance(v, (str, int, float, bool)) or v is None:
+        return v
+    text = repr(v)
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def field_path(loc: Sequence[Any]) -> tuple[str, str]:
+    """("body", "toolpath", "segments", 0, "knots") -> ("toolpath.segments[0].knots", "#/toolpath/segments/0/knots")."""
+    parts = [p for p in loc if p not in UNION_TAGS]
+    if parts and parts[0] in ("body", "query", "path", "header"):
+        parts = parts[1:] if parts[0] == "body" else parts
+    text = ""
+    for p in parts:
+        text += f"[{p}]" if isinstance(p, int) else (f".{p}" if text else str(p))
+    pointer = "#/" + "/".join(str(p).replace("~", "~0").replace("/", "~1") for p in parts)
+    return text, pointer
+
+
+def pointer_of(field: str | None) -> str | None:
+    """'toolpath.segments[0].knots' -> '#/toolpath/segments/0/knots'."""
+    if not field:
+        return None
+    return "#/" + field.replace("[", ".").replace("]", "").replace(".", "/")
+
+
+def _problem(status: int, slug: str, title: str, detail: str, errors: list[dict[str, Any]],
+             **extra: Any) -> dict[str, Any]:
+    return {"type": TYPE_BASE + slug, "title": title, "status": status, "detail": detail, "errors": errors,
+            **{k: jsonable(v) for k, v in extra.items() if v is not None}}
+
+
+def _entry(field: str | None, value: Any, rule: str) -> dict[str, Any]:
+    return {"field": field, "pointer": pointer_of(field), "value": jsonable(value), "rule": rule}
+
+
+def validation_problem(errors: Sequence[Any]) -> dict[str, Any]:
+    out = []
+    for e in errors:
+        text, pointer = field_path(e.get("loc", ()))
+        out.append({"field": text, "pointer": pointer, "value": jsonable(e.get("input")), "rule": e.get("msg", "")})
+    first: dict[str, Any] = out[0] if out else {"field": None, "rule": "invalid"}
+    detail = f"{first['field']}: {first['rule']}" if first["field"] else str(first["rule"])
+    return _problem(422, "invalid-request", "Invalid request", detail, out)
+
+
+def problem_from_exception(exc: BaseException) -> dict[str, Any]:
+    """Map any failure to a problem dict (the only exception -> HTTP status mapping)."""
+    if isinstance(exc, WorkFailed):
+        return dict(exc.problem)
+    if isinstance(exc, WorkTimeout):
+        return _problem(413, "too-large", "Over the time budget", str(exc),
+                        [_entry(None, None, "solver work must finish within the time budget; submit long paths "
+                                "to /v1/jobs")], jobs="/v1/jobs")
+    if isinstance(exc, WorkerLost):
+        return _problem(503, "worker-lost", "Solver worker lost", str(exc),
+                        [_entry(None, None, "the worker process died; retry")])
+    if isinstance(exc, ServiceError):
+        return _problem(exc.status, exc.slug, exc.title, exc.detail, [_entry(exc.field, exc.value, exc.rule)],
+                        **exc.extra)
+    if isinstance(exc, (RequestValidationError, ValidationError)):
+        return validation_problem(exc.errors())
+    if isinstance(exc, GeometryError):
+        return _problem(422, "invalid-toolpath", "Invalid toolpath", str(exc), [_entry(exc.field, exc.value, exc.rule)],
+                        segment=exc.segment)
+    if isinstance(exc, ScheduleError):
+        kind = type(exc).__name__
+        slug = {"InvalidMachineError": "invalid-machine", "InvalidOptionsError": "invalid-options",
+                "InfeasibleError": "infeasible", "SolverFailure": "solver-failure"}.get(kind, "cannot-schedule")
+        return _problem(422, slug, "Cannot schedule", str(exc), [_entry(exc.field, exc.value, exc.rule)],
+                        window=exc.window, axis=exc.axis, solver_status=exc.status)
+    if isinstance(exc, MemoryError):
+        return _problem(413, "too-large", "Out of memory", "the request needs more memory than the service has",
+                        [_entry(None, None, "submit a smaller path or a coarser sample period")], jobs="/v1/jobs")
+    log.error("internal error", exc_info=exc)
+    return _problem(500, "internal", "Internal error", f"{type(exc).__name__}: {exc}"[:500],
+                    [_entry(None, None, "unexpected failure; please report it")])
+
+
+def problem_response(problem: dict[str, Any], instance: str | None = None,
+                     headers: dict[str, str] | None = None) -> JSONResponse:
+    body = dict(problem)
+    if instance:
+        body.setdefault("instance", instance)
+    return JSONResponse(body, status_code=int(body["status"]), media_type=MEDIA_PROBLEM, headers=headers)
+
+
+def install_handlers(app: FastAPI) -> None:
+    """Every 4xx/5xx leaves as application/problem+json."""
+
+    async def _any(request: Request, exc: Exception) -> JSONResponse:
+        return problem_response(problem_from_exception(exc), request.url.path)
+
+    async def _http(request: Request, exc: Exception) -> JSONResponse:
+        assert isinstance(exc, StarletteHTTPException)
+        slug = {400: "bad-request", 404: "not-found", 405: "method-not-allowed", 406: "not-acceptable",
+                413: "too-large", 415: "unsupported-media-type"}.get(exc.status_code, "http-error")
+        title = {400: "Bad request", 404: "Not found", 405: "Method not allowed"}.get(exc.status_code, "HTTP error")
+        rule = {400: "the body must be UTF-8 JSON", 404: "no such route",
+                405: "method not allowed on this route"}.get(exc.status_code, str(exc.detail))
+        field = {400: "body", 404: "path", 405: "path", 413: "body"}.get(exc.status_code)
+        value = None if exc.status_code in (400, 413) else request.url.path
+        p = _problem(exc.status_code, slug, title, str(exc.detail), [_entry(field, value, rule)])
+        return problem_response(p, request.url.path, headers=dict(exc.headers or {}))
+
+    for cls in (RequestValidationError, GeometryError, ScheduleError, ServiceError, WorkFailed, WorkTimeout,
+                WorkerLost):
+        app.add_exception_handler(cls, _any)
+    app.add_exception_handler(StarletteHTTPException, _http)
+    app.add_exception_handler(Exception, _any)

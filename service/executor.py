@@ -1,0 +1,232 @@
+"""Where solver work runs: an executor interface with two implementations.
+
+- ``LocalProcessExecutor`` (default): one forked process per task from a
+  forkserver that has the solver preloaded, at most ``workers`` at once.  A
+  timeout or a cancelled awaiting task kills the process (SIGKILL), so the
+  solver really stops.  The event loop only waits on a pipe.
+- ``DaskExecutor`` (``FEEDSCHED_DASK_SCHEDULER=tcp://host:8786``): tasks go to
+  a Dask distributed scheduler; a worker that dies mid-task has its task
+  re-run elsewhere by Dask; cancellation sets a Dask Event the task polls
+  after every LP window and cancels the future.
+
+``run`` returns a ``Result`` or raises ``WorkFailed`` (problem dict),
+``WorkTimeout``, ``WorkerLost`` or ``asyncio.CancelledError``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import multiprocessing as mp
+import secrets
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from multiprocessing.connection import Connection
+from typing import Any, Protocol
+
+from service import worker
+from service.convert import Budget, Result, result_from_bytes
+from service.errors import WorkerLost, WorkFailed, WorkTimeout
+
+Progress = Callable[[float], None]
+
+
+class Executor(Protocol):
+    name: str
+
+    async def start(self) -> None: ...
+
+    async def close(self) -> None: ...
+
+    async def run(self, request: dict[str, Any], budget: Budget, timeout: float,
+                  progress: Progress | None = None, tag: str = "") -> Result: ...
+
+    def running_pids(self) -> dict[str, int]: ...
+
+
+def _reader(conn: Connection, loop: asyncio.AbstractEventLoop, q: asyncio.Queue[tuple[str, Any]]) -> None:
+    """Thread: forward every message from the child to the loop; ("lost", None) on EOF."""
+    def post(msg: tuple[str, Any]) -> None:
+        with contextlib.suppress(RuntimeError):  # loop closed
+            loop.call_soon_threadsafe(q.put_nowait, msg)
+
+    try:
+        while True:
+            msg = conn.recv()
+            post(msg)
+            if msg[0] != "progress":
+                return
+    except (EOFError, OSError):
+        post(("lost", None))
+    finally:
+        conn.close()
+
+
+class LocalProcessExecutor:
+    name = "local"
+
+    def __init__(self, workers: int) -> None:
+        self.workers = max(1, workers)
+        self._ctx = mp.get_context("forkserver")
+        self._ctx.set_forkserver_preload(["service.worker"])
+        self._threads = ThreadPoolExecutor(max_workers=2 * self.workers + 2, thread_name_prefix="feedsched-pipe")
+        self._sem: asyncio.Semaphore | None = None
+        self._pids: dict[str, int] = {}
+        self._lock = threading.Lock()
+
+    async def start(self) -> None:
+        self._sem = asyncio.Semaphore(self.workers)
+        # start the forkserver now (imports numpy/scipy/HiGHS once) rather than on the first request
+        loop = asyncio.get_running_loop()
+        await loop.run_in_executor(self._threads, self._warm)
+
+    def _warm(self) -> None:
+        p = self._ctx.Process(target=_noop, daemon=True)
+        p.start()
+        p.join()
+
+    async def close(self) -> None:
+        with self._lock:
+            pids = list(self._pids.values())
+        for pid in pids:
+            _kill(pid)
+        self._threads.shutdown(wait=False, cancel_futures=True)
+
+    def running_pids(self) -> dict[str, int]:
+        with self._lock:
+            return dict(self._pids)
+
+    async def run(self, request: dict[str, Any], budget: Budget, timeout: float,
+                  progress: Progress | None = None, tag: str = "") -> Result:
+        if self._sem is None:
+            await self.start()
+        assert self._sem is not None
+        async with self._sem:
+            return await self._run_one(request, budget, timeout, progress, tag or secrets.token_hex(8))
+
+    async def _run_one(self, request: dict[str, Any], budget: Budget, timeout: float,
+                       progress: Progress | None, tag: str) -> Result:
+        loop = asyncio.get_running_loop()
+        recv_end, send_end = self._ctx.Pipe(duplex=False)
+        proc = self._ctx.Process(target=worker.child_main, args=(send_end, request, budget), daemon=True,
+                                 name=f"feedsched-{tag}")
+        await loop.run_in_executor(self._threads, proc.start)
+        send_end.close()
+        with self._lock:
+            self._pids[tag] = proc.pid or -1
+        q: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
+        self._threads.submit(_reader, recv_end, loop, q)
+        try:
+            try:
+                async with asyncio.timeout(timeout):
+                    while True:
+                        kind, payload = await q.get()
+                        if kind != "progress":
+                            break
+                        if progress is not None:
+                            progress(payload)
+            except TimeoutError:
+                raise WorkTimeout(f"solver work took longer than {timeout:g} s") from None
+            if kind == "ok":
+                assert isinstance(payload, Result)
+                return payload
+            if kind == "error":
+                raise WorkFailed(payload)
+            await loop.run_in_executor(self._threads, proc.join, 5.0)
+            raise WorkerLost(f"solver process {proc.pid} ended without a result (exit code {proc.exitcode})")
+        finally:
+            if proc.is_alive():
+                proc.kill()
+            await asyncio.shield(loop.run_in_executor(self._threads, proc.join, 5.0))
+            with self._lock:
+                self._pids.pop(tag, None)
+
+
+def _noop() -> None:
+    pass
+
+
+def _kill(pid: int) -> None:
+    import os
+    import signal
+
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.kill(pid, signal.SIGKILL)
+
+
+class DaskExecutor:
+    name = "dask"
+
+    def __init__(self, address: str) -> None:
+        self.address = address
+        self._client: Any = None
+        self._progress: dict[str, Progress] = {}
+        self._pids: dict[str, int] = {}
+        self._tags: dict[str, str] = {}
+
+    async def start(self) -> None:
+        from distributed import Client
+
+        self._client = await Client(self.address, asynchronous=True)
+        self._client.subscribe_topic(worker.PROGRESS_TOPIC, self._on_event)
+
+    def _on_event(self, event: tuple[float, dict[str, Any]]) -> None:
+        msg = event[1]
+        key = str(msg.get("job", ""))
+        cb = self._progress.get(key)
+        tag = self._tags.get(key)
+        if tag is not None:
+            self._pids[tag] = int(msg.get("pid", -1))
+        if cb is not None:
+            cb(float(msg["fraction"]))
+
+    async def close(self) -> None:
+        if self._client is not None:
+            await self._client.close()
+
+    def running_pids(self) -> dict[str, int]:
+        return dict(self._pids)
+
+    async def run(self, request: dict[str, Any], budget: Budget, timeout: float,
+                  progress: Progress | None = None, tag: str = "") -> Result:
+        from distributed import Event
+
+        if self._client is None:
+            await self.start()
+        key = f"feedsched-{tag or 'sync'}-{secrets.token_hex(6)}"
+        if progress is not None:
+            self._progress[key] = progress
+        self._tags[key] = tag
+        fut = self._client.submit(worker.dask_task, request, budget, key, key=key, pure=False)
+        try:
+            try:
+                async with asyncio.timeout(timeout):
+                    kind, payload = await fut
+            except TimeoutError:
+                raise WorkTimeout(f"solver work took longer than {timeout:g} s") from None
+            except Exception as exc:  # KilledWorker after too many worker deaths, comm errors
+                if isinstance(exc, asyncio.CancelledError):
+                    raise
+                raise WorkerLost(f"Dask could not run the task: {type(exc).__name__}: {exc}") from None
+            if kind == "ok":
+                return result_from_bytes(payload)
+            if kind == "error":
+                raise WorkFailed(payload)
+            raise asyncio.CancelledError()
+        except BaseException:
+            if not fut.done():
+                with contextlib.suppress(Exception):
+                    await Event(f"{key}-cancel", client=self._client).set()
+                with contextlib.suppress(Exception):
+                    await fut.cancel()
+            raise
+        finally:
+            self._progress.pop(key, None)
+            self._pids.pop(self._tags.pop(key, ""), None)
+
+
+def make_executor(workers: int, dask_scheduler: str | None) -> Executor:
+    if dask_scheduler:
+        return DaskExecutor(dask_scheduler)
+    return LocalProcessExecutor(workers)

@@ -1,0 +1,112 @@
+"""What runs where the solver work happens: a forked child process or a Dask worker.
+
+Inputs are the validated request as plain JSON data; outputs are a ``Result``
+or a problem dict (``service.errors.problem_from_exception``).  Nothing here
+touches the web app.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+import time
+from collections.abc import Callable
+from multiprocessing.connection import Connection
+from typing import Any
+
+from service.convert import Budget, Result, check_budget, from_schedule, to_problem
+from service.errors import problem_from_exception
+from service.schemas import ScheduleRequest
+from solvers.pipeline import schedule
+
+#: Seconds between checks that the parent process is still alive.
+PARENT_POLL_S = 0.25
+
+
+class Cancelled(Exception):
+    """Raised inside the solver (from the progress callback) when the job was cancelled."""
+
+
+def compute(request: dict[str, Any], budget: Budget, progress: Callable[[float], None] | None = None) -> Result:
+    req = ScheduleRequest.model_validate(request)
+    tp, machine, opts = to_problem(req)
+    check_budget(tp, machine, opts, budget)
+    return from_schedule(schedule(tp, machine, opts, progress=progress))
+
+
+def run_captured(
+    request: dict[str, Any], budget: Budget, progress: Callable[[float], None] | None = None
+) -> tuple[str, Any]:
+    """("ok", Result) or ("error", problem dict); never raises except Cancelled."""
+    try:
+        return "ok", compute(request, budget, progress)
+    except Cancelled:
+        raise
+    except BaseException as exc:  # every failure becomes a problem document
+        return "error", problem_from_exception(exc)
+
+
+def _watch_parent() -> None:
+    """Exit when the parent (the forkserver, which exits with the service) goes away."""
+    parent = os.getppid()
+
+    def loop() -> None:
+        while True:
+            time.sleep(PARENT_POLL_S)
+            if os.getppid() != parent:
+                os._exit(3)
+
+    threading.Thread(target=loop, daemon=True, name="parent-watch").start()
+
+
+def child_main(conn: Connection, request: dict[str, Any], budget: Budget) -> None:
+    """Entry point of a forked solver process: progress messages, then one result message.
+
+    The process runs at a lower CPU priority (``FEEDSCHED_WORKER_NICE``, default 5) so that the service's event
+    loop is scheduled first when solvers saturate the cores.
+    """
+    _watch_parent()
+    with contextlib.suppress(OSError, ValueError):
+        os.nice(int(os.environ.get("FEEDSCHED_WORKER_NICE", "5")))
+
+    def progress(fraction: float) -> None:
+        conn.send(("progress", float(fraction)))
+
+    kind, payload = run_captured(request, budget, progress)
+    conn.send((kind, payload))
+    conn.close()
+
+
+# --- Dask -----------------------------------------------------------------------
+PROGRESS_TOPIC = "feedsched-progress"
+CANCELLED_TOPIC = "feedsched-cancelled"
+
+
+def dask_task(request: dict[str, Any], budget: Budget, job_key: str) -> tuple[str, Any]:
+    """Runs on a Dask worker.  Progress goes out as worker events; a set ``{job_key}-cancel`` Event
+    stops the solver at its next LP window.  A result travels back as .npz bytes, not a pickle."""
+    from distributed import Event, get_worker
+
+    from service.convert import result_bytes
+
+    worker = get_worker()
+    cancel = Event(f"{job_key}-cancel")
+    last = [0.0]
+
+    def progress(fraction: float) -> None:
+        now = time.monotonic()
+        if now - last[0] > 0.2 or fraction >= 1.0:
+            last[0] = now
+            if cancel.is_set():
+                raise Cancelled(job_key)
+            worker.log_event(PROGRESS_TOPIC, {"job": job_key, "fraction": float(fraction), "pid": os.getpid()})
+
+    try:
+        kind, payload = run_captured(request, budget, progress)
+    except Cancelled:
+        worker.log_event(CANCELLED_TOPIC, {"job": job_key, "pid": os.getpid()})
+        return "cancelled", None
+    if kind == "ok":
+        return "ok", result_bytes(payload)
+    return kind, payload

@@ -1,0 +1,201 @@
+"""In-process API tests (TestClient with the lifespan run): formats, machines, budgets, problem+json."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import struct
+from typing import Any
+
+import numpy as np
+from fastapi.testclient import TestClient
+
+from service.schemas import EXAMPLE
+from solvers.machine import ROUTER_DRIVES, derive_limits
+from tests.service.conftest import long_line
+
+COLUMNS = ["t", "s", "feed", "x", "y", "z", "v_x", "v_y", "v_z", "a_x", "a_y", "a_z", "j_x", "j_y", "j_z",
+           "u_x", "u_y", "u_z", "e_x", "e_y", "e_z"]
+
+
+def bits(x: float) -> int:
+    return int(struct.unpack("<q", struct.pack("<d", x))[0])
+
+
+def assert_problem(r: Any, status: int, field: str | None = None) -> dict[str, Any]:
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"].startswith("application/problem+json")
+    body: dict[str, Any] = r.json()
+    assert body["status"] == status and body["title"] and body["detail"] and body["type"].startswith("urn:")
+    assert body["errors"] and all("rule" in e and "value" in e and "field" in e for e in body["errors"])
+    if field is not None:
+        assert any(e["field"] == field for e in body["errors"]), body
+    return body
+
+
+def test_healthz(client: TestClient) -> None:
+    assert client.get("/healthz").json() == {"status": "ok"}
+
+
+def test_example_schedules_and_is_exact_arc(client: TestClient) -> None:
+    r = client.post("/v1/schedule", json=EXAMPLE)
+    assert r.status_code == 200, r.text
+    assert r.headers["content-type"] == "application/json"
+    body = r.json()
+    smp = body["samples"]
+    assert list(smp) == COLUMNS
+    x, y = np.array(smp["x"]), np.array(smp["y"])
+    # the example is a quarter circle of radius 40 about (0, 40)
+    assert np.max(np.abs(np.hypot(x, y - 40.0) - 40.0)) < 1e-6
+    assert body["summary"]["motion_time"] > 0
+    assert all(math.isfinite(v) for col in smp.values() for v in col)
+    assert len(smp["t"]) == body["summary"]["samples"] == int(r.headers["x-samples"])
+
+
+def test_csv_and_ndjson_are_bit_identical_to_json(client: TestClient) -> None:
+    js = client.post("/v1/schedule", json=EXAMPLE).json()["samples"]
+    r = client.post("/v1/schedule", json=EXAMPLE, headers={"Accept": "text/csv"})
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
+    rows = list(csv.reader(io.StringIO(r.text)))
+    assert rows[0] == COLUMNS
+    assert len(rows) - 1 == len(js["t"])
+    for j, name in enumerate(COLUMNS):
+        assert [bits(float(row[j])) for row in rows[1:]] == [bits(v) for v in js[name]], name
+    r = client.post("/v1/schedule", json=EXAMPLE, headers={"Accept": "application/x-ndjson"})
+    assert r.status_code == 200 and r.headers["content-type"].startswith("application/x-ndjson")
+    lines = [json.loads(line) for line in r.text.splitlines()]
+    assert len(lines) == len(js["t"])
+    for name in COLUMNS:
+        assert [bits(row[name]) for row in lines] == [bits(v) for v in js[name]], name
+
+
+def test_accept_negotiation(client: TestClient) -> None:
+    r = client.post("/v1/schedule", json=EXAMPLE, headers={"Accept": "text/html;q=1, text/csv;q=0.5"})
+    assert r.headers["content-type"].startswith("text/csv")
+    assert_problem(client.post("/v1/schedule", json=EXAMPLE, headers={"Accept": "image/png"}), 406)
+
+
+def _custom_machine(drive_only_z: bool) -> dict[str, Any]:
+    axes: dict[str, Any] = {}
+    for ax in ("x", "y", "z"):
+        d = ROUTER_DRIVES[ax]
+        drive = {k: getattr(d, k) for k in ("M", "b", "c", "d", "Kv", "Ka", "Kj", "umax", "emax")}
+        if ax == "z" and drive_only_z:
+            axes[ax] = {"drive": drive, "vmax_request": 150.0}
+        else:
+            axes[ax] = {"limits": {"vmax": 100.0, "amax": 400.0, "jmax": 50000.0}, "drive": drive}
+    return {"name": "mill", "axes": axes, "feed_max": 80.0}
+
+
+def test_custom_machine_with_limits_and_derived_limits(client: TestClient) -> None:
+    body = {**EXAMPLE, "machine": _custom_machine(drive_only_z=True), "options": {"method": "lp"}}
+    r = client.post("/v1/schedule", json=body)
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert max(out["samples"]["feed"]) <= 80.0 * 1.001
+    assert out["summary"]["peak_utilisation"]["acceleration_x"] <= 1.01
+    # the derived z limits are the solver's own derivation
+    assert derive_limits(ROUTER_DRIVES["z"], 150.0, "z").amax > 0
+
+
+def test_custom_machine_limits_only_has_no_u_e_columns(client: TestClient) -> None:
+    axes = {ax: {"limits": {"vmax": 100.0, "amax": 400.0, "jmax": 50000.0}} for ax in ("x", "y", "z")}
+    r = client.post("/v1/schedule", json={**EXAMPLE, "machine": {"axes": axes}, "options": {"method": "lp"}})
+    assert r.status_code == 200, r.text
+    assert list(r.json()["samples"]) == COLUMNS[:15]
+    # the NLP needs the drive model: a clear 422, not a 500
+    assert_problem(client.post("/v1/schedule", json={**EXAMPLE, "machine": {"axes": axes}}), 422, "machine.axes")
+
+
+def test_custom_machine_errors_name_the_field(client: TestClient) -> None:
+    axes: dict[str, Any] = {ax: {"limits": {"vmax": 100.0, "amax": 400.0, "jmax": 50000.0}} for ax in ("x", "y")}
+    axes["z"] = {}
+    b = assert_problem(client.post("/v1/schedule", json={**EXAMPLE, "machine": {"axes": axes}}), 422, "machine.axes.z")
+    assert "limits" in b["errors"][0]["rule"]
+    axes["z"] = {"limits": {"vmax": -1, "amax": 1, "jmax": 1}}
+    b = assert_problem(client.post("/v1/schedule", json={**EXAMPLE, "machine": {"axes": axes}}), 422,
+                       "machine.axes.z.limits.vmax")
+    assert b["errors"][0]["value"] == -1 and b["errors"][0]["pointer"] == "#/machine/axes/z/limits/vmax"
+    # a drive whose bias and friction leave no voltage: infeasible, 422 with the solver's explanation
+    d = {"M": 1e-3, "b": 0.01, "c": 9.0, "d": 2.0, "Kv": 1e-5, "Ka": 1e-6, "Kj": 1e-8, "umax": 10.0, "emax": 0.02}
+    axes["z"] = {"drive": d}
+    b = assert_problem(client.post("/v1/schedule", json={**EXAMPLE, "machine": {"axes": axes}}), 422,
+                       "machine.axes.z.drive.umax")
+    assert b["type"].endswith("invalid-machine")
+    assert_problem(client.post("/v1/schedule", json={**EXAMPLE, "machine": "mill"}), 422, "machine")
+
+
+def test_lp_nlp_is_the_default_method_and_reports_drive_columns(client: TestClient) -> None:
+    body = {k: v for k, v in EXAMPLE.items() if k != "options"}
+    r = client.post("/v1/schedule", json=body)
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["summary"]["method"] == "lp+nlp"
+    assert out["summary"]["motion_time"] < out["summary"]["lp_motion_time"] + 1e-12
+    assert {"u_x", "e_x", "u_y", "e_y"} <= set(out["samples"])
+    assert out["diagnostics"]["nlp_fallbacks"] == []
+    assert_problem(client.post("/v1/schedule", json={**EXAMPLE, "options": {"method": "nlp"}}), 422, "options.method")
+
+
+def test_bad_knots_is_problem_json_naming_field(client: TestClient) -> None:
+    bad = {"toolpath": {"segments": [{"degree": 2, "knots": [0, 0, 1, 1], "control_points": [[0, 0], [1, 0], [1, 1]]}]}}
+    b = assert_problem(client.post("/v1/schedule", json=bad), 422, "toolpath.segments[0].knots")
+    assert b["type"].endswith("invalid-toolpath")
+
+
+def test_boolean_nan_inf_string_numbers_rejected(client: TestClient) -> None:
+    seg = {"degree": 1, "knots": [0, 0, 1, 1], "control_points": [[0, 0], [True, 0]]}
+    assert_problem(client.post("/v1/schedule", json={"toolpath": {"segments": [seg]}}), 422,
+                   "toolpath.segments[0].control_points[1][0]")
+    for token in ("NaN", "Infinity", "-Infinity", "1e999", '"1"'):
+        raw = ('{"toolpath": {"segments": [{"degree": 1, "knots": [0, 0, 1, 1], "control_points": [[0, 0], ['
+               + token + ', 0]]}]}}')
+        assert_problem(client.post("/v1/schedule", content=raw, headers={"content-type": "application/json"}), 422,
+                       "toolpath.segments[0].control_points[1][0]")
+
+
+def test_malformed_json_is_problem(client: TestClient) -> None:
+    assert_problem(client.post("/v1/schedule", content=b"{nope", headers={"content-type": "application/json"}), 422)
+
+
+def test_body_size_cap(client: TestClient) -> None:
+    big = {**EXAMPLE, "pad": "x" * 250_000}
+    b = assert_problem(client.post("/v1/schedule", json=big), 413, "body")
+    assert "FEEDSCHED_MAX_BODY_BYTES" in b["errors"][0]["rule"]
+
+    def chunks() -> Any:  # no content-length: the streamed byte count trips the cap
+        for _ in range(30):
+            yield b" " * 10_000
+
+    assert_problem(client.post("/v1/schedule", content=chunks(), headers={"content-type": "application/json"}), 413)
+
+
+def test_sync_budget_points_to_jobs(client: TestClient) -> None:
+    n = 600  # over the fixture's 500 control points
+    seg = {"degree": 1, "knots": [0, *np.linspace(0, 1, n).tolist(), 1],
+           "control_points": [[float(i), 0.0, 0.0] for i in range(n)]}
+    b = assert_problem(client.post("/v1/schedule", json={"toolpath": {"segments": [seg]}}), 413, "toolpath.segments")
+    assert b["jobs"] == "/v1/jobs"
+    # few control points but a long path: the sample-count lower bound trips (fixture: 50 000 samples)
+    b = assert_problem(client.post("/v1/schedule", json=long_line(20_000.0, 50.0)), 413, "options.sample_period")
+    assert b["jobs"] == "/v1/jobs"
+
+
+def test_404_405_problem(client: TestClient) -> None:
+    assert_problem(client.get("/v2/nothing"), 404, "path")
+    assert_problem(client.put("/v1/schedule", json=EXAMPLE), 405, "path")
+    assert_problem(client.get("/v1/machines/nope"), 404)
+    assert_problem(client.get("/v1/jobs/../../etc/passwd"), 404)
+    assert_problem(client.get("/v1/jobs/not-a-valid-id"), 404)
+
+
+def test_router_machine(client: TestClient) -> None:
+    assert client.get("/v1/machines").json() == {"machines": ["router"]}
+    r = client.get("/v1/machines/router")
+    assert r.status_code == 200
+    body = r.json()
+    assert body["axes"][0]["limits"]["amax"] == 500.0
+    assert body["axes"][2]["limits"] == body["axes"][2]["limits_from_drive"]  # z is derived from its drive
+    assert body["units"]["jmax"] == "mm/s^3" and body["stopping_distance_mm"] > 0
