@@ -564,9 +564,8 @@ class _Interpreter:
             return fallback
         return min(words.values(), key=lambda w: w.col)
 
-    def _need_feed(self, ln: int, words: dict[str, Word], motion_word: Word | None) -> float:
+    def _need_feed(self, ln: int, w: Word) -> float:
         if self.feed is None:
-            w = self._first_col(words, _AXES + "IJKR", motion_word)
             raise GcodeError(ln, w.col, w.text, "cutting move without a feed rate: program F before or in this block")
         return self.feed
 
@@ -580,7 +579,7 @@ class _Interpreter:
     def _line(
         self, target: FloatArray, ln: int, words: dict[str, Word], rapid: bool, motion_word: Word | None
     ) -> None:
-        feed = None if rapid else self._need_feed(ln, words, motion_word)
+        feed = None if rapid else self._need_feed(ln, self._first_col(words, _AXES, motion_word))
         if float(np.linalg.norm(target - self.pos)) <= primitives.MIN_LENGTH_MM:
             self.null_moves.append(ln)
             return
@@ -595,7 +594,7 @@ class _Interpreter:
     def _arc(self, words: dict[str, Word], used: set[str], ln: int, mode: str, motion_word: Word | None) -> None:
         a, b, nrm = primitives.PLANES[self.plane]
         scale = MM_PER_INCH if self.inch else 1.0
-        feed = self._need_feed(ln, words, motion_word)
+        feed = self._need_feed(ln, self._first_col(words, _AXES + "IJKR", motion_word))
         target = self._target(words, used)
         in_plane = (_OFFSETS[a], _OFFSETS[b])
         offsets = [words[k] for k in in_plane if k in words]
@@ -683,7 +682,7 @@ class _Interpreter:
                     raise GcodeError(ln, pw.col, pw.text, "NURBS rank P must be 2, 3 or 4 (degree 1 to 3)")
                 rank = int(_val(pw))
                 used.add("P")
-            self._need_feed(ln, words, start)
+            self._need_feed(ln, start)
             cur = _Fanuc(ln, start.col, rank)
             self.fanuc = cur
             # first control point: the current position
@@ -816,7 +815,7 @@ class _Interpreter:
             return
         if not cur.first_line:
             cur.first_line = ln
-            self._need_feed(ln, words, self._first_col(words, _AXES, kw))
+            self._need_feed(ln, self._first_col(words, _AXES, kw))
         p = cur.points[-1].copy()
         for k, a in enumerate(_AXES):
             if a in words:
@@ -893,7 +892,7 @@ class _Interpreter:
                 raise GcodeError(ln, g52.col, g52.text, "G5.2 NURBS are planar in XY: select G17")
             if not self.absolute:
                 raise GcodeError(ln, g52.col, g52.text, "G5.2 control points must be absolute (G90)")
-            self._need_feed(ln, words, g52)
+            self._need_feed(ln, g52)
             order = LINUXCNC_ORDER_DEFAULT
             if "L" in words:
                 lw = words["L"]
