@@ -74,7 +74,7 @@ Siemens BSPLINE (SINUMERIK Programming Manual Job Planning 6FC5398-2BP40-0BA0,
     The programmed points are control points; the start point (the current position
     when BSPLINE becomes active) is the first control point, weight 1; the curve is
     tangent to the control polygon at both ends (clamped). SD = degree, 2 or 3,
-    default 3, on any block before the second point. PW = point weight, 0 < w <= 3,
+    default 3, on the BSPLINE block or the first point's block. PW = point weight, 0 < w <= 3,
     default 1. PL = parameter interval length: Siemens "suitably calculates" the
     knot distances internally when PL is absent and does not publish the rule.
     Our rule: with n control points P_0 (start) .. P_{n-1} and degree p the knot
@@ -803,8 +803,9 @@ class _Interpreter:
             used.add("SD")
             if _val(sd) not in SIEMENS_DEGREES:
                 raise GcodeError(ln, sd.col, sd.text, "B spline degree SD must be 2 or 3")
-            if len(cur.points) > 2 or (cur.degree is not None and cur.degree != int(_val(sd))):
-                raise GcodeError(ln, sd.col, sd.text, "SD must be programmed before the second point of a B spline")
+            if len(cur.points) > 1 or (cur.degree is not None and cur.degree != int(_val(sd))):
+                raise GcodeError(ln, sd.col, sd.text, "SD must be programmed on or before the first point of a "
+                                 "B spline")
             cur.degree = int(_val(sd))
         has_axes = any(a in words for a in _AXES)
         if not has_axes:

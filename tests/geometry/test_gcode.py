@@ -402,6 +402,7 @@ MALFORMED = [
     (F + "BSPLINE SD=3\nX10 Y10 PL=1\nX20 Y0 PL=1\nX30 Y5\nG1 X40", 4, 8, "have no parameter interval"),
     (F + "BSPLINE SD=2\nX10 Y10 PL=0\nX20 Y0 PL=1\nX30 Y5", 3, 9, "PL must be > 0"),
     (F + "BSPLINE PW=2", 2, 9, "needs a point"),
+    (F + "BSPLINE\nX10 Y10\nX20 Y0 SD=2", 4, 8, "SD must be programmed on or before the first point"),
     (F + "BSPLINE\nX10 Y10\nX20 Y0 F200", 4, 8, "F cannot change inside a B spline"),
     # LinuxCNC G5.2
     (F + "G5.2 X0 Y1 L3", 2, 6, "needs X, Y and a weight P"),
