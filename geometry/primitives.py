@@ -37,7 +37,7 @@ its positive end.
 Helical arcs (start and end differ along the plane normal) are *rejected*: a
 helix is transcendental in its parameter and no NURBS reproduces it exactly; the
 scheduler's exact arc length would be lost. They need a segment type of their
-own (see ``geometry/CORNERS.md`` for the interface a non-NURBS segment needs).
+own, through the ``Segment`` protocol of ``geometry/segment.py`` (as ``ClothoidSegment`` does).
 """
 
 from __future__ import annotations
