@@ -80,8 +80,11 @@ Siemens BSPLINE (SINUMERIK Programming Manual Job Planning 6FC5398-2BP40-0BA0,
     Our rule: with n control points P_0 (start) .. P_{n-1} and degree p the knot
     vector is clamped with n - p spans; the PL of the block programming P_j is the
     length of span j = [u_{p+j-1}, u_{p+j}] for j = 1 .. n - p (the last p - 1 points
-    have no span: their PL must be absent or 0). Either every P_1 .. P_{n-p} carries PL
-    or none does; with none the spans are uniform (all 1). Uniform spacing of any
+    have no span: their PL must be absent or 0). Either every P_1 .. P_{n-p} carries a
+    PL > 0 or none does; with none the spans are uniform (all 1). The span mapping is our
+    convention, not Siemens' (their manuals do not define it); it is the one an
+    open-source NURBS-to-Sinumerik writer uses (PL of point i = u_{p+i} - u_{p+i-1}).
+    Uniform spacing of any
     length gives the same curve (an affine change of the knots leaves it unchanged),
     so only the *relative* spacing matters; a control that computes chord-length
     spacing draws a different curve between the end points, so posts that need
