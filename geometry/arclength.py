@@ -1,4 +1,4 @@
-"""Arc length s(u) and its inverse u(s) for one NURBS segment.
+"""Arc length s(u) and its inverse u(s) for one segment (NURBS, clothoid: any ``Segment``).
 
     s(u) = integral_{U_p}^{u} |C'(v)| dv
 
@@ -13,8 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geometry.nurbs import FloatArray, NurbsSegment
+from geometry.nurbs import FloatArray
 from geometry.quadrature import MonotoneTable
+from geometry.segment import Segment
 
 #: The Hermite guess of u(s) is refined until it is within this distance (mm).
 GUESS_TOL_MM = 1e-7
@@ -24,11 +25,11 @@ GUESS_TOL_MM = 1e-7
 class ArcLengthTable:
     """Arc-length table of one segment: u_b (M+1,), s_b (M+1,) in mm."""
 
-    segment: NurbsSegment
+    segment: Segment
     table: MonotoneTable
 
     @classmethod
-    def build(cls, seg: NurbsSegment) -> ArcLengthTable:
+    def build(cls, seg: Segment) -> ArcLengthTable:
         return cls(seg, MonotoneTable.build(seg.speed, seg.breakpoints, guess_tol=GUESS_TOL_MM))
 
     @property

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from geometry.arclength import ArcLengthTable
 from geometry.errors import GeometryError
-from geometry.nurbs import NurbsSegment
+from geometry.segment import Segment
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -118,7 +118,7 @@ class Toolpath:
 
     def __init__(
         self,
-        segments: Sequence[NurbsSegment],
+        segments: Sequence[Segment],
         corner_tol_deg: float = CORNER_TOL_DEG,
         gap_tol: float = GAP_TOL_MM,
     ) -> None:
