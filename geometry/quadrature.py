@@ -79,6 +79,9 @@ class MonotoneTable:
             right = gauss_legendre(f, m, b)
             halves = left + right
             ok = np.abs(halves - whole) <= REL_TOL * np.abs(halves) + abs_tol
+            # a non-finite integral stops refining (it stays in the table for the caller to reject);
+            # splitting it further only doubles the work at every level
+            ok |= ~np.isfinite(halves)
             out_a.extend([a[ok], m[ok]])
             out_i.extend([left[ok], right[ok]])
             if ok.all():

@@ -14,6 +14,7 @@ from geometry.toolpath import Toolpath
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
 from tests.solvers.test_limits import _check
+from tests.solvers.test_nlp import _check_drive
 
 #: 8 legs of 11.2 mm turning 53 degrees alternately (a pocketing-style zig-zag).
 ZIGZAG = np.array([[10.0 * i, 5.0 * (i % 2), 0.0] for i in range(9)])
@@ -28,8 +29,17 @@ def test_blended_zigzag_is_faster_and_within_limits() -> None:
     stop = Toolpath([polyline(ZIGZAG)])
     blended = Toolpath(blend_polyline(ZIGZAG, BLEND_TOL_MM))
     assert len(stop.pieces) == 8 and len(blended.pieces) == 1
-    t_stop = schedule(stop, m, Options()).summary["motion_time"]
-    sch = schedule(blended, m, Options())
+    t_stop = schedule(stop, m, Options(method="lp")).summary["motion_time"]
+    sch = schedule(blended, m, Options(method="lp"))
     _check(blended, m, sch)
     t_blend = sch.summary["motion_time"]
     assert t_stop / t_blend >= MIN_SPEEDUP, (t_stop, t_blend)
+
+
+def test_blended_zigzag_lp_nlp_within_drive_limits() -> None:
+    m = router()
+    blended = Toolpath(blend_polyline(ZIGZAG, BLEND_TOL_MM))
+    lp = schedule(blended, m, Options(method="lp")).summary["motion_time"]
+    sch = schedule(blended, m, Options(method="lp+nlp"))
+    _check_drive(m, sch)
+    assert sch.summary["motion_time"] < lp

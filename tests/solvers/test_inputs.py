@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from solvers.errors import InvalidMachineError, InvalidOptionsError, ScheduleError
 from solvers.machine import Axis, AxisLimits, DriveModel, Machine, derive_limits, preset, router
 from solvers.pipeline import Options
+from solvers.timing import PieceProfile, PieceTiming
 
 
 @pytest.mark.parametrize(
@@ -72,3 +74,13 @@ def test_drive_without_headroom_rejected() -> None:
     with pytest.raises(InvalidMachineError) as err:
         derive_limits(drv, 100.0, "x")
     assert err.value.field == "machine.axes.x.drive.umax"
+
+
+def test_feed_reaching_zero_inside_a_piece_is_a_clear_error_not_a_runaway() -> None:
+    """A profile whose q dips to zero mid-piece: ScheduleError, quickly (was an unbounded bisection)."""
+    n = 20
+    c = np.full(n + 2, 100.0)
+    c[0], c[-1] = -c[1], -c[-2]
+    c[10] = c[11] = -5.0  # q < 0 around the middle
+    with pytest.raises(ScheduleError):
+        PieceTiming.build(PieceProfile(s_start=0.0, length=20.0, d=1.0, c=c))
