@@ -54,6 +54,8 @@ class PathSamples:
         d1: (K, 3) C_s, unit tangent (dimensionless).
         d2: (K, 3) C_ss, 1/mm.
         d3: (K, 3) C_sss, 1/mm^2.
+        feed_limit: (K,) programmed feed limit of the segment at each point, mm/s
+            (inf where the segment has none), or None when no segment has one.
     """
 
     s: FloatArray
@@ -61,6 +63,12 @@ class PathSamples:
     d1: FloatArray
     d2: FloatArray
     d3: FloatArray
+    feed_limit: FloatArray | None = None
+
+    def subset(self, mask: NDArray[np.bool_]) -> PathSamples:
+        """The points selected by ``mask``."""
+        fl = None if self.feed_limit is None else self.feed_limit[mask]
+        return PathSamples(self.s[mask], self.position[mask], self.d1[mask], self.d2[mask], self.d3[mask], fl)
 
 
 @dataclass(frozen=True)
@@ -121,12 +129,16 @@ class Toolpath:
         segments: Sequence[Segment],
         corner_tol_deg: float = CORNER_TOL_DEG,
         gap_tol: float = GAP_TOL_MM,
+        feed_limits: Sequence[float | None] | None = None,
     ) -> None:
+        """``feed_limits``: optional programmed feed limit (mm/s) per segment (None: no limit),
+        e.g. a G-code block's F word; the schedule keeps the tangential feed under it."""
         if len(segments) == 0:
             raise GeometryError("segments", [], "a toolpath needs at least one segment")
         if not (np.isfinite(corner_tol_deg) and 0.0 <= corner_tol_deg < 180.0):
             raise GeometryError("corner_tolerance_deg", corner_tol_deg, "must be in [0, 180)")
         self.segments = list(segments)
+        self._feed = self._check_feed_limits(feed_limits, len(self.segments))
         subs: list[ArcLengthTable] = []
         origin: list[int] = []
         for i, seg in enumerate(self.segments):
@@ -155,6 +167,28 @@ class Toolpath:
     @property
     def length(self) -> float:
         return float(self.offsets[-1])
+
+    @staticmethod
+    def _check_feed_limits(feed_limits: Sequence[float | None] | None, n: int) -> FloatArray | None:
+        if feed_limits is None or all(f is None for f in feed_limits):
+            return None
+        if len(feed_limits) != n:
+            raise GeometryError("feed_limits", len(feed_limits), f"needs one entry per segment ({n})")
+        out = np.full(n, np.inf)
+        for i, f in enumerate(feed_limits):
+            if f is None:
+                continue
+            if isinstance(f, bool) or not isinstance(f, (int, float)) or not (np.isfinite(f) and f > 0):
+                raise GeometryError(f"segments[{i}].feed", f, "a feed limit must be a finite number > 0 mm/s", i)
+            out[i] = float(f)
+        return out
+
+    def feed_limit(self, s: FloatArray, piece: Piece | None = None) -> FloatArray | None:
+        """Programmed feed limit (mm/s) at arc lengths s, (K,); inf where none; None if no segment has one."""
+        if self._feed is None:
+            return None
+        k, _ = self.locate(s, piece)
+        return np.asarray(self._feed[self.sub_origin[k]], dtype=np.float64)
 
     def _end_derivs(self, k: int, at_end: bool) -> FloatArray:
         seg = self.subs[k].segment
@@ -244,7 +278,8 @@ class Toolpath:
                 Dk[1:, stuck, :] = seg.derivatives(um + nudge)[1:]
             D[:, m, :] = Dk
         d1, d2, d3 = arc_length_derivatives(D)
-        return PathSamples(s=s, position=D[0], d1=d1, d2=d2, d3=d3)
+        fl = None if self._feed is None else np.asarray(self._feed[self.sub_origin[k]], dtype=np.float64)
+        return PathSamples(s=s, position=D[0], d1=d1, d2=d2, d3=d3, feed_limit=fl)
 
     def positions(self, s: FloatArray, piece: Piece | None = None) -> FloatArray:
         """C(s) only, (K, 3) mm."""

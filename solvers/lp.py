@@ -187,6 +187,8 @@ def _velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
         ub = np.min(np.where(x2 > AXIS_EPS, lim.vmax[None, :] ** 2 / x2, np.inf), axis=1)
     if lim.feed_max is not None:
         ub = np.minimum(ub, lim.feed_max**2)
+    if g.feed_limit is not None:
+        ub = np.minimum(ub, g.feed_limit**2)
     return np.asarray(ub, dtype=np.float64)
 
 
@@ -250,7 +252,7 @@ class WindowLP:
         keep = np.sqrt(np.maximum(qstar, 0.0)) > TINY_SQRT_QSTAR * np.sqrt(Q)
         if not keep.any():
             return
-        g = PathSamples(g.s[keep], g.position[keep], g.d1[keep], g.d2[keep], g.d3[keep])
+        g = g.subset(keep)
         rq = np.sqrt(qstar[keep])
         B0, B1, B2 = self._mats(g.s)
         for ax in range(3):
@@ -351,7 +353,7 @@ class WindowLP:
             viol = self._violations(chat * Q, g, c_star)
             if not viol.any() or i == MAX_CUT_ROUNDS:
                 break
-            gv = PathSamples(g.s[viol], g.position[viol], g.d1[viol], g.d2[viol], g.d3[viol])
+            gv = g.subset(viol)
             if c_star is None:
                 self._stage1_rows(rows, gv, Q, None)
             else:

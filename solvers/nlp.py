@@ -180,8 +180,11 @@ class NlpLimits:
         if self.amax is not None and self.jmax is not None:
             out["acceleration"] = np.abs(a) / self.amax
             out["jerk"] = np.abs(j) / self.jmax
-        if self.feed_max is not None:
-            out["feed"] = fd[0] / self.feed_max
+        cap = np.full(g.s.size, np.inf if self.feed_max is None else self.feed_max)
+        if g.feed_limit is not None:
+            cap = np.minimum(cap, g.feed_limit)
+        if np.isfinite(cap).any():
+            out["feed"] = fd[0] / cap
         return out
 
 
@@ -711,6 +714,8 @@ class NlpRefiner:
     def _feed_bound(self, g: PathSamples) -> FloatArray:
         """Upper bound on f at points g: min(Fmax, min_x vmax_x / |x_s|) (inf if neither applies), (K,)."""
         ub = np.full(g.s.size, np.inf if self.lim.feed_max is None else self.lim.feed_max)
+        if g.feed_limit is not None:
+            ub = np.minimum(ub, g.feed_limit)
         if self.lim.vmax is not None:
             with np.errstate(divide="ignore"):
                 ub = np.minimum(ub, np.min(self.lim.vmax / np.abs(g.d1), axis=1))

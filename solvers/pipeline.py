@@ -193,7 +193,7 @@ def plan_piece(piece: Piece, machine: Machine, opt: Options) -> WindowPlan:
 def _local(toolpath: Toolpath, piece: Piece) -> Any:
     def geometry(s_local: FloatArray) -> PathSamples:
         g = toolpath.evaluate(np.asarray(s_local) + piece.s_start, piece)
-        return PathSamples(np.asarray(s_local, dtype=np.float64), g.position, g.d1, g.d2, g.d3)
+        return PathSamples(np.asarray(s_local, dtype=np.float64), g.position, g.d1, g.d2, g.d3, g.feed_limit)
 
     return geometry
 
@@ -277,6 +277,8 @@ def _velocity_bound_at(g: PathSamples, lim: LimitSet) -> FloatArray:
         ub = np.min(np.where(x2 > 1e-24, lim.vmax[None, :] ** 2 / np.where(x2 > 1e-24, x2, 1.0), np.inf), axis=1)
     if lim.feed_max is not None:
         ub = np.minimum(ub, lim.feed_max**2)
+    if g.feed_limit is not None:
+        ub = np.minimum(ub, g.feed_limit**2)
     return np.asarray(ub, dtype=np.float64)
 
 
@@ -427,7 +429,9 @@ def schedule(
         "knot_spacing": float(np.min(stats["knot_spacing"])),
         "samples": int(n_samples),
         "sample_period": Ts,
-        "peak_utilisation": _peak_utilisation(samples, lim, machine.drive_arrays() if machine.has_drives else None),
+        "peak_utilisation": _peak_utilisation(
+            samples, lim, machine.drive_arrays() if machine.has_drives else None, toolpath.feed_limit(samples.s)
+        ),
         "window_times": stats["window_times"],
     }
     if nlp_stats is not None:
@@ -443,7 +447,7 @@ def schedule(
             {"s": c.s, "angle_deg": c.angle_deg, "segment": c.segment, "position": list(c.position)}
             for c in toolpath.corners
         ],
-        "binding": _binding(toolpath, profiles, lim, opt),
+        "binding": _binding(toolpath, profiles, lim, opt, machine),
         "rest_acceleration": {ax: float(v) for ax, v in zip(AXES, lim.a_rest, strict=True)},
     }
     if nlp_stats is not None:
@@ -452,7 +456,7 @@ def schedule(
 
 
 def _peak_utilisation(
-    smp: TimeSamples, lim: LimitSet, drives: dict[str, FloatArray] | None = None
+    smp: TimeSamples, lim: LimitSet, drives: dict[str, FloatArray] | None = None, feed_cap: FloatArray | None = None
 ) -> dict[str, float]:
     out: dict[str, float] = {}
     for i, ax in enumerate(AXES):
@@ -463,28 +467,44 @@ def _peak_utilisation(
         for i, ax in enumerate(AXES):
             out[f"control_signal_{ax}"] = float(np.max(np.abs(smp.control_signal[:, i])) / drives["umax"][i])
             out[f"servo_error_{ax}"] = float(np.max(np.abs(smp.servo_error[:, i])) / drives["emax"][i])
-    if lim.feed_max is not None:
-        out["feed"] = float(np.max(smp.feed) / lim.feed_max)
+    cap = np.full(smp.feed.size, np.inf if lim.feed_max is None else lim.feed_max)
+    if feed_cap is not None:
+        cap = np.minimum(cap, feed_cap)
+    if np.isfinite(cap).any():
+        out["feed"] = float(np.max(smp.feed / cap))
     return out
 
 
-def _binding(toolpath: Toolpath, profiles: list[PieceProfile], lim: LimitSet, opt: Options) -> dict[str, Any]:
-    """Where each constraint is within 2% of its limit, at the checkpoints."""
+def _binding(
+    toolpath: Toolpath, profiles: list[PieceProfile], lim: LimitSet, opt: Options, machine: Machine
+) -> dict[str, Any]:
+    """Where each constraint is within 2% of its limit, at the checkpoints.
+
+    Kinds: velocity, feed, and with method lp acceleration and jerk, with lp+nlp
+    control_signal and servo_error (and acceleration/jerk when kept in the NLP)."""
     found: dict[str, list[FloatArray]] = {}
+    nlp = opt.method == "lp+nlp" and machine.has_drives
+    dr = machine.drive_arrays() if nlp else None
     for piece, prof in zip(toolpath.pieces, profiles, strict=True):
         s_local = np.linspace(0.0, piece.length, prof.n_int * opt.checkpoints_per_interval + 1)
-        _, f, v, a, j = _kinematics(toolpath, piece, prof, s_local)
+        g, f, v, a, j = _kinematics(toolpath, piece, prof, s_local)
         s_glob = s_local + piece.s_start
-        util = {
-            "velocity": np.max(np.abs(v) / lim.vmax, axis=1),
-            "acceleration": np.max(np.abs(a) / lim.amax, axis=1),
-        }
-        if opt.jerk:
-            util["jerk"] = np.max(np.abs(j) / lim.jmax, axis=1)
-        if lim.feed_max is not None:
-            util["feed"] = f / lim.feed_max
-        for kind, u in util.items():
-            found.setdefault(kind, []).append(s_glob[u >= BINDING_UTILISATION])
+        util = {"velocity": np.max(np.abs(v) / lim.vmax, axis=1)}
+        if not nlp or opt.nlp_kinematic:
+            util["acceleration"] = np.max(np.abs(a) / lim.amax, axis=1)
+            if opt.jerk or opt.nlp_kinematic:
+                util["jerk"] = np.max(np.abs(j) / lim.jmax, axis=1)
+        if dr is not None:
+            u, e = drive_outputs(dr, v, a, j)
+            util["control_signal"] = np.max(np.abs(u) / dr["umax"], axis=1)
+            util["servo_error"] = np.max(np.abs(e) / dr["emax"], axis=1)
+        cap = np.full(s_local.size, np.inf if lim.feed_max is None else lim.feed_max)
+        if g.feed_limit is not None:
+            cap = np.minimum(cap, g.feed_limit)
+        if np.isfinite(cap).any():
+            util["feed"] = f / cap
+        for kind, uu in util.items():
+            found.setdefault(kind, []).append(s_glob[uu >= BINDING_UTILISATION])
     out: dict[str, Any] = {}
     for kind, parts in found.items():
         s_all = np.concatenate(parts)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geometry import Toolpath
+from geometry import GeometryError, Toolpath
 from geometry import examples as ex
 from solvers.machine import Machine, router
 from solvers.pipeline import Options, Schedule, schedule
@@ -21,6 +21,8 @@ LIMIT_FACTOR = 1.01
 REST_FEED = 1e-9
 END_POSITION_TOL_MM = 1e-9
 TS = 1e-3
+#: Relative excess of a programmed feed limit allowed in the samples.
+FEED_TOL = 2e-3
 
 
 def _limits(m: Machine) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -122,3 +124,29 @@ def test_jerk_rows_matter() -> None:
     u = utilisation(with_jerk.samples.position, TS, vmax, amax, jmax)
     assert max(u["jx"], u["jy"]) <= LIMIT_FACTOR
     assert with_jerk.summary["motion_time"] > no_jerk.summary["motion_time"]
+
+
+@pytest.mark.parametrize("method", ["lp", "lp+nlp"])
+def test_programmed_feed_per_segment(method: str) -> None:
+    """Two segments with F limits 40 and 90 mm/s (as G-code F words give): each is held on its own segment."""
+    a = ex.line((0, 0, 0), (60, 0, 0))
+    b = ex.line((60, 0, 0), (120, 0, 0))
+    tp = Toolpath([a, b], feed_limits=[40.0, 90.0])
+    sch = schedule(tp, router(), Options(method=method))
+    smp = sch.samples
+    on_a = smp.s < 60.0
+    assert np.max(smp.feed[on_a]) <= 40.0 * (1 + FEED_TOL)
+    assert np.max(smp.feed[~on_a]) <= 90.0 * (1 + FEED_TOL)
+    # both limits are actually reached (the segments are long enough)
+    assert np.max(smp.feed[on_a]) >= 40.0 * (1 - 1e-3)
+    assert np.max(smp.feed[~on_a]) >= 90.0 * (1 - 1e-3)
+    # the feed never steps: it changes by at most amax * Ts per sample
+    assert np.max(np.abs(np.diff(smp.feed))) <= 500.0 * 1.01 * TS * 3
+    assert sch.summary["peak_utilisation"]["feed"] <= 1 + FEED_TOL
+    assert sch.diagnostics["binding"]["feed"]["count"] > 0
+
+
+def test_feed_limits_validated() -> None:
+    with pytest.raises(GeometryError) as err:
+        Toolpath([ex.line((0, 0, 0), (1, 0, 0))], feed_limits=[-3.0])
+    assert err.value.field == "segments[0].feed"
