@@ -376,35 +376,67 @@ class NlpRefiner:
         for A, B in itertools.pairwise(knots):
             if B - A < 2:
                 continue
-            try:
-                p[A : B + 2] = self._chain(geometry, c, d, A, B, breaks)
-                mask[A:B] = True
-            except NlpFailure as exc:
-                self._record(A, B, d, exc.window, exc.reason, exc.status)
-            except Exception as exc:
-                self._record(A, B, d, self.stats.windows - 1, f"{type(exc).__name__}: {exc}", "exception")
+            for a0, b0, vals in self._spans(geometry, c, d, A, B, breaks):
+                p[a0 : b0 + 2] = vals
+                mask[a0:b0] = True
             if on_chain is not None:
                 on_chain(B * d)
         return p, mask
 
-    def _record(self, A: int, B: int, d: float, window: int, reason: str, status: str) -> None:
+    def _record(self, a: int, b: int, d: float, window: int, reason: str, status: str, fallback: str) -> None:
         self.stats.failures.append({
-            "nlp_window": window, "s_range": [A * d, B * d], "reason": reason, "status": status,
-            "fallback": "lp feed kept on this span",
+            "nlp_window": window, "s_range": [a * d, b * d], "reason": reason, "status": status,
+            "fallback": fallback,
         })
 
-    def _chain(self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray) -> FloatArray:
-        """NLP windows over knot intervals [A, B), from and back to the LP state; p_A .. p_{B+1}.
+    def _spans(
+        self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray
+    ) -> list[tuple[int, int, FloatArray]]:
+        """NLP spans (a, b, p_a .. p_{b+1}) covering [A, B) from and back to LP states.
+
+        Normally one span, the whole chain.  If a window fails, the span so far
+        is closed by re-solving the previous window with its far end joined to
+        the LP's state (a *bridge*) and a new span starts there from the LP's
+        state; if a span's first window fails, the LP feed is kept over one
+        window advance and a new span starts after it.  Failures are recorded.
+        """
+        out: list[tuple[int, int, FloatArray]] = []
+        a0 = A
+        while B - a0 >= 2:
+            try:
+                b0, vals = self._chain(geometry, c, d, a0, B, breaks)
+            except NlpFailure as exc:
+                skip = min(B, a0 + max(2, self.window - self.overlap))
+                self._record(a0, skip, d, exc.window, exc.reason, exc.status, "lp feed kept on this span")
+                a0 = skip
+                continue
+            except Exception as exc:  # noqa: BLE001 - any solver exception: keep the LP feed there
+                skip = min(B, a0 + max(2, self.window - self.overlap))
+                self._record(a0, skip, d, self.stats.windows - 1, f"{type(exc).__name__}: {exc}", "exception",
+                             "lp feed kept on this span")
+                a0 = skip
+                continue
+            out.append((a0, b0, vals))
+            a0 = b0
+        return out
+
+    def _chain(
+        self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray
+    ) -> tuple[int, FloatArray]:
+        """NLP windows from the LP state at knot A towards B; returns (b, p_A .. p_{b+1}) with b = B,
+        or an earlier knot b where a bridge joined the LP state after a failed window.
 
         A window inheriting from the previous NLP window fixes three control
         points (so its first knot interval is the one the previous window
         verified) and takes the previous solution as its initial guess.
+        Raises NlpFailure if the first window fails.
         """
         out = np.zeros(B - A + 2)
         a = A
         start: tuple[float, ...] = _lp_state(c, d, A)
         end = _lp_state(c, d, B)
         prev: FloatArray | None = None
+        last: tuple[int, int, tuple[float, ...], FloatArray | None] | None = None
         W, P = self.window, self.overlap
         while True:
             b = B if B - a <= W else a + W
@@ -414,11 +446,28 @@ class NlpRefiner:
                 commit = a + W - P
                 if B - commit < W:
                     commit = max(B - W, a + 1)
-            sol = self._window(geometry, c, d, a, b, commit, start, end if b == B else (0.0, 0.0), breaks, prev)
+            try:
+                sol = self._window(geometry, c, d, a, b, commit, start, end if b == B else (0.0, 0.0), breaks, prev)
+            except Exception as exc:
+                if last is None:
+                    raise
+                # bridge: the previous window again, its far end joined to the LP state
+                la, lb, lstart, lprev = last
+                reason = exc.reason if isinstance(exc, NlpFailure) else f"{type(exc).__name__}: {exc}"
+                status = exc.status if isinstance(exc, NlpFailure) else "exception"
+                window = exc.window if isinstance(exc, NlpFailure) else self.stats.windows - 1
+                try:
+                    bridge = self._window(geometry, c, d, la, lb, lb, lstart, _lp_state(c, d, lb), breaks, lprev)
+                except Exception:
+                    raise NlpFailure(f"{reason}; the bridge to the LP feed failed too", window, status) from exc
+                self._record(a, lb, d, window, reason, status, "previous window re-solved to join the lp feed")
+                out[la - A : lb - A + 2] = bridge
+                return lb, out[: lb - A + 2]
             if b == B:
                 out[a - A :] = sol
-                return out
+                return B, out
             out[a - A : commit - A + 3] = sol[: commit - a + 3]
+            last = (a, b, start, prev)
             start = tuple(float(x) for x in sol[commit - a : commit - a + 3])
             prev = sol[commit - a :]
             a = commit
@@ -605,7 +654,9 @@ class NlpRefiner:
         fe = np.zeros((K, len(moving)))
         if prev is None:
             return fu, fe
-        sel = k_loc < VERIFY_PAST_COMMIT
+        # the verified intervals and the knot that closes them (u depends on f and f' only, which are
+        # continuous there, so that knot seen from the next interval must admit the same value)
+        sel = (k_loc < VERIFY_PAST_COMMIT) | ((k_loc == VERIFY_PAST_COMMIT) & (tau == 0.0))
         sel &= k_loc + 2 < prev.size
         if not sel.any():
             return fu, fe

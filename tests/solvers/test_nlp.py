@@ -113,7 +113,8 @@ def test_gain_over_lp_on_flower() -> None:
 
 
 @pytest.mark.parametrize("exc", [RuntimeError("injected Ipopt crash"), ValueError("bad")])
-def test_failed_window_falls_back_to_lp_feed(exc: Exception) -> None:
+def test_one_failed_window_is_bridged_to_the_lp_feed(exc: Exception) -> None:
+    """Window 1 fails once: window 0 is re-solved to join the LP state and a new span starts there."""
     tp = ex.flower(1)
     m = router()
 
@@ -124,12 +125,34 @@ def test_failed_window_falls_back_to_lp_feed(exc: Exception) -> None:
     sch = schedule(tp, m, Options(method="lp+nlp", nlp_fault=fault))
     fb = sch.diagnostics["nlp_fallbacks"]
     assert len(fb) == 1 and fb[0]["nlp_window"] == 1 and type(exc).__name__ in fb[0]["reason"]
+    assert "re-solved" in fb[0]["fallback"]
     assert sch.summary["nlp_failures"] == 1
-    # the span keeps the LP feed: it is feasible for the drive limits too
     _check_drive(m, sch)
+    _assert_seams_continuous(sch)
+    clean = schedule(tp, m, Options(method="lp+nlp")).summary["motion_time"]
+    lp = schedule(tp, m, Options(method="lp")).summary["motion_time"]
+    assert clean <= sch.summary["motion_time"] < lp
+
+
+def test_persistent_failures_keep_the_lp_feed() -> None:
+    """Every window after the first fails: the bridge fails too, so the LP feed is kept everywhere."""
+    tp = ex.flower(1)
+    m = router()
+
+    def fault(index: int) -> None:
+        if index >= 1:
+            raise RuntimeError("injected")
+
+    sch = schedule(tp, m, Options(method="lp+nlp", nlp_fault=fault))
+    fb = sch.diagnostics["nlp_fallbacks"]
+    assert fb and all("lp feed kept" in f["fallback"] for f in fb)
     prof = sch.profiles[0]
     assert prof.f_mask is not None and not prof.f_mask.any()
+    _check_drive(m, sch)
     assert np.all(np.isfinite(sch.samples.position))
+    # the spans reported cover the whole chain
+    covered = sum(f["s_range"][1] - f["s_range"][0] for f in fb)
+    assert covered >= tp.length - 2 * prof.d - 1e-6
 
 
 def test_lp_nlp_needs_drive_model() -> None:
