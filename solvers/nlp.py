@@ -410,7 +410,7 @@ class NlpRefiner:
                 self._record(a0, skip, d, exc.window, exc.reason, exc.status, "lp feed kept on this span")
                 a0 = skip
                 continue
-            except Exception as exc:  # noqa: BLE001 - any solver exception: keep the LP feed there
+            except Exception as exc:
                 skip = min(B, a0 + max(2, self.window - self.overlap))
                 self._record(a0, skip, d, self.stats.windows - 1, f"{type(exc).__name__}: {exc}", "exception",
                              "lp feed kept on this span")
