@@ -209,7 +209,7 @@ class Program:
 
     def toolpath(self, corner_tol_deg: float = CORNER_TOL_DEG) -> Toolpath:
         """The segments as a Toolpath (corners between them found as usual)."""
-        return Toolpath(list(self.segments), corner_tol_deg=corner_tol_deg)
+        return Toolpath(list(self.segments), corner_tol_deg=corner_tol_deg, feed_limits=list(self.feed))
 
 
 # --------------------------------------------------------------------------- tokenizer

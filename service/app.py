@@ -9,10 +9,12 @@ from __future__ import annotations
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import asdict
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
-from fastapi import FastAPI, Header, Path, Request
+from fastapi import FastAPI, Header, Path, Query, Request
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
+from pydantic import ValidationError
 
 from service.config import Settings
 from service.convert import Budget, control_point_count, load_result
@@ -34,6 +36,8 @@ from service.schemas import (
 )
 from service.store import Job, JobStore
 from solvers.machine import PRESETS, derive_limits, preset
+
+GCODE_MEDIA = "text/x-gcode"
 
 VERSION = "0.2.0"
 UNITS = {"vmax": "mm/s", "amax": "mm/s^2", "jmax": "mm/s^3", "M": "V s^2/mm", "b": "V s/mm", "c": "V", "d": "V",
@@ -158,6 +162,42 @@ def _routes(app: FastAPI) -> None:
                             rule=f"at most {svc.settings.sync_max_control_points} control points")
         res = await svc.executor.run(body.model_dump(mode="json"), svc.sync_budget, svc.settings.sync_timeout)
         return await render(res, media)
+
+    @app.post(
+        "/v1/schedule/gcode",
+        response_model=ScheduleResponse,
+        openapi_extra={"requestBody": {"required": True, "content": {GCODE_MEDIA: {"schema": {"type": "string"}}}}},
+        responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule (JSON columns, CSV or NDJSON rows "
+                         "by Accept)"}, **_problems(400, 406, 413, 415, 422, 503)},
+    )
+    async def post_schedule_gcode(
+        request: Request,
+        machine: Annotated[str, Query(max_length=64, description="machine preset")] = "router",
+        method: Annotated[Literal["lp", "lp+nlp"], Query()] = "lp+nlp",
+        sample_period: Annotated[float, Query(ge=1e-5, le=0.1, description="s")] = 0.001,
+        corner_tolerance_deg: Annotated[float, Query(ge=0, le=180)] = 0.5,
+    ) -> Response:
+        """Schedule a G-code program uploaded as `text/x-gcode` (machine preset and options as query parameters)."""
+        ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+        if ctype not in (GCODE_MEDIA, "text/plain"):
+            raise ServiceError(415, "unsupported-media-type", "Unsupported Media Type",
+                               f"send the program as {GCODE_MEDIA}", field="content-type", value=ctype,
+                               rule=f"content-type must be {GCODE_MEDIA} or text/plain")
+        raw = await request.body()
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ServiceError(422, "invalid-gcode", "Invalid G-code", "the program is not UTF-8 text",
+                               field="body", value=None, rule="UTF-8 text") from exc
+        try:
+            body = ScheduleRequest.model_validate({
+                "toolpath": {"gcode": text, "corner_tolerance_deg": corner_tolerance_deg},
+                "machine": machine,
+                "options": {"method": method, "sample_period": sample_period},
+            })
+        except ValidationError as exc:
+            raise RequestValidationError(exc.errors()) from exc
+        return await post_schedule(body, request)
 
     @app.post("/v1/jobs", status_code=202, response_model=JobOut,
               responses={200: {"model": JobOut, "description": "an existing job (same Idempotency-Key)"},

@@ -19,7 +19,7 @@ import numpy as np
 import orjson
 from numpy.typing import NDArray
 
-from geometry import NurbsSegment, Toolpath
+from geometry import GeometryError, NurbsSegment, Toolpath, gcode
 from service.errors import too_large
 from service.schemas import MachineIn, ScheduleRequest
 from solvers.machine import AXES, Axis, AxisLimits, DriveModel, Machine, derive_limits, preset
@@ -66,11 +66,18 @@ def to_machine(m: str | MachineIn) -> Machine:
 
 
 def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
-    segs = [
-        NurbsSegment.create(s.degree, s.knots, s.control_points, s.weights, name=f"toolpath.segments[{i}]")
-        for i, s in enumerate(req.toolpath.segments)
-    ]
-    tp = Toolpath(segs, corner_tol_deg=float(req.toolpath.corner_tolerance_deg))
+    corner_tol = float(req.toolpath.corner_tolerance_deg)
+    if req.toolpath.gcode is not None:
+        prog = gcode.parse(req.toolpath.gcode)
+        if not prog.segments:
+            raise GeometryError("toolpath.gcode", None, "the program has no motion")
+        tp = Toolpath(list(prog.segments), corner_tol_deg=corner_tol, feed_limits=list(prog.feed))
+    else:
+        segs = [
+            NurbsSegment.create(s.degree, s.knots, s.control_points, s.weights, name=f"toolpath.segments[{i}]")
+            for i, s in enumerate(req.toolpath.segments or [])
+        ]
+        tp = Toolpath(segs, corner_tol_deg=corner_tol)
     machine = to_machine(req.machine)
     o = req.options
     if o.feed_max is not None:
@@ -87,7 +94,10 @@ def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
 
 
 def control_point_count(req: ScheduleRequest) -> int:
-    return sum(len(s.control_points) for s in req.toolpath.segments)
+    """Control points of a NURBS request; for G-code, its line count (an upper bound on its motions)."""
+    if req.toolpath.gcode is not None:
+        return req.toolpath.gcode.count("\n") + 1
+    return sum(len(s.control_points) for s in req.toolpath.segments or [])
 
 
 def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) -> None:

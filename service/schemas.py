@@ -48,10 +48,27 @@ class NurbsIn(BaseModel):
     weights: list[Annotated[Number, Field(gt=0, le=1e6)]] | None = Field(default=None, max_length=200_000)
 
 
+#: Longest G-code program accepted in a request (characters).
+GCODE_MAX_CHARS = 20_000_000
+
+
 class ToolpathIn(BaseModel):
+    """Either NURBS ``segments`` or a G-code program (``gcode``), not both."""
+
     model_config = ConfigDict(extra="forbid")
-    segments: list[NurbsIn] = Field(min_length=1, max_length=10_000)
+    segments: list[NurbsIn] | None = Field(default=None, min_length=1, max_length=10_000)
+    gcode: str | None = Field(
+        default=None, min_length=1, max_length=GCODE_MAX_CHARS,
+        description="G-code text (G00-G03, G17-G19, G20/G21, G90/G91, Fanuc G06.2, Siemens BSPLINE, LinuxCNC "
+        "G5.2); F words become the feed limit of their blocks, G00 moves run at the machine's own limits",
+    )
     corner_tolerance_deg: Annotated[Number, Field(ge=0, le=180)] = 0.5
+
+    @model_validator(mode="after")
+    def _one_source(self) -> ToolpathIn:
+        if (self.segments is None) == (self.gcode is None):
+            raise ValueError("give exactly one of toolpath.segments and toolpath.gcode")
+        return self
 
 
 class LimitsIn(BaseModel):

@@ -283,9 +283,11 @@ def _velocity_bound_at(g: PathSamples, lim: LimitSet) -> FloatArray:
 
 
 def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
-    """Piece-local arc lengths of the geometry knots strictly inside the piece."""
-    ks = toolpath.knot_s
-    return np.asarray(ks[(ks > piece.s_start) & (ks < piece.s_end)] - piece.s_start, dtype=np.float64)
+    """Piece-local arc lengths strictly inside the piece where the geometry's third derivative (or a
+    programmed feed limit) may jump: knots inside segments and junctions between them."""
+    ks = np.concatenate([toolpath.knot_s, toolpath.offsets[1:-1]])  # knots inside segments and junctions
+    ks = np.unique(ks[(ks > piece.s_start) & (ks < piece.s_end)])
+    return np.asarray(ks - piece.s_start, dtype=np.float64)
 
 
 def refine_pieces(

@@ -1,0 +1,66 @@
+"""G-code in the service: JSON body and text/x-gcode upload, F words as feed limits, errors with line and column."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from tests.service.test_inprocess import assert_problem
+
+#: A 60 x 40 mm rectangle at F1200 (20 mm/s) after a rapid to its corner, then a G2 quarter circle at F3000.
+PROGRAM = """(rectangle and an arc)
+G21 G90 G17
+G00 X10 Y10
+G01 X70 F1200
+Y50
+G02 X90 Y70 I20 J0 F3000
+M30
+"""
+FEED_TOL = 2e-3
+
+
+@pytest.mark.parametrize("method", ["lp", "lp+nlp"])
+def test_gcode_json_body_feed_limits_and_path(client: TestClient, method: str) -> None:
+    r = client.post("/v1/schedule", json={"toolpath": {"gcode": PROGRAM}, "options": {"method": method}})
+    assert r.status_code == 200, r.text
+    smp = r.json()["samples"]
+    x, y, feed = np.array(smp["x"]), np.array(smp["y"]), np.array(smp["feed"])
+    # starts at the origin (the rapid), ends at the arc's end
+    assert abs(x[0]) < 1e-9 and abs(y[0]) < 1e-9
+    assert abs(x[-1] - 90) < 1e-9 and abs(y[-1] - 70) < 1e-9
+    # on the G01 legs (y = 10 with x in (10, 70), and x = 70) the feed stays under F1200 = 20 mm/s
+    leg = ((np.abs(y - 10) < 1e-9) & (x > 10 + 1e-6)) | ((np.abs(x - 70) < 1e-9) & (y < 50 - 1e-6) & (y > 10))
+    assert leg.sum() > 100
+    assert np.max(feed[leg]) <= 20.0 * (1 + FEED_TOL)
+    assert np.max(feed[leg]) >= 20.0 * (1 - 1e-3)
+    # on the arc (centre (90, 50), R 20) the feed stays under F3000 = 50 mm/s
+    on_arc = (np.abs(np.hypot(x - 90, y - 50) - 20) < 1e-6) & (y > 50 + 1e-6)
+    assert on_arc.sum() > 10
+    assert np.max(feed[on_arc]) <= 50.0 * (1 + FEED_TOL)
+    # the rapid is not held to a programmed feed: it runs faster than either F word
+    rapid = (np.abs(x - y) < 1e-9) & (x > 1e-6) & (x < 10 - 1e-6)
+    assert np.max(feed[rapid]) > 50.0
+
+
+def test_gcode_upload_text_x_gcode(client: TestClient) -> None:
+    r = client.post("/v1/schedule/gcode?method=lp", content=PROGRAM, headers={"content-type": "text/x-gcode",
+                                                                             "accept": "text/csv"})
+    assert r.status_code == 200, r.text
+    rows = r.text.strip().splitlines()
+    assert rows[0].startswith("t,s,feed,x,y,z")
+    last = rows[-1].split(",")
+    assert abs(float(last[3]) - 90) < 1e-9 and abs(float(last[4]) - 70) < 1e-9
+
+
+def test_gcode_errors_name_line_and_column(client: TestClient) -> None:
+    bad = "G21 G90\nG01 X10 F600\nG01 X20 Q5\n"
+    b = assert_problem(client.post("/v1/schedule", json={"toolpath": {"gcode": bad}}), 422)
+    assert "line 3" in b["errors"][0]["field"] and "col" in b["errors"][0]["field"]
+    r = client.post("/v1/schedule/gcode", content=bad, headers={"content-type": "text/x-gcode"})
+    assert_problem(r, 422)
+    r = client.post("/v1/schedule/gcode", content=PROGRAM, headers={"content-type": "application/json"})
+    assert_problem(r, 415)
+    both = {"toolpath": {"gcode": PROGRAM, "segments": [{"degree": 1, "knots": [0, 0, 1, 1],
+                                                          "control_points": [[0, 0], [1, 0]]}]}}
+    assert_problem(client.post("/v1/schedule", json=both), 422)
