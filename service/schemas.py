@@ -93,6 +93,10 @@ class DriveIn(BaseModel):
     Kj: Annotated[Number, Field(gt=0, le=1e3)] = Field(description="s^3")
     umax: Annotated[Number, Field(gt=0, le=1e4)] = Field(description="V")
     emax: Annotated[Number, Field(gt=0, le=1e3)] = Field(description="mm")
+    vmax: Speed | None = Field(
+        default=None, description="mm/s, the drive's own speed limit (held by lp+nlp); none: speed is limited "
+        "through u and e only (the axis limits' vmax is the LP's limit)",
+    )
 
 
 class AxisIn(BaseModel):

@@ -42,6 +42,9 @@ class DriveModel:
         M: V s^2/mm (inertia), b: V s/mm (viscous), c: V (bias, e.g. gravity),
         d: V (Coulomb), Kv: s, Ka: s^2, Kj: s^3 (servo-error coefficients),
         umax: V, emax: mm.
+        vmax: mm/s, the drive's own speed limit (motor speed), or None: the NLP
+            then limits speed only through u and e.  (``AxisLimits.vmax`` is the
+            LP's velocity limit, a conservative proxy, spec §8.)
     """
 
     M: float
@@ -53,6 +56,7 @@ class DriveModel:
     Kj: float
     umax: float
     emax: float
+    vmax: float | None = None
 
 
 @dataclass(frozen=True)
@@ -101,6 +105,8 @@ class Machine:
                         raise InvalidMachineError(
                             "must be finite and >= 0", field=f"machine.axes.{ax.name}.drive.{key}", value=v
                         )
+                if ax.drive.vmax is not None:
+                    _positive(ax.drive.vmax, f"machine.axes.{ax.name}.drive.vmax")
                 if not math.isfinite(ax.drive.c):
                     raise InvalidMachineError(
                         "must be finite", field=f"machine.axes.{ax.name}.drive.c", value=ax.drive.c
@@ -143,7 +149,10 @@ class Machine:
                 "the drive model is needed (control signal / servo error)", field=f"machine.axes.{missing[0]}.drive"
             )
         keys = ("M", "b", "c", "d", "Kv", "Ka", "Kj", "umax", "emax")
-        return {k: np.array([getattr(a.drive, k) for a in self.axes], dtype=np.float64) for k in keys}
+        out = {k: np.array([getattr(a.drive, k) for a in self.axes], dtype=np.float64) for k in keys}
+        out["vmax"] = np.array([np.inf if a.drive is None or a.drive.vmax is None else a.drive.vmax
+                                for a in self.axes], dtype=np.float64)
+        return out
 
     def with_feed_max(self, feed_max: float | None) -> Machine:
         return replace(self, feed_max=feed_max)

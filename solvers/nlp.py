@@ -158,9 +158,11 @@ class NlpLimits:
     def from_machine(cls, m: Machine, axis_velocity: bool, kinematic: bool) -> NlpLimits:
         dr = m.drive_arrays()
         vmax, amax, jmax = m.limit_arrays()
+        # axis speed: the drive's own limit (inf where none), and the LP's vmax only if asked
+        v_cap = dr["vmax"] if not (axis_velocity or kinematic) else np.minimum(dr["vmax"], vmax)
         return cls(
             dr["M"], dr["b"], dr["c"], dr["d"], dr["Kv"], dr["Ka"], dr["Kj"], dr["umax"], dr["emax"],
-            vmax if (axis_velocity or kinematic) else None,
+            v_cap if np.isfinite(v_cap).any() else None,
             amax if kinematic else None,
             jmax if kinematic else None,
             m.feed_max,

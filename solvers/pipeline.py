@@ -68,7 +68,8 @@ class Options:
         nlp_overlap: NLP window overlap in knot intervals; default from the stopping distance.
         nlp_checkpoints_per_interval: N of the NLP (each interval is also checked at both knots,
             and the limits are verified between checkpoints).
-        nlp_axis_velocity: keep |v| <= vmax per axis in the NLP (drive speed limit).
+        nlp_axis_velocity: also hold |v| <= the LP's vmax per axis in the NLP (off: the NLP limits
+            speed through the control signal, servo error and the drive's own vmax if given).
         nlp_kinematic: keep the velocity, acceleration and true-jerk limits in the NLP too.
     """
 
@@ -83,7 +84,7 @@ class Options:
     nlp_window: int | None = None
     nlp_overlap: int | None = None
     nlp_checkpoints_per_interval: int = 4
-    nlp_axis_velocity: bool = True
+    nlp_axis_velocity: bool = False
     nlp_kinematic: bool = False
     #: test hook: called with each NLP window's index before it is solved (may raise to inject a fault)
     nlp_fault: Callable[[int], None] | None = field(default=None, repr=False, compare=False)
@@ -491,7 +492,11 @@ def _binding(
         s_local = np.linspace(0.0, piece.length, prof.n_int * opt.checkpoints_per_interval + 1)
         g, f, v, a, j = _kinematics(toolpath, piece, prof, s_local)
         s_glob = s_local + piece.s_start
-        util = {"velocity": np.max(np.abs(v) / lim.vmax, axis=1)}
+        util: dict[str, FloatArray] = {}
+        if not nlp or opt.nlp_axis_velocity or opt.nlp_kinematic:
+            util["velocity"] = np.max(np.abs(v) / lim.vmax, axis=1)
+        elif dr is not None and np.isfinite(dr["vmax"]).any():
+            util["velocity"] = np.max(np.abs(v) / dr["vmax"], axis=1)
         if not nlp or opt.nlp_kinematic:
             util["acceleration"] = np.max(np.abs(a) / lim.amax, axis=1)
             if opt.jerk or opt.nlp_kinematic:
