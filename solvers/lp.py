@@ -181,7 +181,8 @@ def _moving(g: PathSamples, ax: int) -> bool:
     return bool(np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS)
 
 
-def _velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
+def velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
+    """Upper bound on q at points g (K,): min(Fmax^2, programmed feed^2, min_x vmax_x^2 / x_s^2)."""
     x2 = g.d1**2
     with np.errstate(divide="ignore"):
         ub = np.min(np.where(x2 > AXIS_EPS, lim.vmax[None, :] ** 2 / x2, np.inf), axis=1)
@@ -237,7 +238,7 @@ class WindowLP:
 
     def _stage1_rows(self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray | None) -> None:
         B0, B1, _ = self._mats(g.s)
-        ub = _velocity_bound(g, self.lim)
+        ub = velocity_bound(g, self.lim)
         if qstar is not None:
             ub = np.minimum(ub, np.maximum(qstar, 0.0))
         self._add(rows, B0, np.zeros(ub.size), ub / Q, g.s)
@@ -293,7 +294,7 @@ class WindowLP:
     def solve(self, s_check: FloatArray) -> WindowResult:
         spec = self.spec
         g = self.geometry(s_check)
-        Q = float(np.max(np.minimum(_velocity_bound(g, self.lim), 1e300)))
+        Q = float(np.max(np.minimum(velocity_bound(g, self.lim), 1e300)))
         self.Q = Q
         if not np.isfinite(Q) or Q <= 0:
             raise InfeasibleError("window has no positive velocity bound", window=spec.index)
@@ -368,7 +369,7 @@ class WindowLP:
     def _violations(self, c: FloatArray, g: PathSamples, c_star: FloatArray | None) -> NDArray[np.bool_]:
         f, _, a, j = axis_kinematics(g, *self._eval(c, g.s))
         tol = 1.0 + VERIFY_TOL
-        bad = f * f > _velocity_bound(g, self.lim) * tol**2
+        bad = f * f > velocity_bound(g, self.lim) * tol**2
         bad |= np.any(np.abs(a) > self.lim.amax[None, :] * tol, axis=1)
         if c_star is not None:
             bad |= np.any(np.abs(j) > self.lim.jmax[None, :] * tol, axis=1)

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from geometry.toolpath import PathSamples, Piece, Toolpath
 from solvers import kinematics
 from solvers.errors import InvalidMachineError, InvalidOptionsError
-from solvers.lp import LimitSet, WindowLP, WindowSpec
+from solvers.lp import LimitSet, WindowLP, WindowSpec, velocity_bound
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.nlp import NlpLimits, NlpRefiner, NlpStats
 from solvers.timing import PieceProfile, PieceTiming
@@ -267,20 +267,9 @@ def _join_knot(geometry: Any, c_win: FloatArray, k0: int, k_last: int, plan: Win
     lo = max(k0 + 1, k_last - plan.overlap)
     ks = np.arange(lo, k_last + 1)
     q = 0.5 * (c_win[ks - k0] + c_win[ks - k0 + 1])
-    ub = _velocity_bound_at(geometry(ks * plan.d), lim)
+    ub = velocity_bound(geometry(ks * plan.d), lim)
     score = np.where(np.isfinite(ub) & (ub > 0), q / np.where(ub > 0, ub, 1.0), 0.0)
     return int(ks[len(ks) - 1 - int(np.argmax(score[::-1]))])
-
-
-def _velocity_bound_at(g: PathSamples, lim: LimitSet) -> FloatArray:
-    x2 = g.d1**2
-    with np.errstate(divide="ignore"):
-        ub = np.min(np.where(x2 > 1e-24, lim.vmax[None, :] ** 2 / np.where(x2 > 1e-24, x2, 1.0), np.inf), axis=1)
-    if lim.feed_max is not None:
-        ub = np.minimum(ub, lim.feed_max**2)
-    if g.feed_limit is not None:
-        ub = np.minimum(ub, g.feed_limit**2)
-    return np.asarray(ub, dtype=np.float64)
 
 
 def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
