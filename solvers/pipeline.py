@@ -432,6 +432,10 @@ def schedule(
             "nlp_iterations": nlp_stats.iterations,
             "nlp_cut_rounds": nlp_stats.cut_rounds,
             "nlp_failures": len(nlp_stats.failures),
+            "nlp_softer_retries": nlp_stats.softer_retries,
+            "nlp_handover_shrink_steps": nlp_stats.handover_scaled,
+            # worst fine-grid utilisation (u, e, feed, ...) of any accepted NLP window
+            "nlp_worst_verified_utilisation": nlp_stats.worst_verified,
             "nlp_window_times": nlp_stats.window_times,
         })
     diagnostics = {

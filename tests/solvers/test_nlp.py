@@ -14,6 +14,7 @@ from geometry import Toolpath
 from geometry import examples as ex
 from solvers.errors import InvalidMachineError
 from solvers.machine import Axis, Machine, router
+from solvers.nlp import ACCEPT_TOL
 from solvers.pipeline import Options, Schedule, schedule
 from tests.fdcheck import fd_drive
 
@@ -58,6 +59,8 @@ def test_drive_limits_hold_sampled(name: str) -> None:
     m = router()
     sch = schedule(tp, m, Options(method="lp+nlp"))
     assert sch.diagnostics["nlp_fallbacks"] == []
+    # every accepted window met its limits on the fine verification grid (within the accept tolerance)
+    assert 0.95 < sch.summary["nlp_worst_verified_utilisation"] <= 1 + ACCEPT_TOL
     u_util, e_util = _check_drive(m, sch)
     # the NLP actually drives the machine to its limits (not trivially slow)
     assert max(u_util, e_util) > 0.95
