@@ -165,8 +165,9 @@ def _thin(a: FloatArray, most: int = MAX_MARKERS) -> FloatArray:
 
 # --- what binds where ---------------------------------------------------------------
 def binding(res: ResultLike, limits: Limits) -> dict[str, FloatArray]:
-    """Arc lengths (mm) where each enforced constraint binds: LP kinds from the diagnostics, drive kinds from the
-    samples (utilisation >= BINDING_UTILISATION); kinds that never bind are left out."""
+    """Arc lengths (mm) where each enforced constraint binds: LP kinds from the diagnostics (their thinned list of
+    checkpoints), drive kinds from the samples (every sample with utilisation >= BINDING_UTILISATION); kinds that
+    never bind are left out."""
     out: dict[str, FloatArray] = {}
     enf = enforced(res)
     diag = res.diagnostics.get("binding", {})
@@ -182,7 +183,7 @@ def binding(res: ResultLike, limits: Limits) -> dict[str, FloatArray]:
                       axis=1)
         hit = cols["s"][util >= BINDING_UTILISATION]
         if hit.size:
-            out[q.key] = _thin(np.asarray(hit, dtype=np.float64))
+            out[q.key] = np.asarray(hit, dtype=np.float64)
     return out
 
 

@@ -225,11 +225,13 @@ def report_page(job_id: str, res: Result, request: dict[str, Any]) -> str:
     bind = plots.binding(res, limits)
     d = res.diagnostics
     diag = f"<tr><th>corners (rest points)</th><td class=num>{len(d.get('corners', []))}</td></tr>"
-    for kind in plots.BINDING_STYLE:
-        n = len(bind[kind]) if kind in bind else 0
-        if kind in ("velocity", "acceleration", "jerk", "feed") and kind in bind:
-            n = int(d["binding"][kind]["count"])
-        diag += f"<tr><th>{kind.replace('_', ' ')} binds at</th><td class=num>{n} points</td></tr>"
+    kinds = [*enf, *(["feed"] if limits.feed_max is not None else [])]
+    for kind in kinds:
+        if kind in ("control_signal", "servo_error"):
+            n, where = (len(bind[kind]) if kind in bind else 0), "samples"
+        else:
+            n, where = int(d.get("binding", {}).get(kind, {}).get("count", 0)), "checkpoints"
+        diag += f"<tr><th>{kind.replace('_', ' ')} binds at</th><td class=num>{n} {where}</td></tr>"
     if "nlp_fallbacks" in d:
         diag += f"<tr><th>NLP fallbacks to the LP feed</th><td class=num>{len(d['nlp_fallbacks'])}</td></tr>"
     figs = ""
