@@ -47,6 +47,8 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 PLOTS = ("toolpath", "feed", "axes", "comparison")
+#: Bumped whenever a plot changes, so that cached plots of older versions are not served.
+VERSION = 1
 FORMATS = {"svg": "image/svg+xml", "png": "image/png"}
 AXES = ("x", "y", "z")
 #: Utilisation at or above which a drive limit is marked as binding (as solvers.pipeline does for the LP kinds).

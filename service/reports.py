@@ -3,7 +3,7 @@
 Rendering runs in one dedicated thread (matplotlib's shared state - font and
 text caches - is not meant for concurrent figures), so the event loop only
 awaits it.  Job results never change once a job has succeeded, so each job's
-plots are cached as files next to its result (``<data>/plots/<id>.<name>.<fmt>``)
+plots are cached as files next to its result (``<data>/plots/<id>.<name>.v<plots.VERSION>.<fmt>``)
 and concurrent requests for the same plot share one rendering.
 """
 
@@ -58,14 +58,14 @@ class PlotService:
         return await asyncio.get_running_loop().run_in_executor(self._thread, fn, *args)
 
     def cache_path(self, job_id: str, name: str, fmt: str) -> Path:
-        return self.cache_dir / f"{job_id}.{name}.{fmt}"
+        return self.cache_dir / f"{job_id}.{name}.v{plots.VERSION}.{fmt}"
 
     async def job_plot(self, job_id: str, result_path: Path, request: dict[str, Any], name: str, fmt: str) -> bytes:
         """The plot of a succeeded job, from the cache or rendered once (concurrent callers share it)."""
         key = (job_id, name, fmt)
         path = self.cache_path(*key)
         if path.exists():
-            return await self._off_loop(path.read_bytes)
+            return await asyncio.to_thread(path.read_bytes)  # not queued behind a rendering
         fut = self._inflight.get(key)
         if fut is None:
             fut = asyncio.ensure_future(self._off_loop(self._render_job, job_id, result_path, request, name, fmt))

@@ -201,23 +201,38 @@ def test_minmax_decimation_keeps_every_peak() -> None:
         assert kept.max() == seg.max() and kept.min() == seg.min()
 
 
-def test_a_million_samples_are_drawn_decimated_with_the_peaks() -> None:
-    n = 1_000_000
+LIM = plots.Limits({"velocity": (150.0, 150.0, 150.0), "acceleration": (1e3, 1e3, 1e3), "jerk": (1e5, 1e5, 1e5)})
+
+
+def synthetic(n: int, z_amp: float = 0.0) -> Result:
+    """A made-up lp result of n samples along a helix-like path (no drive columns, nothing binds)."""
     t = np.arange(n) * 1e-4
     feed = 50 + 40 * np.sin(t) ** 2
     feed[0] = feed[-1] = 0.0
-    feed[654_321] = 123.0
     s = np.cumsum(feed) * 1e-4
-    cols = {"t": t, "s": s, "feed": feed, "x": np.cos(s / 50) * 50, "y": np.sin(s / 50) * 50, "z": np.zeros(n)}
+    cols = {"t": t, "s": s, "feed": feed, "x": np.cos(s / 50) * 50, "y": np.sin(s / 50) * 50,
+            "z": z_amp * np.sin(s / 20)}
     for q in "vaj":
         for a in "xyz":
             cols[f"{q}_{a}"] = np.zeros(n)
     cols["v_x"] = feed.copy()
-    res = Result(summary={"method": "lp", "path_length": float(s[-1]), "motion_time": float(t[-1])},
-                 diagnostics={"binding": {"velocity": {"count": 0, "s": []}, "acceleration": {"count": 0, "s": []},
-                                          "jerk": {"count": 0, "s": []}}, "corners": []}, columns=cols)
-    lim = plots.Limits({"velocity": (150.0, 150.0, 150.0), "acceleration": (1e3, 1e3, 1e3),
-                        "jerk": (1e5, 1e5, 1e5)})
+    return Result(summary={"method": "lp", "path_length": float(s[-1]), "motion_time": float(t[-1])},
+                  diagnostics={"binding": {k: {"count": 0, "s": []} for k in ("velocity", "acceleration", "jerk")},
+                               "corners": []}, columns=cols)
+
+
+def test_a_3d_view_when_z_moves() -> None:
+    flat = ET.fromstring(plots.render("toolpath", synthetic(5000), LIM))
+    assert meta(flat)["has_3d"] is False and "toolpath-line-3d" not in by_id(flat, "toolpath-line")
+    helix = ET.fromstring(plots.render("toolpath", synthetic(5000, z_amp=5.0), LIM))
+    assert meta(helix)["has_3d"] is True and "toolpath-line-3d" in by_id(helix, "toolpath-line")
+    assert "z (mm)" in texts(helix)
+
+
+def test_a_million_samples_are_drawn_decimated_with_the_peaks() -> None:
+    res = synthetic(1_000_000)
+    res.columns["feed"][654_321] = 123.0
+    lim = LIM
     fig, md = plots.figure("feed", res, lim)
     lines = {ln.get_gid(): ln for ax in fig.axes for ln in ax.get_lines()}
     for gid in ("feed-vs-s", "feed-vs-t"):

@@ -7,12 +7,15 @@ import csv
 import io
 import json
 import re
+import threading
 import xml.etree.ElementTree as ET
 from html.parser import HTMLParser
 from typing import Any
 
+import pytest
 from fastapi.testclient import TestClient
 
+from service import reports
 from service.schemas import EXAMPLE
 from tests.service.test_inprocess import COLUMNS, assert_problem
 from tests.service.test_jobs import poll_done
@@ -57,8 +60,14 @@ def svg_meta(data: bytes) -> dict[str, Any]:
     return out
 
 
-def test_job_plots_svg_png_cached(client: TestClient) -> None:
-    job_id = run_job(client, EXAMPLE)
+@pytest.fixture(scope="module")
+def nlp_job(client: TestClient) -> str:
+    """One lp+nlp job of the quarter arc, shared (its plots are rendered once, then cached)."""
+    return run_job(client, EXAMPLE)
+
+
+def test_job_plots_svg_png_cached(client: TestClient, nlp_job: str) -> None:
+    job_id = nlp_job
     result = client.get(f"/v1/jobs/{job_id}/result").json()
     base = f"/v1/jobs/{job_id}/plots"
     for name in ("toolpath", "feed", "axes", "comparison"):
@@ -84,15 +93,28 @@ def test_job_plots_svg_png_cached(client: TestClient) -> None:
     assert_problem(client.get("/v1/jobs/AAAAAAAAAAAAAAAAAAAAAAAA/plots/feed.svg"), 404)
 
 
-def test_comparison_needs_both_methods(client: TestClient) -> None:
+def test_comparison_needs_both_methods_and_rendering_is_off_the_loop(client: TestClient,
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     job_id = run_job(client, {**EXAMPLE, "options": {"method": "lp"}})
+    threads: list[str] = []
+    real = reports.plots.render
+
+    def spy(*args: Any) -> bytes:
+        threads.append(threading.current_thread().name)
+        return real(*args)
+
+    monkeypatch.setattr(reports.plots, "render", spy)
+    assert client.get(f"/v1/jobs/{job_id}/plots/feed.svg").status_code == 200
+    assert len(threads) == 1 and threads[0].startswith("feedsched-plots")  # the dedicated plot thread
+    assert client.get(f"/v1/jobs/{job_id}/plots/feed.svg").status_code == 200
+    assert len(threads) == 1  # second time from the cache
     assert_problem(client.get(f"/v1/jobs/{job_id}/plots/comparison.svg"), 404)
     page = client.get(f"/v1/jobs/{job_id}/report").text
     assert "plots/comparison.svg" not in page and "plots/toolpath.svg" in page
 
 
-def test_report_page(client: TestClient) -> None:
-    job_id = run_job(client, EXAMPLE)
+def test_report_page(client: TestClient, nlp_job: str) -> None:
+    job_id = nlp_job
     r = client.get(f"/v1/jobs/{job_id}/report")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
     page = r.text
