@@ -12,8 +12,11 @@ from dataclasses import asdict
 from typing import Annotated, Any, Literal
 
 from fastapi import FastAPI, Header, Path, Query, Request
+from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
 from starlette.concurrency import run_in_threadpool
+from swagger_ui_bundle import swagger_ui_path
 
 from service.config import Settings
 from service.convert import Budget, control_point_count, load_result
@@ -42,6 +45,7 @@ from service.store import Job, JobStore
 from solvers.machine import PRESETS, derive_limits, preset
 
 VERSION = "0.2.0"
+SWAGGER_STATIC = "/static/swagger-ui"
 UNITS = {"vmax": "mm/s", "amax": "mm/s^2", "jmax": "mm/s^3", "M": "V s^2/mm", "b": "V s/mm", "c": "V", "d": "V",
          "Kv": "s", "Ka": "s^2", "Kj": "s^3", "umax": "V", "emax": "mm", "feed_max": "mm/s",
          "stopping_distance_mm": "mm"}
@@ -100,9 +104,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             await svc.close()
 
-    app = FastAPI(title="feedsched", version=VERSION, lifespan=lifespan,
+    app = FastAPI(title="feedsched", version=VERSION, lifespan=lifespan, docs_url=None, redoc_url=None,
                   description="Time-optimal CNC feed scheduling along NURBS toolpaths. Errors are RFC 9457 "
                   "problem+json naming the field path, value and rule.")
+    # Swagger UI from the swagger-ui-bundle-v2 package, not a CDN (the service may run offline)
+    app.mount(SWAGGER_STATIC, StaticFiles(directory=swagger_ui_path), name="swagger-ui")
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
     install_handlers(app)
     _routes(app)
@@ -304,6 +310,13 @@ def _routes(app: FastAPI) -> None:
             raise not_found("example", name)
         body: dict[str, Any] = await run_in_threadpool(example, name)
         return body
+
+    @app.get("/docs", response_class=HTMLResponse, include_in_schema=False)
+    async def docs() -> HTMLResponse:
+        return get_swagger_ui_html(openapi_url="/openapi.json", title="feedsched - Swagger UI",
+                                   swagger_js_url=f"{SWAGGER_STATIC}/swagger-ui-bundle.js",
+                                   swagger_css_url=f"{SWAGGER_STATIC}/swagger-ui.css",
+                                   swagger_favicon_url=f"{SWAGGER_STATIC}/favicon-32x32.png")
 
     @app.get("/", response_class=HTMLResponse, include_in_schema=False)
     async def index() -> HTMLResponse:

@@ -266,6 +266,7 @@ def index_page(machines: list[str]) -> str:
     opts = "".join(f'<option value="{html.escape(n)}"{" selected" if n == "flower" else ""}>'
                    f"{html.escape(n)} — {html.escape(t)}</option>" for n, t in EXAMPLES.items())
     mach = "".join(f'<option value="{html.escape(m)}">{html.escape(m)}</option>' for m in machines)
+    mach += '<option value="">as in the JSON (a custom machine)</option>'
     body = f"""
 <p>Schedule the fastest feed along a toolpath within the machine's limits, then look at where it slows down and
 which limit holds it back.  The toolpath is JSON: a whole <code>/v1/jobs</code> request body or just its
@@ -309,7 +310,7 @@ $("run-form").addEventListener("submit", async (e) => {
     $("error").textContent = "the toolpath is not valid JSON: " + err.message; return;
   }
   const body = parsed.toolpath ? parsed : {toolpath: parsed};
-  body.machine = $("machine").value;
+  if ($("machine").value || !body.machine) body.machine = $("machine").value || "router";
   body.options = Object.assign({}, body.options || {}, {method: $("method").value});
   $("run").disabled = true;
   $("status").textContent = "submitting…";

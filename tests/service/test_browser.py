@@ -7,6 +7,7 @@ Set FEEDSCHED_SCREENSHOT=path.png to keep the report screenshot (docs/report-flo
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 from collections.abc import Iterator
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from service.schemas import EXAMPLE
 from tests.service.conftest import WAIT_S, Server
 
 CHROMIUM = os.environ.get("FEEDSCHED_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
@@ -62,6 +64,13 @@ def test_run_the_flower_from_the_start_page_and_see_the_report(browser_server: S
             # the bundled flower is loaded into the text area (723 control points)
             page.wait_for_function("document.getElementById('toolpath').value.length > 10000")
             assert page.locator("a[href='/docs']").count() >= 1
+            # uploading a file replaces the text; picking the example again brings the flower back
+            upload = tmp_path / "arc.json"
+            upload.write_text(json.dumps(EXAMPLE["toolpath"]))
+            page.set_input_files("#file", str(upload))
+            page.wait_for_function("document.getElementById('toolpath').value.includes('0.7071067811865476')")
+            page.select_option("#example", "flower")
+            page.wait_for_function("document.getElementById('toolpath').value.length > 10000")
             page.select_option("#machine", "router")
             page.select_option("#method", "lp+nlp")
             page.click("#run")
@@ -81,6 +90,10 @@ def test_run_the_flower_from_the_start_page_and_see_the_report(browser_server: S
             assert "motion time" in page.locator("#summary").inner_text()
             page.screenshot(path=str(shot), full_page=True)
             height = page.evaluate("document.documentElement.scrollHeight")
+            # the start page links to Swagger UI, served by the service itself (this machine has no CDN)
+            page.goto(browser_server.url + "/docs")
+            assert "feedsched" in page.locator(".swagger-ui .info .title").inner_text()
+            page.get_by_text("/v1/jobs/{job_id}/report", exact=True).wait_for()
         finally:
             browser.close()
     assert errors == []

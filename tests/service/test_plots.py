@@ -95,6 +95,15 @@ def test_lp_binding_markers_are_where_the_diagnostics_say(corner_lp: tuple[Resul
         assert markers(groups[f"binding-{k}"]) == md["binding_markers"][k] == min(len(diag[k]["s"]),
                                                                                    plots.MAX_MARKERS)
         assert set(md["binding"][k]) <= set(diag[k]["s"]) and len(want) >= 1
+    # the markers sit on the path at the arc lengths the diagnostics give
+    fig, _ = plots.figure("toolpath", res, lim)
+    offsets = {c.get_gid(): np.asarray(c.get_offsets()) for ax in fig.axes for c in ax.collections}
+    for k in binds:
+        s_b = np.asarray(md["binding"][k])
+        want_xy = np.column_stack([np.interp(s_b, res.columns["s"], res.columns[a]) for a in "xy"])
+        assert np.allclose(offsets[f"binding-{k}"], want_xy)
+    corner = res.diagnostics["corners"][0]["position"]
+    assert np.allclose(offsets["corners"], [corner[:2]])
     # method lp does not constrain the drive: no control-signal / servo-error markers
     assert "binding-control_signal" not in groups and "binding-servo_error" not in groups
     # the corner is marked where the diagnostics put it

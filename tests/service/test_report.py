@@ -169,6 +169,13 @@ def test_start_page_and_examples(client: TestClient) -> None:
     seg = flower["toolpath"]["segments"][0]
     assert seg["degree"] == 3 and len(seg["control_points"]) > 700 and flower["machine"] == "router"
     assert_problem(client.get("/v1/examples/nope"), 404)
+    # Swagger UI without a CDN: every asset from this service
+    docs = client.get("/docs")
+    assert docs.status_code == 200 and "https://" not in docs.text and "http://" not in docs.text
+    assets = [u for u in links(docs.text).urls if u.startswith("/static/")]
+    assert len(assets) >= 2 and any(u.endswith("swagger-ui-bundle.js") for u in assets)
+    for u in assets:
+        assert client.get(u).status_code == 200, u
 
 
 def test_sync_plots_option(client: TestClient) -> None:
