@@ -110,7 +110,7 @@ class PlotService:
 
 # --- bundled examples ---------------------------------------------------------------------
 EXAMPLES: dict[str, str] = {
-    "flower": "flower: r = 40 + 15 cos(5θ) mm, one closed loop (407.7 mm, cubic NURBS through 720 points)",
+    "flower": "r = 40 + 15 cos(5θ) mm, one closed loop (407.7 mm, cubic NURBS through 720 points)",
     "quarter-arc": "quarter circle of radius 40 mm (exact rational quadratic NURBS)",
     "square-corner": "two 50 mm lines meeting at a 90° corner (the tool stops there)",
     "wave3d": "a 3-D path: an ellipse in XY with Z rising and waving (330 mm)",
