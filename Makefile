@@ -9,7 +9,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 PYTEST_ARGS ?=
 
-.PHONY: venv run test lint typecheck pytest bench clean openapi load
+.PHONY: venv run test lint typecheck pytest bench clean openapi load browser screenshot
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -47,3 +47,12 @@ openapi: $(STAMP)
 DURATION ?= 60
 load: $(STAMP)
 	$(BIN)/python -m bench.load --duration $(DURATION)
+
+# headless Chromium for tests/service/test_browser.py: Debian's package (as root), never a browser download
+browser:
+	command -v chromium >/dev/null || { apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium; }
+
+# refresh the README's report screenshot (docs/report-flower.png) from the browser test
+screenshot: $(STAMP)
+	FEEDSCHED_REQUIRE_BROWSER=1 FEEDSCHED_SCREENSHOT=$(CURDIR)/docs/report-flower.png \
+		$(BIN)/python -m pytest -q tests/service/test_browser.py

@@ -13,24 +13,33 @@ from typing import Annotated, Any, Literal
 
 from fastapi import FastAPI, Header, Path, Query, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse, Response
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import HTMLResponse, JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
 from pydantic import ValidationError
+from starlette.concurrency import run_in_threadpool
+from swagger_ui_bundle import swagger_ui_path
 
 from service.config import Settings
 from service.convert import Budget, control_point_count, load_result
 from service.errors import ServiceError, install_handlers, not_found, too_large
 from service.executor import Executor, make_executor
-from service.http import BodyLimit, negotiate, render
+from service.http import FORMAT_NAMES, BodyLimit, negotiate, render
 from service.jobs import JobManager
+from service.plots import FORMATS as PLOT_MEDIA
+from service.reports import EXAMPLES, PlotService, example, index_page, report_page, report_pending
 from service.schemas import (
     MEDIA_CSV,
     MEDIA_JSON,
     MEDIA_NDJSON,
     MEDIA_PROBLEM,
+    ExampleList,
     Health,
     JobOut,
     MachineList,
     MachineOut,
+    PlotFormat,
+    PlotName,
     ScheduleRequest,
     ScheduleResponse,
 )
@@ -40,6 +49,7 @@ from solvers.machine import PRESETS, derive_limits, preset
 GCODE_MEDIA = "text/x-gcode"
 
 VERSION = "0.2.0"
+SWAGGER_STATIC = "/static/swagger-ui"
 UNITS = {"vmax": "mm/s", "amax": "mm/s^2", "jmax": "mm/s^3", "M": "V s^2/mm", "b": "V s/mm", "c": "V", "d": "V",
          "Kv": "s", "Ka": "s^2", "Kj": "s^3", "umax": "V", "emax": "mm", "feed_max": "mm/s",
          "stopping_distance_mm": "mm"}
@@ -65,6 +75,7 @@ class Service:
         self.store = JobStore(settings.data_dir)
         self.executor: Executor = make_executor(settings.workers, settings.dask_scheduler)
         self.jobs = JobManager(self.store, self.executor, settings)
+        self.plots = PlotService(self.store.dir / "plots")
         self.sync_budget = Budget(settings.sync_max_samples, settings.sync_max_intervals,
                                   where="the synchronous API (POST /v1/jobs takes more)")
 
@@ -75,6 +86,7 @@ class Service:
     async def close(self) -> None:
         await self.jobs.close()
         await self.executor.close()
+        self.plots.close()
         self.store.close()
 
 
@@ -96,9 +108,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             await svc.close()
 
-    app = FastAPI(title="feedsched", version=VERSION, lifespan=lifespan,
+    app = FastAPI(title="feedsched", version=VERSION, lifespan=lifespan, docs_url=None, redoc_url=None,
                   description="Time-optimal CNC feed scheduling along NURBS toolpaths. Errors are RFC 9457 "
                   "problem+json naming the field path, value and rule.")
+    # Swagger UI from the swagger-ui-bundle-v2 package, not a CDN (the service may run offline)
+    app.mount(SWAGGER_STATIC, StaticFiles(directory=swagger_ui_path), name="swagger-ui")
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
     install_handlers(app)
     _routes(app)
@@ -115,10 +129,42 @@ def _job_out(svc: Service, job: Job) -> dict[str, Any]:
     return {"id": job.id, "status": job.status, "progress": svc.jobs.progress(job), "attempts": job.attempts,
             "worker_pid": svc.executor.running_pids().get(job.id) if job.status == "running" else None,
             "timings": timings, "error": job.error, "summary": job.summary,
-            "links": {"self": base, "result": base + "/result", "cancel": base}}
+            "links": {"self": base, "result": base + "/result", "cancel": base, "report": base + "/report"}}
 
 
 JobId = Annotated[str, Path(min_length=1, max_length=100, description="job id from POST /v1/jobs")]
+ResultFormat = Annotated[Literal["json", "csv", "ndjson"] | None, Query(
+    description="instead of the Accept header (for links): json, csv or ndjson")]
+PLOT_CONTENT: dict[str, Any] = {
+    "image/svg+xml": {"schema": {"type": "string"}},
+    "image/png": {"schema": {"type": "string", "format": "binary"}},
+}
+
+
+def _succeeded(svc: Service, job_id: str) -> Job:
+    """The job if it has succeeded; 404 if unknown, 409 otherwise."""
+    job = svc.store.get(job_id)
+    if job is None:
+        raise not_found("job", job_id)
+    if job.status != "succeeded":
+        raise ServiceError(409, "job-not-succeeded", "No result", f"the job is {job.status}",
+                           field="job_id", value=job_id, rule="a result exists once the job has succeeded",
+                           job_status=job.status, job_error=job.error)
+    if not svc.store.result_path(job_id).exists():
+        raise not_found("job result file", job_id)
+    return job
+
+
+def _check_plots(body: ScheduleRequest, media: str) -> None:
+    o = body.options
+    if not o.plots:
+        return
+    if media != MEDIA_JSON:
+        raise ServiceError(406, "not-acceptable", "Not Acceptable", "plots come in the JSON body only",
+                           field="options.plots", value=o.plots, rule="options.plots needs Accept: application/json")
+    if "comparison" in o.plots and o.method != "lp+nlp":
+        raise ServiceError(422, "invalid-options", "Invalid options", "the comparison plot needs method lp+nlp",
+                           field="options.plots", value=o.plots, rule='"comparison" needs options.method "lp+nlp"')
 
 
 def _routes(app: FastAPI) -> None:
@@ -160,8 +206,12 @@ def _routes(app: FastAPI) -> None:
                             f"{svc.settings.sync_max_control_points}; POST the same body to /v1/jobs",
                             field="toolpath.segments", value=n,
                             rule=f"at most {svc.settings.sync_max_control_points} control points")
+        _check_plots(body, media)
         res = await svc.executor.run(body.model_dump(mode="json"), svc.sync_budget, svc.settings.sync_timeout)
-        return await render(res, media)
+        figs = None
+        if body.options.plots:
+            figs = await svc.plots.inline(res, body, list(dict.fromkeys(body.options.plots)), body.options.plot_format)
+        return await render(res, media, plots=figs)
 
     @app.post(
         "/v1/schedule/gcode",
@@ -244,12 +294,12 @@ def _routes(app: FastAPI) -> None:
     @app.get("/v1/jobs/{job_id}/result", response_model=ScheduleResponse,
              responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule"},
                         **_problems(404, 406, 409, 422)})
-    async def get_result(job_id: JobId, request: Request) -> Response:
+    async def get_result(job_id: JobId, request: Request, format: ResultFormat = None) -> Response:
         svc = _svc(request)
         job = svc.store.get(job_id)
         if job is None:
             raise not_found("job", job_id)
-        media = negotiate(request.headers.get("accept"))
+        media = FORMAT_NAMES[format] if format else negotiate(request.headers.get("accept"))
         if job.status != "succeeded":
             raise ServiceError(409, "job-not-succeeded", "No result", f"the job is {job.status}",
                                field="job_id", value=job_id, rule="a result exists once the job has succeeded",
@@ -261,10 +311,59 @@ def _routes(app: FastAPI) -> None:
             raise not_found("job result file", job_id) from None
         return await render(res, media)
 
+    @app.get("/v1/jobs/{job_id}/plots/{name}.{fmt}", response_class=Response,
+             responses={200: {"content": PLOT_CONTENT, "description": "the plot (SVG or PNG)"},
+                        **_problems(404, 409, 422)})
+    async def get_plot(job_id: JobId, name: Annotated[PlotName, Path(description="which plot")],
+                       fmt: Annotated[PlotFormat, Path(description="svg or png")], request: Request) -> Response:
+        """A plot of a succeeded job: toolpath coloured by feed, feed profiles, axis profiles against limits,
+        or (method lp+nlp) the LP vs LP+NLP comparison.  Rendered once, then cached."""
+        svc = _svc(request)
+        job = _succeeded(svc, job_id)
+        if name == "comparison" and job.request.get("options", {}).get("method", "lp+nlp") != "lp+nlp":
+            raise not_found("comparison plot (the job ran method lp only)", name)
+        data = await svc.plots.job_plot(job_id, svc.store.result_path(job_id), job.request, name, fmt)
+        return Response(data, media_type=PLOT_MEDIA[fmt], headers={"Cache-Control": "public, max-age=86400"})
+
+    @app.get("/v1/jobs/{job_id}/report", response_class=HTMLResponse, responses=_problems(404, 422))
+    async def get_report(job_id: JobId, request: Request) -> HTMLResponse:
+        """An HTML page: the plots, the summary table and download links (the job's status until it succeeds)."""
+        svc = _svc(request)
+        job = svc.store.get(job_id)
+        if job is None:
+            raise not_found("job", job_id)
+        if job.status != "succeeded":
+            return HTMLResponse(report_pending(job))
+        job = _succeeded(svc, job_id)
+        res = await svc.plots.job_result(job_id, svc.store.result_path(job_id))
+        page = await run_in_threadpool(report_page, job_id, res, job.request)
+        return HTMLResponse(page)
+
+    @app.get("/v1/examples", response_model=ExampleList)
+    async def examples() -> dict[str, Any]:
+        """Bundled example toolpaths (request bodies for POST /v1/schedule or /v1/jobs)."""
+        return {"examples": [{"name": n, "description": d, "href": f"/v1/examples/{n}"} for n, d in EXAMPLES.items()]}
+
+    @app.get("/v1/examples/{name}", response_model=ScheduleRequest, responses=_problems(404, 422))
+    async def get_example(name: Annotated[str, Path(max_length=100)]) -> dict[str, Any]:
+        if name not in EXAMPLES:
+            raise not_found("example", name)
+        body: dict[str, Any] = await run_in_threadpool(example, name)
+        return body
+
+    @app.get("/docs", response_class=HTMLResponse, include_in_schema=False)
+    async def docs() -> HTMLResponse:
+        return get_swagger_ui_html(openapi_url="/openapi.json", title="feedsched - Swagger UI",
+                                   swagger_js_url=f"{SWAGGER_STATIC}/swagger-ui-bundle.js",
+                                   swagger_css_url=f"{SWAGGER_STATIC}/swagger-ui.css",
+                                   swagger_favicon_url=f"{SWAGGER_STATIC}/favicon-32x32.png")
+
+    @app.get("/", response_class=HTMLResponse, include_in_schema=False)
+    async def index() -> HTMLResponse:
+        return HTMLResponse(index_page(sorted(PRESETS)))
+
 
 async def _load(path: Any) -> Any:
-    from starlette.concurrency import run_in_threadpool
-
     return await run_in_threadpool(load_result, path)
 
 

@@ -11,7 +11,7 @@ import io
 import json
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +28,8 @@ from solvers.pipeline import Options, Schedule, plan_piece
 FloatArray = NDArray[np.float64]
 #: Rows per chunk when streaming CSV/NDJSON.
 CHUNK_ROWS = 2000
+#: Samples of the LP feed kept for the LP vs LP+NLP comparison (diagnostics.lp_feed).
+LP_FEED_POINTS = 1200
 
 
 @dataclass(frozen=True)
@@ -134,8 +136,25 @@ def from_schedule(sch: Schedule) -> Result:
             for i, ax in enumerate(AXES):
                 cols[f"{name}_{ax}"] = np.ascontiguousarray(arr[:, i], dtype=np.float64)
     summary = {k: v for k, v in sch.summary.items() if k != "window_times"}
-    return Result(summary=_plain(summary), diagnostics=_plain(sch.diagnostics),
+    diagnostics = dict(sch.diagnostics)
+    if sch.summary.get("method") == "lp+nlp" and sch.profiles:
+        diagnostics["lp_feed"] = lp_feed(sch)
+    return Result(summary=_plain(summary), diagnostics=_plain(diagnostics),
                   columns={k: np.ascontiguousarray(v, dtype=np.float64) for k, v in cols.items()})
+
+
+def lp_feed(sch: Schedule, points: int = LP_FEED_POINTS) -> dict[str, list[float]]:
+    """The LP stage's feed (before the NLP refined it) along the path: ``{"s": [...], "feed": [...]}``, mm and mm/s,
+    about ``points`` samples (at least 16 per rest-to-rest piece, both ends included)."""
+    total = sum(p.length for p in sch.profiles) or 1.0
+    s_out: list[FloatArray] = []
+    f_out: list[FloatArray] = []
+    for prof in sch.profiles:
+        s_loc = np.linspace(0.0, prof.length, max(16, round(points * prof.length / total)))
+        lp_only = replace(prof, p=None, f_mask=None)
+        s_out.append(s_loc + prof.s_start)
+        f_out.append(lp_only.feed(s_loc)[0])
+    return {"s": np.concatenate(s_out).tolist(), "feed": np.concatenate(f_out).tolist()}
 
 
 def _plain(v: Any) -> Any:
@@ -144,9 +163,11 @@ def _plain(v: Any) -> Any:
 
 
 # --- encodings ----------------------------------------------------------------
-def encode_json(res: Result) -> bytes:
-    return orjson.dumps({"summary": res.summary, "diagnostics": res.diagnostics, "samples": res.columns},
-                        option=orjson.OPT_SERIALIZE_NUMPY)
+def encode_json(res: Result, plots: dict[str, str] | None = None) -> bytes:
+    body: dict[str, Any] = {"summary": res.summary, "diagnostics": res.diagnostics, "samples": res.columns}
+    if plots is not None:
+        body["plots"] = plots
+    return orjson.dumps(body, option=orjson.OPT_SERIALIZE_NUMPY)
 
 
 def _rows(res: Result, a: int, b: int) -> tuple[list[str], Iterator[tuple[float, ...]]]:

@@ -14,6 +14,8 @@ from service.errors import problem_from_exception, problem_response
 from service.schemas import MEDIA_CSV, MEDIA_JSON, MEDIA_NDJSON
 
 FORMATS = (MEDIA_JSON, MEDIA_CSV, MEDIA_NDJSON)
+#: ?format= values of the result routes (links cannot set Accept).
+FORMAT_NAMES = {"json": MEDIA_JSON, "csv": MEDIA_CSV, "ndjson": MEDIA_NDJSON}
 
 
 def negotiate(accept: str | None) -> str:
@@ -43,13 +45,14 @@ def negotiate(accept: str | None) -> str:
     return best[2]
 
 
-async def render(res: Result, media: str, headers: dict[str, str] | None = None) -> Response:
+async def render(res: Result, media: str, headers: dict[str, str] | None = None,
+                 plots: dict[str, str] | None = None) -> Response:
     hdrs = {"X-Samples": str(len(res.columns.get("t", ()))), **(headers or {})}
     if media == MEDIA_CSV:
         return StreamingResponse(iter_csv(res), media_type="text/csv; charset=utf-8", headers=hdrs)
     if media == MEDIA_NDJSON:
         return StreamingResponse(iter_ndjson(res), media_type=MEDIA_NDJSON, headers=hdrs)
-    body = await run_in_threadpool(encode_json, res)
+    body = await run_in_threadpool(encode_json, res, plots)
     return Response(body, media_type=MEDIA_JSON, headers=hdrs)
 
 

@@ -133,6 +133,11 @@ class MachineIn(BaseModel):
     feed_max: Speed | None = Field(default=None, description="tangential feed limit, mm/s")
 
 
+PLOT_NAMES = ("toolpath", "feed", "axes", "comparison")
+PlotName = Literal["toolpath", "feed", "axes", "comparison"]
+PlotFormat = Literal["svg", "png"]
+
+
 class OptionsIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
     method: Literal["lp", "lp+nlp"] = Field(
@@ -148,6 +153,12 @@ class OptionsIn(BaseModel):
     jerk: bool = True
     solver: Literal["highs", "clarabel"] = "highs"
     feed_max: Speed | None = Field(default=None, description="mm/s (overrides the machine's)")
+    plots: list[PlotName] | None = Field(
+        default=None, max_length=len(PLOT_NAMES),
+        description="POST /v1/schedule only: plots to return in the JSON body's `plots` as data: URIs "
+        '("comparison" needs method lp+nlp); jobs serve theirs at /v1/jobs/{id}/plots/{name}.{svg|png}',
+    )
+    plot_format: PlotFormat = Field(default="svg", description="format of the plots asked for in `plots`")
 
 
 EXAMPLE: dict[str, Any] = {
@@ -195,6 +206,10 @@ class ScheduleResponse(BaseModel):
     samples: dict[str, list[float]] = Field(
         description="columns t, s, feed, x, y, z, v_x.., a_x.., j_x.. and, with a drive model, u_x.. (V), e_x.. (mm)"
     )
+    plots: dict[str, str] | None = Field(
+        default=None, description="the plots asked for in options.plots, name -> data: URI (image/svg+xml or "
+        "image/png, base64)",
+    )
 
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
@@ -239,6 +254,16 @@ class JobOut(BaseModel):
     error: Problem | None = None
     summary: dict[str, Any] | None = None
     links: dict[str, str]
+
+
+class ExampleOut(BaseModel):
+    name: str
+    description: str
+    href: str
+
+
+class ExampleList(BaseModel):
+    examples: list[ExampleOut]
 
 
 class MachineList(BaseModel):

@@ -1,0 +1,253 @@
+"""Plot content (service/plots.py): colour bar range, limit lines, binding markers, decimation, PNG metadata."""
+
+from __future__ import annotations
+
+import io
+import json
+import xml.etree.ElementTree as ET
+from typing import Any
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from geometry.examples import flower, square_corner
+from service import plots
+from service.convert import Result, from_schedule
+from solvers.machine import router
+from solvers.pipeline import Options, schedule
+
+SVG = "{http://www.w3.org/2000/svg}"
+FEED_MAX = 60.0
+
+
+@pytest.fixture(scope="module")
+def flower_nlp() -> tuple[Result, plots.Limits]:
+    """The flower under lp+nlp (binding: velocity from the diagnostics, servo error from the samples)."""
+    m = router()
+    return from_schedule(schedule(flower(1, points_per_loop=180), m, Options(method="lp+nlp"))), \
+        plots.Limits.from_machine(m)
+
+
+@pytest.fixture(scope="module")
+def corner_lp() -> tuple[Result, plots.Limits]:
+    """Two lines at a right angle under lp with a feed limit (a corner; velocity/acceleration/jerk/feed kinds)."""
+    m = router().with_feed_max(FEED_MAX)
+    return from_schedule(schedule(square_corner(40.0), m, Options(method="lp"))), plots.Limits.from_machine(m)
+
+
+def svg(name: str, res: Result, lim: plots.Limits) -> ET.Element:
+    return ET.fromstring(plots.render(name, res, lim, "svg"))
+
+
+def meta(root: ET.Element) -> dict[str, Any]:
+    desc = [e.text for e in root.iter() if e.tag.endswith("}description")]
+    assert len(desc) == 1 and desc[0]
+    out: dict[str, Any] = json.loads(desc[0])
+    return out
+
+
+def by_id(root: ET.Element, prefix: str) -> dict[str, ET.Element]:
+    return {e.get("id", ""): e for e in root.iter() if e.get("id", "").startswith(prefix)}
+
+
+def texts(el: ET.Element) -> list[str]:
+    return [t.text.strip() for t in el.iter(SVG + "text") if t.text and t.text.strip()]
+
+
+def markers(el: ET.Element) -> int:
+    """Scatter points in a group: <use> of one <defs> path each, or (few points) one <path> each."""
+    uses = len(list(el.iter(SVG + "use")))
+    return uses if uses else len(list(el.iter(SVG + "path")))
+
+
+@pytest.mark.parametrize("case", ["flower_nlp", "corner_lp"])
+def test_toolpath_colour_bar_spans_the_feed_range(case: str, request: pytest.FixtureRequest) -> None:
+    res, lim = request.getfixturevalue(case)
+    root = svg("toolpath", res, lim)
+    md = meta(root)
+    feed = res.columns["feed"]
+    assert md["feed_range"] == [float(feed.min()), float(feed.max())]
+    assert md["feed_range"][0] == 0.0  # starts and ends at rest
+    bar = by_id(root, "colorbar")["colorbar"]
+    labels = texts(bar)
+    assert "feed (mm/s)" in labels
+    ticks = [float(t) for t in labels if t != "feed (mm/s)"]
+    assert ticks[0] == 0.0 and len(ticks) == 6
+    assert ticks[-1] == pytest.approx(float(feed.max()), rel=5e-3)  # the top of the bar is the top feed
+    assert md["colorbar"]["max"] == float(feed.max())
+    # start and end markers, and the path itself
+    ids = by_id(root, "")
+    assert {"start", "end", "toolpath-line"} <= set(ids)
+
+
+def test_lp_binding_markers_are_where_the_diagnostics_say(corner_lp: tuple[Result, plots.Limits]) -> None:
+    res, lim = corner_lp
+    root = svg("toolpath", res, lim)
+    md = meta(root)
+    diag = res.diagnostics["binding"]
+    binds = {k for k, v in diag.items() if v["count"] > 0}
+    assert {"velocity", "feed"} <= binds or {"acceleration", "feed"} <= binds  # this case binds the feed limit
+    groups = by_id(root, "binding-")
+    assert set(groups) == {f"binding-{k}" for k in binds}
+    for k in binds:
+        want = diag[k]["s"][:: max(1, -(-len(diag[k]["s"]) // plots.MAX_MARKERS))]
+        assert markers(groups[f"binding-{k}"]) == md["binding_markers"][k] == min(len(diag[k]["s"]),
+                                                                                   plots.MAX_MARKERS)
+        assert set(md["binding"][k]) <= set(diag[k]["s"]) and len(want) >= 1
+    # the markers sit on the path at the arc lengths the diagnostics give
+    fig, _ = plots.figure("toolpath", res, lim)
+    offsets = {c.get_gid(): np.asarray(c.get_offsets()) for ax in fig.axes for c in ax.collections}
+    for k in binds:
+        s_b = np.asarray(md["binding"][k])
+        want_xy = np.column_stack([np.interp(s_b, res.columns["s"], res.columns[a]) for a in "xy"])
+        assert np.allclose(offsets[f"binding-{k}"], want_xy)
+    corner = res.diagnostics["corners"][0]["position"]
+    assert np.allclose(offsets["corners"], [corner[:2]])
+    # method lp does not constrain the drive: no control-signal / servo-error markers
+    assert "binding-control_signal" not in groups and "binding-servo_error" not in groups
+    # the corner is marked where the diagnostics put it
+    assert markers(by_id(root, "corners")["corners"]) == len(res.diagnostics["corners"]) == 1
+
+
+def test_lp_nlp_binding_markers_include_drive_limits_from_samples(flower_nlp: tuple[Result, plots.Limits]) -> None:
+    res, lim = flower_nlp
+    root = svg("toolpath", res, lim)
+    md = meta(root)
+    groups = by_id(root, "binding-")
+    c = res.columns
+    e_util = np.max([np.abs(c[f"e_{a}"]) / lim.per_axis["servo_error"][i] for i, a in enumerate("xyz")], axis=0)
+    u_util = np.max([np.abs(c[f"u_{a}"]) / lim.per_axis["control_signal"][i] for i, a in enumerate("xyz")], axis=0)
+    assert e_util.max() >= plots.BINDING_UTILISATION  # the flower is servo-error bound under the NLP
+    assert "binding-servo_error" in groups
+    assert ("binding-control_signal" in groups) == bool(u_util.max() >= plots.BINDING_UTILISATION)
+    s_hit = c["s"][e_util >= plots.BINDING_UTILISATION]
+    assert set(md["binding"]["servo_error"]) <= set(s_hit.tolist())
+    assert markers(groups["binding-servo_error"]) == min(s_hit.size, plots.MAX_MARKERS)
+    diag = res.diagnostics["binding"]
+    # the LP's kinematic limits are not constraints of the NLP (default options): not reported, not marked
+    assert not {"velocity", "acceleration", "jerk"} & set(diag)
+    assert not {"binding-velocity", "binding-acceleration", "binding-jerk"} & set(groups)
+    assert not res.diagnostics["corners"] and "corners" not in by_id(root, "corners")
+
+
+@pytest.mark.parametrize("case,enforced,reference", [
+    ("flower_nlp", ("control_signal", "servo_error"), ("velocity", "acceleration", "jerk")),
+    ("corner_lp", ("velocity", "acceleration", "jerk"), ("control_signal", "servo_error")),
+])
+def test_one_limit_line_per_constrained_quantity(case: str, enforced: tuple[str, ...], reference: tuple[str, ...],
+                                                 request: pytest.FixtureRequest) -> None:
+    res, lim = request.getfixturevalue(case)
+    root = svg("axes", res, lim)
+    md = meta(root)
+    want = {f"limit-{q}-{a}" for q in enforced for a in "xyz"}
+    assert set(by_id(root, "limit-")) == want
+    assert set(by_id(root, "reference-")) == {f"reference-{q}-{a}" for q in reference for a in "xyz"}
+    for q in enforced:
+        for i, a in enumerate("xyz"):
+            assert md["limits"][f"limit-{q}-{a}"] == lim.per_axis[q][i]
+            # utilisation in percent in the panel title, from the samples
+            col = {"velocity": "v", "acceleration": "a", "jerk": "j", "control_signal": "u", "servo_error": "e"}[q]
+            peak = 100 * float(np.max(np.abs(res.columns[f"{col}_{a}"]))) / lim.per_axis[q][i]
+            assert f"{q.replace('_', ' ')} {a}: peak {peak:.1f} %" in texts(root)
+    # one drawn line per limit (both signs in one path)
+    for el in by_id(root, "limit-").values():
+        assert len(list(el.iter(SVG + "path"))) == 1
+    feed = svg("feed", res, lim)
+    feed_limits = set(by_id(feed, "limit-"))
+    assert feed_limits == ({"limit-feed-s", "limit-feed-t"} if lim.feed_max else set())
+
+
+def test_comparison_only_when_both_methods_ran(flower_nlp: tuple[Result, plots.Limits],
+                                              corner_lp: tuple[Result, plots.Limits]) -> None:
+    res, lim = flower_nlp
+    assert plots.available(res) == list(plots.PLOTS)
+    assert "comparison" not in plots.available(corner_lp[0])
+    with pytest.raises(KeyError):
+        plots.render("comparison", *corner_lp)
+    root = svg("comparison", res, lim)
+    md = meta(root)
+    s = res.summary
+    assert md["gain_percent"] == pytest.approx(100 * (s["lp_motion_time"] - s["motion_time"]) / s["lp_motion_time"])
+    assert md["gain_percent"] > 0
+    assert {"feed-lp", "feed-lpnlp"} <= set(by_id(root, "feed-"))
+    lp = res.diagnostics["lp_feed"]
+    assert lp["s"][0] == 0.0 and lp["s"][-1] == pytest.approx(s["path_length"])
+    # the NLP is faster: its feed is above the LP's on average along the path
+    assert np.mean(np.interp(lp["s"], res.columns["s"], res.columns["feed"])) > np.mean(lp["feed"])
+
+
+def test_png_size_content_and_metadata(corner_lp: tuple[Result, plots.Limits]) -> None:
+    res, lim = corner_lp
+    data = plots.render("toolpath", res, lim, "png")
+    img = Image.open(io.BytesIO(data))
+    fig, _ = plots.figure("toolpath", res, lim)
+    w, h = fig.get_size_inches() * plots.PNG_DPI
+    assert img.size == (round(w), round(h))
+    md = json.loads(img.text["feedsched"])  # type: ignore[attr-defined]
+    assert md["plot"] == "toolpath" and md["feed_range"][1] == float(res.columns["feed"].max())
+    px = np.asarray(img.convert("RGB")).reshape(-1, 3)
+    assert (px.min(axis=1) < 200).mean() > 0.01  # not blank
+    assert len(np.unique(px[::7], axis=0)) > 50  # a colour map, not one colour
+
+
+def test_minmax_decimation_keeps_every_peak() -> None:
+    n = 1_000_000
+    rng = np.random.default_rng(1)
+    y = np.sin(np.linspace(0, 40, n)) + 0.01 * rng.standard_normal(n)
+    y[123_457] = 9.0
+    y[876_543] = -7.0
+    idx = plots.minmax_indices(y, 1000)
+    assert idx.size <= 2 * 1000 + 2 and np.all(np.diff(idx) > 0)
+    assert idx[0] == 0 and idx[-1] == n - 1
+    assert {123_457, 876_543} <= set(idx.tolist())
+    # every bin's extremes survive
+    w = -(-n // 1000)
+    for b in (0, 123, 999):
+        seg = y[b * w:(b + 1) * w]
+        kept = y[idx[(idx >= b * w) & (idx < (b + 1) * w)]]
+        assert kept.max() == seg.max() and kept.min() == seg.min()
+
+
+LIM = plots.Limits({"velocity": (150.0, 150.0, 150.0), "acceleration": (1e3, 1e3, 1e3), "jerk": (1e5, 1e5, 1e5)})
+
+
+def synthetic(n: int, z_amp: float = 0.0) -> Result:
+    """A made-up lp result of n samples along a helix-like path (no drive columns, nothing binds)."""
+    t = np.arange(n) * 1e-4
+    feed = 50 + 40 * np.sin(t) ** 2
+    feed[0] = feed[-1] = 0.0
+    s = np.cumsum(feed) * 1e-4
+    cols = {"t": t, "s": s, "feed": feed, "x": np.cos(s / 50) * 50, "y": np.sin(s / 50) * 50,
+            "z": z_amp * np.sin(s / 20)}
+    for q in "vaj":
+        for a in "xyz":
+            cols[f"{q}_{a}"] = np.zeros(n)
+    cols["v_x"] = feed.copy()
+    return Result(summary={"method": "lp", "path_length": float(s[-1]), "motion_time": float(t[-1])},
+                  diagnostics={"binding": {k: {"count": 0, "s": []} for k in ("velocity", "acceleration", "jerk")},
+                               "corners": []}, columns=cols)
+
+
+def test_a_3d_view_when_z_moves() -> None:
+    flat = ET.fromstring(plots.render("toolpath", synthetic(5000), LIM))
+    assert meta(flat)["has_3d"] is False and "toolpath-line-3d" not in by_id(flat, "toolpath-line")
+    helix = ET.fromstring(plots.render("toolpath", synthetic(5000, z_amp=5.0), LIM))
+    assert meta(helix)["has_3d"] is True and "toolpath-line-3d" in by_id(helix, "toolpath-line")
+    assert "z (mm)" in texts(helix)
+
+
+def test_a_million_samples_are_drawn_decimated_with_the_peaks() -> None:
+    res = synthetic(1_000_000)
+    res.columns["feed"][654_321] = 123.0
+    lim = LIM
+    fig, md = plots.figure("feed", res, lim)
+    lines = {ln.get_gid(): ln for ax in fig.axes for ln in ax.get_lines()}
+    for gid in ("feed-vs-s", "feed-vs-t"):
+        yd = np.asarray(lines[gid].get_ydata())
+        assert yd.size <= 2 * plots.DECIMATE_BINS + 2 and yd.max() == 123.0
+    fig, md = plots.figure("toolpath", res, lim)
+    assert md["points_drawn"] <= 2 * plots.DECIMATE_BINS + 2 and md["feed_range"] == [0.0, 123.0]
+    root = ET.fromstring(plots.render("toolpath", res, lim, "svg"))
+    assert [float(x) for x in texts(by_id(root, "colorbar")["colorbar"])[:-1]][-1] == 123.0
+    assert not by_id(root, "binding-")
