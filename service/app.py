@@ -226,6 +226,7 @@ def _routes(app: FastAPI) -> None:
         method: Annotated[Literal["lp", "lp+nlp"], Query()] = "lp+nlp",
         sample_period: Annotated[float, Query(ge=1e-5, le=0.1, description="s")] = 0.001,
         corner_tolerance_deg: Annotated[float, Query(ge=0, le=180)] = 0.5,
+        corner_blend_mm: Annotated[float, Query(ge=0, le=100, description="mm; 0 stops at corners")] = 0.0,
     ) -> Response:
         """Schedule a G-code program uploaded as `text/x-gcode` (machine preset and options as query parameters)."""
         ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
@@ -241,7 +242,8 @@ def _routes(app: FastAPI) -> None:
                                field="body", value=None, rule="UTF-8 text") from exc
         try:
             body = ScheduleRequest.model_validate({
-                "toolpath": {"gcode": text, "corner_tolerance_deg": corner_tolerance_deg},
+                "toolpath": {"gcode": text, "corner_tolerance_deg": corner_tolerance_deg,
+                             "corner_blend_mm": corner_blend_mm},
                 "machine": machine,
                 "options": {"method": method, "sample_period": sample_period},
             })

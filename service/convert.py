@@ -73,7 +73,7 @@ def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
         prog = gcode.parse(req.toolpath.gcode)
         if not prog.segments:
             raise GeometryError("toolpath.gcode", None, "the program has no motion")
-        tp = Toolpath(list(prog.segments), corner_tol_deg=corner_tol, feed_limits=list(prog.feed))
+        tp = prog.toolpath(corner_tol, blend_mm=float(req.toolpath.corner_blend_mm))
     else:
         segs = [
             NurbsSegment.create(s.degree, s.knots, s.control_points, s.weights, name=f"toolpath.segments[{i}]")

@@ -63,6 +63,10 @@ class ToolpathIn(BaseModel):
         "G5.2); F words become the feed limit of their blocks, G00 moves run at the machine's own limits",
     )
     corner_tolerance_deg: Annotated[Number, Field(ge=0, le=180)] = 0.5
+    corner_blend_mm: Annotated[Number, Field(ge=0, le=100)] = Field(
+        default=0.0, description="G-code only: blend the corners of straight-move runs (same F) with G2 clothoid "
+        "pairs within this distance (mm) of the corner, so the schedule runs through them; 0 stops at each corner",
+    )
 
     @model_validator(mode="after")
     def _one_source(self) -> ToolpathIn:

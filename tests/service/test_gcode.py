@@ -64,3 +64,27 @@ def test_gcode_errors_name_line_and_column(client: TestClient) -> None:
     both = {"toolpath": {"gcode": PROGRAM, "segments": [{"degree": 1, "knots": [0, 0, 1, 1],
                                                           "control_points": [[0, 0], [1, 0]]}]}}
     assert_problem(client.post("/v1/schedule", json=both), 422)
+
+
+#: A pocketing-style zig-zag of G01 moves at one feed: 8 legs turning 53 degrees.
+ZIGZAG = "G21 G90 G01 F6000\n" + "\n".join(f"X{10 * i} Y{5 * (i % 2)}" for i in range(1, 9)) + "\n"
+
+
+def test_gcode_corner_blend_runs_through_corners(client: TestClient) -> None:
+    stop = client.post("/v1/schedule", json={"toolpath": {"gcode": ZIGZAG}, "options": {"method": "lp"}}).json()
+    blend = client.post("/v1/schedule/gcode?method=lp&corner_blend_mm=0.1", content=ZIGZAG,
+                        headers={"content-type": "text/x-gcode"})
+    assert blend.status_code == 200, blend.text
+    b = blend.json()
+    assert len(stop["diagnostics"]["corners"]) == 7 and b["diagnostics"]["corners"] == []
+    assert b["summary"]["motion_time"] < 0.8 * stop["summary"]["motion_time"]
+    # the blended path stays within the blend distance of the programmed corners' polyline
+    x, y = np.array(b["samples"]["x"]), np.array(b["samples"]["y"])
+    pts = np.array([[10.0 * i, 5.0 * (i % 2)] for i in range(9)])
+    a, c = pts[:-1], pts[1:]
+    d = c - a
+    t = np.clip(((x[:, None] - a[:, 0]) * d[:, 0] + (y[:, None] - a[:, 1]) * d[:, 1]) / np.sum(d * d, axis=1), 0, 1)
+    dist = np.hypot(x[:, None] - (a[:, 0] + t * d[:, 0]), y[:, None] - (a[:, 1] + t * d[:, 1])).min(axis=1)
+    assert np.max(dist) <= 0.1 + 1e-9
+    # programmed feed 6000 mm/min = 100 mm/s is held
+    assert max(b["samples"]["feed"]) <= 100.0 * (1 + FEED_TOL)
