@@ -9,6 +9,7 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -113,3 +114,23 @@ def emit(result: dict[str, Any]) -> None:
 
 def fmt(x: float, unit: str = "", digits: int = 4) -> str:
     return f"{x:.{digits}g}{(' ' + unit) if unit else ''}"
+
+
+def proc_status_mb(key: str) -> float:
+    """VmRSS / VmHWM of this process from /proc/self/status, MB (nan if unavailable)."""
+    try:
+        for ln in Path("/proc/self/status").read_text().splitlines():
+            if ln.startswith(key + ":"):
+                return float(ln.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return float("nan")
+
+
+def reset_hwm() -> bool:
+    """Reset the kernel's peak-RSS mark (VmHWM) of this process; False where not permitted."""
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+        return True
+    except OSError:
+        return False

@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench._common import REPEATS, emit, env_info, row, run_ours, summary_subset, verdict
+from bench._common import REPEATS, emit, env_info, proc_status_mb, reset_hwm, row, run_ours, summary_subset, verdict
 from geometry import examples as ex
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
@@ -43,25 +43,6 @@ CONFIGS: tuple[tuple[str, str, bool], ...] = (
 
 def _maxrss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
-
-
-def _proc_status_mb(key: str) -> float:
-    """VmRSS / VmHWM of this process from /proc/self/status, MB (nan if unavailable)."""
-    try:
-        for ln in Path("/proc/self/status").read_text().splitlines():
-            if ln.startswith(key + ":"):
-                return float(ln.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return float("nan")
-
-
-def _reset_hwm() -> bool:
-    try:
-        Path("/proc/self/clear_refs").write_text("5")
-        return True
-    except OSError:
-        return False
 
 
 def _stats(sch: Any, t: dict[str, float]) -> dict[str, Any]:
@@ -87,10 +68,10 @@ def child(solver: str, jerk: bool, loops: int) -> None:
     # ru_maxrss survives fork+exec on Linux (it starts at the parent's peak), so the child's own
     # peaks come from VmHWM, which is per address space
     before = _maxrss_mb()
-    hwm_build = _proc_status_mb("VmHWM")
-    rss_before = _proc_status_mb("VmRSS")
+    hwm_build = proc_status_mb("VmHWM")
+    rss_before = proc_status_mb("VmRSS")
     # reset the kernel's peak-RSS mark (VmHWM) so the peak below is the scheduling's own
-    hwm_reset = _reset_hwm()
+    hwm_reset = reset_hwm()
     res: dict[str, Any] = {"loops": loops, "solver": solver, "jerk": jerk, "path_build_time": build,
                            "maxrss_mb_before_schedule": before, "hwm_mb_after_build": hwm_build,
                            "rss_mb_before_schedule": rss_before,
@@ -100,7 +81,7 @@ def child(solver: str, jerk: bool, loops: int) -> None:
         res["compute_time"] = sch.summary["compute_time"]
         res["motion_time"] = sch.summary["motion_time"]
     res["maxrss_mb"] = _maxrss_mb()
-    res["hwm_mb_during_schedule"] = _proc_status_mb("VmHWM") if hwm_reset else None
+    res["hwm_mb_during_schedule"] = proc_status_mb("VmHWM") if hwm_reset else None
     res["peak_mb"] = max(hwm_build, res["hwm_mb_during_schedule"] or 0.0)
     res["schedule_increment_mb"] = (
         res["hwm_mb_during_schedule"] - rss_before if hwm_reset else res["maxrss_mb"] - before

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from bench._common import emit, env_info, row, verdict
+from bench._common import emit, env_info, proc_status_mb, reset_hwm, row, verdict
 from geometry import examples as ex
 from solvers.machine import Machine, router
 from solvers.pipeline import Options, Schedule, schedule
@@ -94,30 +94,15 @@ def one_loop(out: dict[str, Any]) -> None:
 def child(method: str, loops: int) -> None:
     """Fresh process: build the path, schedule once, print the scheduling's peak RSS (VmHWM)."""
     tp = ex.flower(loops)
-    rss0 = _status_mb("VmRSS")
-    reset = _reset_hwm()
+    rss0 = proc_status_mb("VmRSS")
+    reset = reset_hwm()
     t0 = time.perf_counter()
     sch = schedule(tp, router(), Options(method=method))
     el = time.perf_counter() - t0
     n = sch.samples.t.size
     print(json.dumps({"loops": loops, "method": method, "compute_time": el, "motion_time": sch.summary["motion_time"],
-                      "rss_before_mb": rss0, "peak_mb": _status_mb("VmHWM") if reset else None,
+                      "rss_before_mb": rss0, "peak_mb": proc_status_mb("VmHWM") if reset else None,
                       "samples": n, "sample_mb": 8.0 * n * 21 / 2**20}), flush=True)
-
-
-def _status_mb(key: str) -> float:
-    for ln in Path("/proc/self/status").read_text().splitlines():
-        if ln.startswith(key + ":"):
-            return float(ln.split()[1]) / 1024.0
-    return float("nan")
-
-
-def _reset_hwm() -> bool:
-    try:
-        Path("/proc/self/clear_refs").write_text("5")
-        return True
-    except OSError:
-        return False
 
 
 def run_child(method: str, loops: int, timeout: float = 3600) -> dict[str, Any]:
