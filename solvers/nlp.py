@@ -53,7 +53,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -363,22 +363,27 @@ class NlpRefiner:
         joins: list[int],
         breaks: FloatArray,
         on_chain: Callable[[float], None] | None = None,
+        workers: int = 1,
     ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """f control points (n_int + 2,) and the mask of knot intervals that use them.
 
         ``c``: the LP's q control points over the piece; ``joins``: knots where LP
         windows meet (chains end and start there); ``breaks``: piece-local s of
         geometry knots; ``on_chain(s)`` is called after each chain with the piece-local
-        arc length done (it may raise to cancel).
+        arc length done (it may raise to cancel).  Chains are independent given the
+        LP: with ``workers`` > 1 they are solved in that many forked processes.
         """
         n_int = c.size - 2
         p = np.zeros(n_int + 2)
         mask = np.zeros(n_int, dtype=bool)
         knots = [1] + [k for k in joins if 1 < k < n_int - 1] + [n_int - 1]
-        for A, B in itertools.pairwise(knots):
-            if B - A < 2:
-                continue
-            for a0, b0, vals in self._spans(geometry, c, d, A, B, breaks):
+        chains = [(A, B) for A, B in itertools.pairwise(knots) if B - A >= 2]
+        if workers > 1 and len(chains) > 1:
+            results = _parallel_spans(self, geometry, c, d, breaks, chains, workers)
+        else:
+            results = (self._spans(geometry, c, d, A, B, breaks) for A, B in chains)
+        for (_, B), spans in zip(chains, results, strict=True):
+            for a0, b0, vals in spans:
                 p[a0 : b0 + 2] = vals
                 mask[a0:b0] = True
             if on_chain is not None:
@@ -877,3 +882,61 @@ def _third_derivative_envelope(
                 np.maximum.at(top, ii, d3b[side][ok])
                 np.minimum.at(bot, ii, d3b[side][ok])
     return top, bot
+
+
+# ----- chains in parallel (fork) -------------------------------------------------
+#: What the forked workers read: (refiner, geometry, c, d, breaks), set just before the pool forks.
+_FORK_STATE: tuple[NlpRefiner, GeometryFn, FloatArray, float, FloatArray] | None = None
+
+
+def _die_with_parent() -> None:
+    """Pool initializer: the worker gets SIGKILL when its parent dies (Linux), so a killed job leaves no solver."""
+    try:
+        import ctypes
+        import signal
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def _chain_task(chain: tuple[int, int]) -> tuple[list[tuple[int, int, FloatArray]], NlpStats]:
+    if _FORK_STATE is None:  # pragma: no cover - set by _parallel_spans before the pool forks
+        raise RuntimeError("NLP worker started without its state")
+    refiner, geometry, c, d, breaks = _FORK_STATE
+    refiner.stats = NlpStats()
+    spans = refiner._spans(geometry, c, d, chain[0], chain[1], breaks)
+    return spans, refiner.stats
+
+
+def _parallel_spans(
+    refiner: NlpRefiner,
+    geometry: GeometryFn,
+    c: FloatArray,
+    d: float,
+    breaks: FloatArray,
+    chains: list[tuple[int, int]],
+    workers: int,
+) -> Iterator[list[tuple[int, int, FloatArray]]]:
+    """Spans of each chain, in order, solved by ``workers`` forked processes; their counters are merged
+    into ``refiner.stats``."""
+    global _FORK_STATE
+    import multiprocessing
+
+    _FORK_STATE = (refiner, geometry, c, d, breaks)
+    ctx = multiprocessing.get_context("fork")
+    try:
+        with ctx.Pool(min(workers, len(chains)), initializer=_die_with_parent) as pool:
+            for spans, st in pool.imap(_chain_task, chains):
+                base = refiner.stats.windows
+                refiner.stats.windows += st.windows
+                refiner.stats.iterations += st.iterations
+                refiner.stats.cut_rounds += st.cut_rounds
+                refiner.stats.softer_retries += st.softer_retries
+                refiner.stats.handover_scaled += st.handover_scaled
+                refiner.stats.worst_verified = max(refiner.stats.worst_verified, st.worst_verified)
+                refiner.stats.window_times.extend(st.window_times)
+                refiner.stats.failures.extend({**f, "nlp_window": base + f["nlp_window"]} for f in st.failures)
+                yield spans
+    finally:
+        _FORK_STATE = None

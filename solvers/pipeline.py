@@ -66,6 +66,7 @@ class Options:
         solver: "highs" or "clarabel".
         nlp_window: NLP window size in knot intervals; default 3 x nlp_overlap.
         nlp_overlap: NLP window overlap in knot intervals; default from the stopping distance.
+        nlp_workers: processes solving independent NLP chains in parallel (forked; 1: in this process).
         nlp_checkpoints_per_interval: N of the NLP (each interval is also checked at both knots,
             and the limits are verified between checkpoints).
         nlp_axis_velocity: also hold |v| <= the LP's vmax per axis in the NLP (off: the NLP limits
@@ -84,6 +85,7 @@ class Options:
     nlp_window: int | None = None
     nlp_overlap: int | None = None
     nlp_checkpoints_per_interval: int = 4
+    nlp_workers: int = 1
     nlp_axis_velocity: bool = False
     nlp_kinematic: bool = False
     #: test hook: called with each NLP window's index before it is solved (may raise to inject a fault)
@@ -114,6 +116,10 @@ class Options:
             raise InvalidOptionsError(
                 "must be an integer in [3, lp_window / 2]", field="options.lp_overlap", value=self.lp_overlap
             )
+        if not (isinstance(self.nlp_workers, int) and not isinstance(self.nlp_workers, bool)
+                and 1 <= self.nlp_workers <= 64):
+            raise InvalidOptionsError("must be an integer in [1, 64]", field="options.nlp_workers",
+                                      value=self.nlp_workers)
         if not (isinstance(self.nlp_checkpoints_per_interval, int) and 1 <= self.nlp_checkpoints_per_interval <= 64):
             raise InvalidOptionsError(
                 "must be an integer in [1, 64]", field="options.nlp_checkpoints_per_interval",
@@ -305,7 +311,7 @@ def refine_pieces(
                 report(s0 + s_loc)
 
         p, mask = refiners[key].refine(
-            _local(toolpath, piece), prof.c, prof.d, jn, _breaks(toolpath, piece), chain_done
+            _local(toolpath, piece), prof.c, prof.d, jn, _breaks(toolpath, piece), chain_done, opt.nlp_workers
         )
         out.append(replace(prof, p=p, f_mask=mask))
     return out, stats
