@@ -61,6 +61,9 @@ BREAK_EPS_MM = 1e-6
 INHERITED_INTERVALS = 2
 #: Share of the servo-error budget the acceleration step at rest may use (lp+nlp).
 REST_SHARE = 0.9
+#: Floor of q away from rest ends, as a share of the largest constant q that meets every limit
+#: in the window (keeps the feed from stalling at a knot; see ``WindowLP.solve``).
+FLOOR_SHARE = 1e-2
 #: An axis whose path-derivative coefficients are all below this is not moving.
 AXIS_EPS = 1e-12
 
@@ -297,12 +300,24 @@ class WindowLP:
             raise InfeasibleError("window has no positive velocity bound", window=spec.index)
         n = spec.ncols
         w = bspline.integral_weights(spec.k0, spec.k1, spec.d, spec.k0, n) * Q
-        col_lo = np.full(n, -np.inf)
+        # q >= 0 everywhere, not only at checkpoints: the B-spline basis is non-negative, so
+        # c >= 0 suffices (the rows keep q >= 0 only at checkpoints, and q dipping below 0
+        # between them stalls the feed inside the path).  The control point outside a rest end
+        # is -c of its neighbour (q = 0 there with q' != 0), so it stays free.
+        col_lo = np.zeros(n)
         col_hi = np.full(n, np.inf)
+        floor_cols = np.ones(n, dtype=bool)
         if spec.start_fixed is not None:
             col_lo[:2] = col_hi[:2] = np.asarray(spec.start_fixed) / Q
-        if not spec.end_rest:
+            floor_cols[:2] = False
+        else:
+            col_lo[0] = -np.inf
+            floor_cols[:2] = False
+        if spec.end_rest:
+            col_lo[-1] = -np.inf
+        else:
             col_lo[-2:] = col_hi[-2:] = 0.0
+        floor_cols[-2:] = False
 
         base = _Rows(n)
         if spec.start_fixed is None:
@@ -310,12 +325,18 @@ class WindowLP:
         if spec.end_rest:
             self._rest_rows(base, spec.k1 * spec.d, -1.0, Q)
 
-        # stage 1: velocity + acceleration
-        r1 = base.copy()
-        self._stage1_rows(r1, g, Q, None)
-        chat1 = self._run(r1, w, col_lo, col_hi)
-        chat1, pts1 = self._cuts(chat1, r1, w, col_lo, col_hi, Q, s_check, None)
-        c_star = chat1 * Q
+        # Away from the rest ends q is kept above a small floor (a constant feed that meets every
+        # limit at every checkpoint): with knots coarser than a sharp turn, the optimum of
+        # integral q otherwise lets q touch 0 at a knot (two zero control points), where the
+        # time 1 / sqrt(q) diverges and the feed stalls.  If the floor makes the window
+        # infeasible (an inherited start below it), it is dropped.
+        floor_lo = col_lo.copy()
+        floor_lo[floor_cols] = self._floor(self.geometry(self._fine(s_check))) / Q
+        try:
+            chat1, c_star, pts1 = self._stage1(base, g, w, floor_lo, col_hi, Q, s_check)
+        except InfeasibleError:
+            chat1, c_star, pts1 = self._stage1(base, g, w, col_lo, col_hi, Q, s_check)
+            floor_lo = col_lo
         if not self.lim.jerk:
             return WindowResult(chat1 * Q, c_star, self.iterations, pts1[0], pts1[1], pts1[2])
 
@@ -324,9 +345,51 @@ class WindowLP:
         r2 = base.copy()
         self._stage1_rows(r2, g, Q, qstar)
         self._jerk_rows(r2, g, Q, qstar)
-        chat2 = self._run(r2, w, col_lo, col_hi)
-        chat2, pts2 = self._cuts(chat2, r2, w, col_lo, col_hi, Q, s_check, c_star)
+        try:
+            chat2 = self._run(r2, w, floor_lo, col_hi)
+        except InfeasibleError:  # a fresh model (the solver keeps its column bounds)
+            floor_lo = col_lo
+            r2 = base.copy()
+            self._stage1_rows(r2, g, Q, qstar)
+            self._jerk_rows(r2, g, Q, qstar)
+            chat2 = self._run(r2, w, floor_lo, col_hi)
+        chat2, pts2 = self._cuts(chat2, r2, w, floor_lo, col_hi, Q, s_check, c_star)
         return WindowResult(chat2 * Q, c_star, self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1], pts2[2])
+
+    def _stage1(
+        self, base: _Rows, g: PathSamples, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray, Q: float,
+        s_check: FloatArray,
+    ) -> tuple[FloatArray, FloatArray, tuple[int, int, int]]:
+        """Stage 1 (velocity + acceleration) with cutting planes: (chat, c*, (rounds, added, unverified))."""
+        r1 = base.copy()
+        self._stage1_rows(r1, g, Q, None)
+        chat1 = self._run(r1, w, col_lo, col_hi)
+        chat1, pts1 = self._cuts(chat1, r1, w, col_lo, col_hi, Q, s_check, None)
+        return chat1, chat1 * Q, pts1
+
+    def _fine(self, s_check: FloatArray) -> FloatArray:
+        """The verification grid: VERIFY_SUBDIV points per checkpoint gap and both sides of geometry knots."""
+        frac = np.arange(1, VERIFY_SUBDIV) / VERIFY_SUBDIV
+        s_fine = (s_check[:-1, None] + np.diff(s_check)[:, None] * frac[None, :]).ravel()
+        lo, hi = s_check[0], s_check[-1]
+        br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
+        return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br]))
+
+    def _floor(self, g: PathSamples) -> float:
+        """FLOOR_SHARE x the largest constant q that meets every limit at the points g (verification grid):
+        q <= ub (velocity, feed), |x_ss| q <= amax, |x_sss| q sqrt(ub) <= jmax (pseudo-jerk, q* <= ub)."""
+        ub = _velocity_bound(g, self.lim)
+        lim = self.lim
+        with np.errstate(divide="ignore", invalid="ignore"):
+            qa = np.min(np.where(np.abs(g.d2) > AXIS_EPS, lim.amax[None, :] / np.abs(g.d2), np.inf), axis=1)
+            cap = np.minimum(ub, qa)
+            if lim.jerk:
+                qj = np.min(
+                    np.where(np.abs(g.d3) > AXIS_EPS, lim.jmax[None, :] / np.abs(g.d3), np.inf), axis=1
+                ) / np.sqrt(ub)
+                cap = np.minimum(cap, qj)
+        finite = cap[np.isfinite(cap)]
+        return FLOOR_SHARE * float(np.min(finite)) if finite.size else 0.0
 
     def _cuts(
         self,
@@ -340,12 +403,7 @@ class WindowLP:
         c_star: FloatArray | None,
     ) -> tuple[FloatArray, tuple[int, int, int]]:
         """Verify on a finer grid; add violated points as rows and re-solve."""
-        frac = np.arange(1, VERIFY_SUBDIV) / VERIFY_SUBDIV
-        s_fine = (s_check[:-1, None] + np.diff(s_check)[:, None] * frac[None, :]).ravel()
-        lo, hi = s_check[0], s_check[-1]
-        br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
-        s_fine = np.sort(np.concatenate([s_fine, br - BREAK_EPS_MM, br]))
-        g = self.geometry(s_fine)
+        g = self.geometry(self._fine(s_check))
         rounds = added = 0
         for i in range(MAX_CUT_ROUNDS + 1):
             viol = self._violations(chat * Q, g, c_star)

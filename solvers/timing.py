@@ -130,6 +130,12 @@ class PieceTiming:
                 "feed profile cannot leave or reach a rest point (zero acceleration at rest)",
                 value={"s_start": profile.s_start, "dq_start": q1_0, "dq_end": q1_L},
             )
+        stalls = _stalls(profile)
+        if stalls.size:
+            raise ScheduleError(
+                "feed stalls inside the path (q reaches 0)",
+                value={"s_start": profile.s_start, "s": float(profile.s_start + (stalls[0] + 0.5) * profile.d)},
+            )
         edges = np.arange(n + 1, dtype=np.float64)
         table = MonotoneTable.build(profile.h, edges, min_intervals=2, abs_tol=1e-16, guess_tol=TIME_GUESS_TOL_S)
         if not np.all(np.isfinite(table.F_b)):
@@ -140,3 +146,32 @@ class PieceTiming:
         """Piece-local s at piece-local times (clamped to [0, duration])."""
         x = self.table.inverse(t_local)
         return self.profile.s_of_x(x)[0]
+
+
+def _stalls(profile: PieceProfile) -> NDArray[np.int64]:
+    """Knot intervals (not the two rest intervals) where the feed reaches 0: there the time
+    integral 1 / sdot diverges.  Each interval's quadratic (of q, or of f where ``f_mask``)
+    is minimised exactly over [0, 1]."""
+    n = profile.n_int
+    if n < 3:
+        return np.zeros(0, dtype=np.int64)
+    k = np.arange(1, n - 1)
+    lo = _interval_min(profile.c, k)
+    if profile.p is not None and profile.f_mask is not None:
+        use_f = profile.f_mask[k]
+        lo = np.where(use_f, _interval_min(profile.p, k), lo)
+    return np.asarray(k[~(lo > 0.0)], dtype=np.int64)
+
+
+def _interval_min(c: FloatArray, k: NDArray[np.int64]) -> FloatArray:
+    """Minimum over t in [0, 1] of the uniform quadratic B-spline on interval k (control points c_k..c_k+2)."""
+    c0, c1, c2 = c[k], c[k + 1], c[k + 2]
+    a2 = c0 - 2.0 * c1 + c2
+    a1 = c1 - c0
+    q0 = 0.5 * (c0 + c1)
+    q1 = q0 + a1 + 0.5 * a2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tv = np.where(a2 > 0, -a1 / np.where(a2 > 0, a2, 1.0), 0.0)
+    tv = np.clip(tv, 0.0, 1.0)
+    qv = q0 + tv * (a1 + 0.5 * a2 * tv)
+    return np.asarray(np.minimum(np.minimum(q0, q1), qv), dtype=np.float64)
