@@ -294,7 +294,16 @@ class WindowLP:
     def solve(self, s_check: FloatArray) -> WindowResult:
         spec = self.spec
         g = self.geometry(s_check)
-        Q = float(np.max(np.minimum(_velocity_bound(g, self.lim), 1e300)))
+        # scale of q: the largest velocity bound, but no more than the q reachable from rest over
+        # the whole piece (q' = 2 sddot <= 2 |amax|, and the jerk's bound): with limits far above what a short piece can
+        # use (v^2 / a >> L) the velocity bound alone left acceleration rows with coefficients
+        # ~1e9 and HiGHS returned no status
+        L = spec.n_int * spec.d
+        Q_reach = 2.0 * float(np.linalg.norm(self.lim.amax)) * L
+        if self.lim.jerk:  # from rest under jerk j: s = j t^3 / 6, v = j t^2 / 2
+            j = float(np.linalg.norm(self.lim.jmax))
+            Q_reach = min(Q_reach, 4.0 * (0.5 * j) ** (2.0 / 3.0) * (6.0 * L) ** (4.0 / 3.0))
+        Q = float(min(np.max(np.minimum(_velocity_bound(g, self.lim), 1e300)), Q_reach))
         self.Q = Q
         if not np.isfinite(Q) or Q <= 0:
             raise InfeasibleError("window has no positive velocity bound", window=spec.index)
