@@ -28,6 +28,9 @@ from solvers.errors import ScheduleError
 
 FloatArray = NDArray[np.float64]
 
+#: A feed with q below this share of its peak q inside a piece (feed under 1e-6 of its peak)
+#: counts as stalled.
+STALL_Q_SHARE = 1e-12
 #: Hermite guess tolerance for the time table, seconds (one Newton step then
 #: leaves an error of order this squared times |h'/h^2|: far below 1e-12 s).
 TIME_GUESS_TOL_S = 1e-6
@@ -133,7 +136,9 @@ class PieceTiming:
         stalls = _stalls(profile)
         if stalls.size:
             raise ScheduleError(
-                "feed stalls inside the path (q reaches 0)",
+                "feed stalls inside the path (q reaches 0, or under 1e-12 of its peak): the path turns too "
+                "sharply for the knot spacing (a cusp, or a knot span far shorter than the knot spacing)",
+                field="toolpath",
                 value={"s_start": profile.s_start, "s": float(profile.s_start + (stalls[0] + 0.5) * profile.d)},
             )
         edges = np.arange(n + 1, dtype=np.float64)
@@ -149,18 +154,22 @@ class PieceTiming:
 
 
 def _stalls(profile: PieceProfile) -> NDArray[np.int64]:
-    """Knot intervals (not the two rest intervals) where the feed reaches 0: there the time
-    integral 1 / sdot diverges.  Each interval's quadratic (of q, or of f where ``f_mask``)
-    is minimised exactly over [0, 1]."""
+    """Knot intervals (not the two rest intervals) where the feed reaches 0, or drops below
+    sqrt(STALL_Q_SHARE) of its peak: there the time integral of 1 / sdot diverges, or the
+    quadrature bisects for minutes towards the near-singularity.  Each interval's quadratic
+    (of q, or of f where ``f_mask``) is minimised exactly over [0, 1]."""
     n = profile.n_int
     if n < 3:
         return np.zeros(0, dtype=np.int64)
     k = np.arange(1, n - 1)
     lo = _interval_min(profile.c, k)
+    peak = float(np.max(profile.c))
     if profile.p is not None and profile.f_mask is not None:
         use_f = profile.f_mask[k]
-        lo = np.where(use_f, _interval_min(profile.p, k), lo)
-    return np.asarray(k[~(lo > 0.0)], dtype=np.int64)
+        f_lo = _interval_min(profile.p, k)
+        lo = np.where(use_f, f_lo * np.abs(f_lo), lo)  # compare f^2 with q
+        peak = max(peak, float(np.max(profile.p)) ** 2)
+    return np.asarray(k[~(lo > STALL_Q_SHARE * peak)], dtype=np.int64)
 
 
 def _interval_min(c: FloatArray, k: NDArray[np.int64]) -> FloatArray:
