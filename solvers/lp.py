@@ -64,6 +64,9 @@ REST_SHARE = 0.9
 #: Floor of q away from rest ends, as a share of the largest constant q that meets every limit
 #: in the window (keeps the feed from stalling at a knot; see ``WindowLP.solve``).
 FLOOR_SHARE = 1e-2
+#: At a curvature jump the axis acceleration steps by x_ss jump x q; seen in a sampled third
+#: difference the step adds up to 0.75 step / Ts to the jerk, so it is kept to STEP_SHARE jmax Ts.
+STEP_SHARE = 0.25
 #: An axis whose path-derivative coefficients are all below this is not moving.
 AXIS_EPS = 1e-12
 
@@ -125,6 +128,8 @@ class LimitSet:
     a_rest: FloatArray
     feed_max: float | None
     jerk: bool
+    #: largest step of axis acceleration allowed at a curvature jump (G1 junction, C1 knot), (3,) or None
+    a_step: FloatArray | None = None
 
     @classmethod
     def from_machine(cls, m: Machine, sample_period: float, jerk: bool, rest_from_drive: bool = False) -> LimitSet:
@@ -132,9 +137,11 @@ class LimitSet:
         if rest_from_drive:
             dr = m.drive_arrays()
             a_rest = np.minimum(amax, REST_SHARE * dr["emax"] / (dr["Ka"] + dr["Kj"] / (2.0 * sample_period)))
+            a_step = REST_SHARE * dr["emax"] / (dr["Ka"] + dr["Kj"] / (2.0 * sample_period))
         else:
             a_rest = np.minimum(amax, jmax * sample_period / 2.0) if jerk else amax
-        return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk)
+            a_step = STEP_SHARE * jmax * sample_period
+        return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk, a_step if jerk else None)
 
 
 class _Rows:
@@ -334,13 +341,14 @@ class WindowLP:
         if spec.end_rest:
             self._rest_rows(base, spec.k1 * spec.d, -1.0, Q)
 
+        step_cap = self._step_rows(base, Q)
         # Away from the rest ends q is kept above a small floor (a constant feed that meets every
         # limit at every checkpoint): with knots coarser than a sharp turn, the optimum of
         # integral q otherwise lets q touch 0 at a knot (two zero control points), where the
         # time 1 / sqrt(q) diverges and the feed stalls.  If the floor makes the window
         # infeasible (an inherited start below it), it is dropped.
         floor_lo = col_lo.copy()
-        floor_lo[floor_cols] = self._floor(self.geometry(self._fine(s_check))) / Q
+        floor_lo[floor_cols] = min(self._floor(self.geometry(self._fine(s_check))), FLOOR_SHARE * step_cap) / Q
         try:
             chat1, c_star, pts1 = self._stage1(base, g, w, floor_lo, col_hi, Q, s_check)
         except InfeasibleError:
@@ -375,6 +383,27 @@ class WindowLP:
         chat1 = self._run(r1, w, col_lo, col_hi)
         chat1, pts1 = self._cuts(chat1, r1, w, col_lo, col_hi, Q, s_check, None)
         return chat1, chat1 * Q, pts1
+
+    def _step_rows(self, rows: _Rows, Q: float) -> float:
+        """q <= min_x a_step_x / |jump of x_ss| at every geometry break inside the window (the
+        acceleration step there, x_ss jump x q, stays within a_step); returns the smallest cap."""
+        spec = self.spec
+        if self.lim.a_step is None or self.breaks.size == 0:
+            return np.inf
+        lo, hi = spec.k0 * spec.d, spec.k1 * spec.d
+        br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
+        if br.size == 0:
+            return np.inf
+        jump = np.abs(self.geometry(br).d2 - self.geometry(br - BREAK_EPS_MM).d2)
+        with np.errstate(divide="ignore"):
+            cap = np.min(np.where(jump > AXIS_EPS, self.lim.a_step[None, :] / np.where(jump > AXIS_EPS, jump, 1.0),
+                                  np.inf), axis=1)
+        keep = cap < Q  # q never exceeds Q (the largest velocity bound): larger caps are no rows
+        if not keep.any():
+            return np.inf
+        B0 = self._mats(br[keep])[0]
+        rows.add(B0, np.full(int(keep.sum()), -np.inf), cap[keep] / Q)
+        return float(np.min(cap[keep]))
 
     def _fine(self, s_check: FloatArray) -> FloatArray:
         """The verification grid: VERIFY_SUBDIV points per checkpoint gap and both sides of geometry knots."""
