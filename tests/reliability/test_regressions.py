@@ -62,11 +62,10 @@ def test_lp_feed_stays_non_negative_between_checkpoints() -> None:
     assert np.all(np.isfinite(sch.samples.position)) and sch.samples.feed.min() >= 0.0
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a tangent (G1) junction with a curvature jump (line into arc) is passed at speed: the axis acceleration "
-    "steps by v^2 / r between two samples, FD jerk y ~3.6 x jmax under lp; the LP bounds the jerk on both sides "
-    "of the junction but not the step (the lp+nlp run of the same path holds u and e)"))
 def test_line_into_tangent_arc_holds_jerk() -> None:
+    """Found: a tangent (G1) junction with a curvature jump (line into arc) was passed at speed: the
+    axis acceleration stepped by v^2 / r between two samples, FD jerk y 3.6 x jmax under lp.  Now
+    the LP keeps q at every junction and knot under a_step / |jump of x_ss| (a_step = jmax Ts / 4)."""
     segs = [primitives.line([0, 0, 0], [30, 0, 0]),
             primitives.arc([30, 0, 0], [40, 10, 0], centre=[30, 10, 0], plane="G17", direction="ccw")]
     rep = _check(segs, router(), "lp")
