@@ -95,6 +95,19 @@ class NurbsSegment:
         lo, hi = U[p], U[n]
         if not hi > lo:
             raise GeometryError(f"{name}.knots", [float(lo), float(hi)], "parameter domain [U_p, U_n] is empty")
+        # A knot repeated more than p + 1 times makes a basis function vanish identically: its
+        # control point has no effect, and at the ends the curve no longer starts (ends) at the
+        # first (last) control point, e.g. [0, 0, 0, 0, 1, 1, 1] for p = 2.  Rejected.
+        vals, first, counts = np.unique(U, return_index=True, return_counts=True)
+        over = np.flatnonzero(counts > p + 1)
+        if over.size:
+            i = int(first[over[0]]) + p + 1
+            raise GeometryError(
+                f"{name}.knots[{i}]",
+                float(vals[over[0]]),
+                f"knot {float(vals[over[0]])!r} repeated {int(counts[over[0]])} times; at most degree + 1 = {p + 1} "
+                "(more makes a basis function vanish, so the curve would not start or end at its end control points)",
+            )
         interior = U[(U > lo) & (U < hi)]
         if interior.size:
             vals, counts = np.unique(interior, return_counts=True)

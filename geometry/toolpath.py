@@ -155,8 +155,13 @@ class Toolpath:
         self.sub_origin = np.asarray(origin, dtype=np.int64)
         self.offsets = np.concatenate([[0.0], np.cumsum([t.length for t in subs])])
         #: global arc length of every knot inside the sub-segments (where C''' may jump)
-        self.knot_s = np.concatenate(
-            [off + t.s_of_u(t.segment.breakpoints[1:-1]) for off, t in zip(self.offsets[:-1], subs, strict=True)]
+        # ... and the junctions between sub-segments (where the curvature may jump too; those that
+        # are corners are piece ends, outside every piece)
+        self.knot_s = np.union1d(
+            np.concatenate(
+                [off + t.s_of_u(t.segment.breakpoints[1:-1]) for off, t in zip(self.offsets[:-1], subs, strict=True)]
+            ),
+            self.offsets[1:-1],
         )
         # end derivatives at every junction, computed once: (out of sub k, into sub k+1)
         junctions = [(self._end_derivs(k, True), self._end_derivs(k + 1, False)) for k in range(len(subs) - 1)]

@@ -61,6 +61,12 @@ BREAK_EPS_MM = 1e-6
 INHERITED_INTERVALS = 2
 #: Share of the servo-error budget the acceleration step at rest may use (lp+nlp).
 REST_SHARE = 0.9
+#: Floor of q away from rest ends, as a share of the largest constant q that meets every limit
+#: in the window (keeps the feed from stalling at a knot; see ``WindowLP.solve``).
+FLOOR_SHARE = 1e-2
+#: At a curvature jump the axis acceleration steps by x_ss jump x q; seen in a sampled third
+#: difference the step adds up to 0.75 step / Ts to the jerk, so it is kept to STEP_SHARE jmax Ts.
+STEP_SHARE = 0.25
 #: An axis whose path-derivative coefficients are all below this is not moving.
 AXIS_EPS = 1e-12
 
@@ -122,6 +128,8 @@ class LimitSet:
     a_rest: FloatArray
     feed_max: float | None
     jerk: bool
+    #: largest step of axis acceleration allowed at a curvature jump (G1 junction, C1 knot), (3,) or None
+    a_step: FloatArray | None = None
 
     @classmethod
     def from_machine(cls, m: Machine, sample_period: float, jerk: bool, rest_from_drive: bool = False) -> LimitSet:
@@ -129,9 +137,11 @@ class LimitSet:
         if rest_from_drive:
             dr = m.drive_arrays()
             a_rest = np.minimum(amax, REST_SHARE * dr["emax"] / (dr["Ka"] + dr["Kj"] / (2.0 * sample_period)))
+            a_step = REST_SHARE * dr["emax"] / (dr["Ka"] + dr["Kj"] / (2.0 * sample_period))
         else:
             a_rest = np.minimum(amax, jmax * sample_period / 2.0) if jerk else amax
-        return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk)
+            a_step = STEP_SHARE * jmax * sample_period
+        return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk, a_step if jerk else None)
 
 
 class _Rows:
@@ -294,18 +304,39 @@ class WindowLP:
     def solve(self, s_check: FloatArray) -> WindowResult:
         spec = self.spec
         g = self.geometry(s_check)
-        Q = float(np.max(np.minimum(velocity_bound(g, self.lim), 1e300)))
+        # scale of q: the largest velocity bound, but no more than the q reachable from rest over
+        # the whole piece (q' = 2 sddot <= 2 |amax|, and the jerk's bound): with limits far above what a short piece can
+        # use (v^2 / a >> L) the velocity bound alone left acceleration rows with coefficients
+        # ~1e9 and HiGHS returned no status
+        L = spec.n_int * spec.d
+        Q_reach = 2.0 * float(np.linalg.norm(self.lim.amax)) * L
+        if self.lim.jerk:  # from rest under jerk j: s = j t^3 / 6, v = j t^2 / 2
+            j = float(np.linalg.norm(self.lim.jmax))
+            Q_reach = min(Q_reach, 4.0 * (0.5 * j) ** (2.0 / 3.0) * (6.0 * L) ** (4.0 / 3.0))
+        Q = float(min(np.max(np.minimum(velocity_bound(g, self.lim), 1e300)), Q_reach))
         self.Q = Q
         if not np.isfinite(Q) or Q <= 0:
             raise InfeasibleError("window has no positive velocity bound", window=spec.index)
         n = spec.ncols
         w = bspline.integral_weights(spec.k0, spec.k1, spec.d, spec.k0, n) * Q
-        col_lo = np.full(n, -np.inf)
+        # q >= 0 everywhere, not only at checkpoints: the B-spline basis is non-negative, so
+        # c >= 0 suffices (the rows keep q >= 0 only at checkpoints, and q dipping below 0
+        # between them stalls the feed inside the path).  The control point outside a rest end
+        # is -c of its neighbour (q = 0 there with q' != 0), so it stays free.
+        col_lo = np.zeros(n)
         col_hi = np.full(n, np.inf)
+        floor_cols = np.ones(n, dtype=bool)
         if spec.start_fixed is not None:
             col_lo[:2] = col_hi[:2] = np.asarray(spec.start_fixed) / Q
-        if not spec.end_rest:
+            floor_cols[:2] = False
+        else:
+            col_lo[0] = -np.inf
+            floor_cols[:2] = False
+        if spec.end_rest:
+            col_lo[-1] = -np.inf
+        else:
             col_lo[-2:] = col_hi[-2:] = 0.0
+        floor_cols[-2:] = False
 
         base = _Rows(n)
         if spec.start_fixed is None:
@@ -313,12 +344,19 @@ class WindowLP:
         if spec.end_rest:
             self._rest_rows(base, spec.k1 * spec.d, -1.0, Q)
 
-        # stage 1: velocity + acceleration
-        r1 = base.copy()
-        self._stage1_rows(r1, g, Q, None)
-        chat1 = self._run(r1, w, col_lo, col_hi)
-        chat1, pts1 = self._cuts(chat1, r1, w, col_lo, col_hi, Q, s_check, None)
-        c_star = chat1 * Q
+        step_cap = self._step_rows(base, Q)
+        # Away from the rest ends q is kept above a small floor (a constant feed that meets every
+        # limit at every checkpoint): with knots coarser than a sharp turn, the optimum of
+        # integral q otherwise lets q touch 0 at a knot (two zero control points), where the
+        # time 1 / sqrt(q) diverges and the feed stalls.  If the floor makes the window
+        # infeasible (an inherited start below it), it is dropped.
+        floor_lo = col_lo.copy()
+        floor_lo[floor_cols] = min(self._floor(self.geometry(self._fine(s_check))), FLOOR_SHARE * step_cap) / Q
+        try:
+            chat1, c_star, pts1 = self._stage1(base, g, w, floor_lo, col_hi, Q, s_check)
+        except InfeasibleError:
+            chat1, c_star, pts1 = self._stage1(base, g, w, col_lo, col_hi, Q, s_check)
+            floor_lo = col_lo
         if not self.lim.jerk:
             return WindowResult(chat1 * Q, c_star, self.iterations, pts1[0], pts1[1], pts1[2])
 
@@ -327,9 +365,72 @@ class WindowLP:
         r2 = base.copy()
         self._stage1_rows(r2, g, Q, qstar)
         self._jerk_rows(r2, g, Q, qstar)
-        chat2 = self._run(r2, w, col_lo, col_hi)
-        chat2, pts2 = self._cuts(chat2, r2, w, col_lo, col_hi, Q, s_check, c_star)
+        try:
+            chat2 = self._run(r2, w, floor_lo, col_hi)
+        except InfeasibleError:  # a fresh model (the solver keeps its column bounds)
+            floor_lo = col_lo
+            r2 = base.copy()
+            self._stage1_rows(r2, g, Q, qstar)
+            self._jerk_rows(r2, g, Q, qstar)
+            chat2 = self._run(r2, w, floor_lo, col_hi)
+        chat2, pts2 = self._cuts(chat2, r2, w, floor_lo, col_hi, Q, s_check, c_star)
         return WindowResult(chat2 * Q, c_star, self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1], pts2[2])
+
+    def _stage1(
+        self, base: _Rows, g: PathSamples, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray, Q: float,
+        s_check: FloatArray,
+    ) -> tuple[FloatArray, FloatArray, tuple[int, int, int]]:
+        """Stage 1 (velocity + acceleration) with cutting planes: (chat, c*, (rounds, added, unverified))."""
+        r1 = base.copy()
+        self._stage1_rows(r1, g, Q, None)
+        chat1 = self._run(r1, w, col_lo, col_hi)
+        chat1, pts1 = self._cuts(chat1, r1, w, col_lo, col_hi, Q, s_check, None)
+        return chat1, chat1 * Q, pts1
+
+    def _step_rows(self, rows: _Rows, Q: float) -> float:
+        """q <= min_x a_step_x / |jump of x_ss| at every geometry break inside the window (the
+        acceleration step there, x_ss jump x q, stays within a_step); returns the smallest cap."""
+        spec = self.spec
+        if self.lim.a_step is None or self.breaks.size == 0:
+            return np.inf
+        lo, hi = spec.k0 * spec.d, spec.k1 * spec.d
+        br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
+        if br.size == 0:
+            return np.inf
+        jump = np.abs(self.geometry(br).d2 - self.geometry(br - BREAK_EPS_MM).d2)
+        with np.errstate(divide="ignore"):
+            cap = np.min(np.where(jump > AXIS_EPS, self.lim.a_step[None, :] / np.where(jump > AXIS_EPS, jump, 1.0),
+                                  np.inf), axis=1)
+        keep = cap < Q  # q never exceeds Q (the largest velocity bound): larger caps are no rows
+        if not keep.any():
+            return np.inf
+        B0 = self._mats(br[keep])[0]
+        rows.add(B0, np.full(int(keep.sum()), -np.inf), cap[keep] / Q)
+        return float(np.min(cap[keep]))
+
+    def _fine(self, s_check: FloatArray) -> FloatArray:
+        """The verification grid: VERIFY_SUBDIV points per checkpoint gap and both sides of geometry knots."""
+        frac = np.arange(1, VERIFY_SUBDIV) / VERIFY_SUBDIV
+        s_fine = (s_check[:-1, None] + np.diff(s_check)[:, None] * frac[None, :]).ravel()
+        lo, hi = s_check[0], s_check[-1]
+        br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
+        return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br]))
+
+    def _floor(self, g: PathSamples) -> float:
+        """FLOOR_SHARE x the largest constant q that meets every limit at the points g (verification grid):
+        q <= ub (velocity, feed), |x_ss| q <= amax, |x_sss| q sqrt(ub) <= jmax (pseudo-jerk, q* <= ub)."""
+        ub = velocity_bound(g, self.lim)
+        lim = self.lim
+        with np.errstate(divide="ignore", invalid="ignore"):
+            qa = np.min(np.where(np.abs(g.d2) > AXIS_EPS, lim.amax[None, :] / np.abs(g.d2), np.inf), axis=1)
+            cap = np.minimum(ub, qa)
+            if lim.jerk:
+                qj = np.min(
+                    np.where(np.abs(g.d3) > AXIS_EPS, lim.jmax[None, :] / np.abs(g.d3), np.inf), axis=1
+                ) / np.sqrt(ub)
+                cap = np.minimum(cap, qj)
+        finite = cap[np.isfinite(cap)]
+        return FLOOR_SHARE * float(np.min(finite)) if finite.size else 0.0
 
     def _cuts(
         self,
@@ -343,12 +444,7 @@ class WindowLP:
         c_star: FloatArray | None,
     ) -> tuple[FloatArray, tuple[int, int, int]]:
         """Verify on a finer grid; add violated points as rows and re-solve."""
-        frac = np.arange(1, VERIFY_SUBDIV) / VERIFY_SUBDIV
-        s_fine = (s_check[:-1, None] + np.diff(s_check)[:, None] * frac[None, :]).ravel()
-        lo, hi = s_check[0], s_check[-1]
-        br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
-        s_fine = np.sort(np.concatenate([s_fine, br - BREAK_EPS_MM, br]))
-        g = self.geometry(s_fine)
+        g = self.geometry(self._fine(s_check))
         rounds = added = 0
         for i in range(MAX_CUT_ROUNDS + 1):
             viol = self._violations(chat * Q, g, c_star)

@@ -153,9 +153,13 @@ class NlpLimits:
     amax: FloatArray | None
     jmax: FloatArray | None
     feed_max: float | None
+    #: largest step of axis acceleration allowed at a curvature jump (3,), or None (see solvers.lp.LimitSet)
+    a_step: FloatArray | None = None
 
     @classmethod
-    def from_machine(cls, m: Machine, axis_velocity: bool, kinematic: bool) -> NlpLimits:
+    def from_machine(
+        cls, m: Machine, axis_velocity: bool, kinematic: bool, a_step: FloatArray | None = None
+    ) -> NlpLimits:
         dr = m.drive_arrays()
         vmax, amax, jmax = m.limit_arrays()
         # axis speed: the drive's own limit (inf where none), and the LP's vmax only if asked
@@ -166,6 +170,7 @@ class NlpLimits:
             amax if kinematic else None,
             jmax if kinematic else None,
             m.feed_max,
+            a_step,
         )
 
     def utilisation(self, g: PathSamples, fd: kinematics.FeedDerivs) -> dict[str, FloatArray]:
@@ -570,6 +575,14 @@ class NlpRefiner:
         if end[0] != 0.0 or end[1] != 0.0:
             near_lp |= k_loc == n - 1
         feed_ub = np.where(near_lp, np.maximum(feed_ub, f_lp * (1.0 + 1e-9)), feed_ub)
+        # curvature jumps (knots, smooth junctions): f <= f_cap there, held at the two checkpoints around each
+        br, f_cap = self._step_caps(geometry, a * d, b * d, breaks)
+        if br.size:
+            x = (br - a * d) / d
+            kint = np.clip(np.floor(x), 0, n - 1).astype(np.int64)
+            kc = kint * (N + 1) + np.clip(np.floor((x - kint) * N), 0, N - 1).astype(np.int64)
+            for off in (0, 1):
+                np.minimum.at(feed_ub, kc + off, np.where(near_lp[kc + off], np.inf, f_cap))
         fine = self._fine_points(a * d, min(b, commit + VERIFY_PAST_COMMIT) * d, d, breaks)
         floor_u, floor_e = self._inherited_floor(prev, g, xsss_hi, xsss_lo, k_loc, tau, d, moving)
         g_fine = geometry(fine)
@@ -617,6 +630,12 @@ class NlpRefiner:
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("feed reaches zero inside the window", index, "nonpositive feed")
             util = lim.utilisation(g_fine, fd)
+            if br.size:
+                at = np.searchsorted(fine, br)
+                ok_at = (at < fine.size) & (fine[np.minimum(at, fine.size - 1)] == br)
+                step = np.zeros(fine.size)
+                step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
+                util["step"] = step
             worst = max(float(np.max(u)) for u in util.values())
             if best is None or worst < best[0]:
                 best = (worst, pw)
@@ -768,6 +787,23 @@ class NlpRefiner:
             lo_i[off] = -np.inf
             hi_i[off] = np.inf
         return np.concatenate(lo), np.concatenate(hi)
+
+    def _step_caps(
+        self, geometry: GeometryFn, s0: float, s1: float, breaks: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Breaks inside (s0, s1) where x_ss jumps, and the feed cap there: f^2 |jump of x_ss| <= a_step
+        per axis (the sampled acceleration step, seen as jerk and servo error over one period)."""
+        if self.lim.a_step is None:
+            return np.zeros(0), np.zeros(0)
+        br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
+        if br.size == 0:
+            return br, np.zeros(0)
+        jump = np.abs(geometry(br).d2 - geometry(br - BREAK_EPS_MM).d2)
+        with np.errstate(divide="ignore"):
+            cap_q = np.min(np.where(jump > AXIS_EPS, self.lim.a_step / np.where(jump > AXIS_EPS, jump, 1.0), np.inf),
+                           axis=1)
+        keep = np.isfinite(cap_q)
+        return br[keep], np.sqrt(cap_q[keep])
 
     def _feed_bound(self, g: PathSamples) -> FloatArray:
         """Upper bound on f at points g: min(Fmax, min_x vmax_x / |x_s|) (inf if neither applies), (K,)."""

@@ -288,12 +288,13 @@ def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
 
 def refine_pieces(
     toolpath: Toolpath, machine: Machine, opt: Options, lp_profiles: list[PieceProfile], joins: list[list[int]],
+    lp_lim: LimitSet,
     on_chain: Callable[[float], None] | None = None,
 ) -> tuple[list[PieceProfile], NlpStats]:
     """The NLP stage (spec §5-6): each piece's LP feed refined under the drive limits.
 
     ``on_chain(s_done)``, if given, is called after each NLP chain with the global arc length (mm) done."""
-    lim = NlpLimits.from_machine(machine, opt.nlp_axis_velocity, opt.nlp_kinematic)
+    lim = NlpLimits.from_machine(machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lp_lim.a_step)
     out = []
     refiners: dict[tuple[int, int], NlpRefiner] = {}
     stats = NlpStats()
@@ -367,7 +368,7 @@ def schedule(
     nlp_stats: NlpStats | None = None
     if opt.method == "lp+nlp":
         profiles, nlp_stats = refine_pieces(
-            toolpath, machine, opt, profiles, [j for _, j in solved],
+            toolpath, machine, opt, profiles, [j for _, j in solved], lim,
             lambda s_done: report(lp_share + (1.0 - lp_share) * s_done / toolpath.length),
         )
     t_nlp = time.perf_counter() - t_start - t_lp

@@ -28,6 +28,9 @@ from solvers.errors import ScheduleError
 
 FloatArray = NDArray[np.float64]
 
+#: A feed with q below this share of its peak q inside a piece (feed under 1e-6 of its peak)
+#: counts as stalled.
+STALL_Q_SHARE = 1e-12
 #: Hermite guess tolerance for the time table, seconds (one Newton step then
 #: leaves an error of order this squared times |h'/h^2|: far below 1e-12 s).
 TIME_GUESS_TOL_S = 1e-6
@@ -130,6 +133,14 @@ class PieceTiming:
                 "feed profile cannot leave or reach a rest point (zero acceleration at rest)",
                 value={"s_start": profile.s_start, "dq_start": q1_0, "dq_end": q1_L},
             )
+        stalls = _stalls(profile)
+        if stalls.size:
+            raise ScheduleError(
+                "feed stalls inside the path (q reaches 0, or under 1e-12 of its peak): the path turns too "
+                "sharply for the knot spacing (a cusp, or a knot span far shorter than the knot spacing)",
+                field="toolpath",
+                value={"s_start": profile.s_start, "s": float(profile.s_start + (stalls[0] + 0.5) * profile.d)},
+            )
         edges = np.arange(n + 1, dtype=np.float64)
         table = MonotoneTable.build(profile.h, edges, min_intervals=2, abs_tol=1e-16, guess_tol=TIME_GUESS_TOL_S)
         if not np.all(np.isfinite(table.F_b)):
@@ -140,3 +151,36 @@ class PieceTiming:
         """Piece-local s at piece-local times (clamped to [0, duration])."""
         x = self.table.inverse(t_local)
         return self.profile.s_of_x(x)[0]
+
+
+def _stalls(profile: PieceProfile) -> NDArray[np.int64]:
+    """Knot intervals (not the two rest intervals) where the feed reaches 0, or drops below
+    sqrt(STALL_Q_SHARE) of its peak: there the time integral of 1 / sdot diverges, or the
+    quadrature bisects for minutes towards the near-singularity.  Each interval's quadratic
+    (of q, or of f where ``f_mask``) is minimised exactly over [0, 1]."""
+    n = profile.n_int
+    if n < 3:
+        return np.zeros(0, dtype=np.int64)
+    k = np.arange(1, n - 1)
+    lo = _interval_min(profile.c, k)
+    peak = float(np.max(profile.c))
+    if profile.p is not None and profile.f_mask is not None:
+        use_f = profile.f_mask[k]
+        f_lo = _interval_min(profile.p, k)
+        lo = np.where(use_f, f_lo * np.abs(f_lo), lo)  # compare f^2 with q
+        peak = max(peak, float(np.max(profile.p)) ** 2)
+    return np.asarray(k[~(lo > STALL_Q_SHARE * peak)], dtype=np.int64)
+
+
+def _interval_min(c: FloatArray, k: NDArray[np.int64]) -> FloatArray:
+    """Minimum over t in [0, 1] of the uniform quadratic B-spline on interval k (control points c_k..c_k+2)."""
+    c0, c1, c2 = c[k], c[k + 1], c[k + 2]
+    a2 = c0 - 2.0 * c1 + c2
+    a1 = c1 - c0
+    q0 = 0.5 * (c0 + c1)
+    q1 = q0 + a1 + 0.5 * a2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tv = np.where(a2 > 0, -a1 / np.where(a2 > 0, a2, 1.0), 0.0)
+    tv = np.clip(tv, 0.0, 1.0)
+    qv = q0 + tv * (a1 + 0.5 * a2 * tv)
+    return np.asarray(np.minimum(np.minimum(q0, q1), qv), dtype=np.float64)

@@ -1,0 +1,385 @@
+"""Independent checker of a sampled schedule (issue 5, item 1).
+
+Shares no code with ``solvers/`` or with ``geometry/``'s evaluation: it reads
+only plain data (NURBS degree, knots, control points, weights; the machine's
+limit and drive numbers; the sampled t, feed and positions) and recomputes
+everything itself:
+
+- its own NURBS evaluator (de Boor's algorithm on homogeneous points [w P, w]);
+- velocity, acceleration and jerk by finite differences of the sampled
+  positions, the machine held at rest before the first and after the last
+  sample (a k-th difference is a positive-kernel average of the k-th
+  derivative, so it never over-reports a smooth motion);
+- control signal u = M a + b v + c + d sign(v) and servo error
+  e = Kv v + Ka a + Kj j from those differences (central v, j at each point);
+- distance of every sample from the path: nearest point of a dense polyline of
+  the curve (refined until its chords are short), then a golden-section search
+  of |C(u) - x| over the two neighbouring parameter intervals;
+- time strictly increasing at the fixed period from t = 0, no NaN, rest at both
+  ends (on the path's end points) and at every corner it finds itself
+  (tangent break between segments or at a C0 knot), feed continuous and
+  consistent with the distance travelled.
+
+Every limit is checked against ``LIMIT_FACTOR`` x the machine's value.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+FloatArray = NDArray[np.float64]
+
+#: Allowed overshoot of every limit (issue 5: 1.01 x).
+LIMIT_FACTOR = 1.01
+#: Every sample lies within this distance of the path (mm; issue 5: 1 um).
+PATH_TOL_MM = 1e-3
+#: First and last sample sit on the path's end points within this (mm).
+END_TOL_MM = 1e-6
+#: Period jitter allowed in t, relative to Ts: t_k = k Ts to rounding.
+PERIOD_TOL = 1e-9
+#: Samples of rest padding before and after the motion for the differences.
+REST_PAD = 4
+#: Junction angle (degrees) above which the checker demands a stop; the scheduler stops
+#: above 0.5 degrees, the margin keeps near-threshold junctions out of the test.
+CORNER_CHECK_DEG = 1.0
+#: Junctions below this angle (degrees) are smooth for the checker too.
+SMOOTH_DEG = 0.25
+#: At a stop the nearest sample moves at most this many (acceleration bound x Ts) per second
+#: (the stop lies between two samples: speed there <= a Ts, distance <= a Ts^2 / 2).
+CORNER_SLACK = 2.0
+#: The feed changes between samples by at most this many (acceleration bound x Ts).
+FEED_STEP_SLACK = 2.0
+#: Feed vs travelled distance: |(f_k + f_k+1) / 2 - |dp| / Ts| within this share of the peak feed
+#: plus (acceleration bound x Ts) (trapezoid error Ts^2 f'' / 12 and chord vs arc, at most about
+#: 0.2 a Ts, are smaller).
+FEED_CONSISTENCY = 1e-2
+#: Golden-section iterations of the projection (bracket shrinks by 0.618 per step).
+GOLDEN_ITERATIONS = 50
+#: Dense polyline: initial points per knot span, and chord refinement target as a share of the path length.
+DENSE_PER_SPAN = 32
+DENSE_CHORD_SHARE = 1e-3
+DENSE_MAX_ROUNDS = 8
+DENSE_MAX_POINTS = 2_000_000
+
+
+@dataclass(frozen=True)
+class Nurbs:
+    """Plain NURBS data: degree p, knots (n + p + 1,), control points (n, 3), weights (n,)."""
+
+    degree: int
+    knots: FloatArray
+    ctrl: FloatArray
+    weights: FloatArray
+
+    @property
+    def domain(self) -> tuple[float, float]:
+        n = self.ctrl.shape[0]
+        return float(self.knots[self.degree]), float(self.knots[n])
+
+    def spans(self) -> FloatArray:
+        """Distinct knots inside the domain, both ends included."""
+        lo, hi = self.domain
+        u = np.unique(self.knots)
+        return np.asarray(u[(u >= lo) & (u <= hi)], dtype=np.float64)
+
+    def points(self, u: FloatArray) -> FloatArray:
+        """C(u), (K, 3), by de Boor's algorithm on homogeneous control points."""
+        p = self.degree
+        U = self.knots
+        lo, hi = self.domain
+        u = np.clip(np.asarray(u, dtype=np.float64), lo, hi)
+        k = np.searchsorted(U, u, side="right") - 1
+        last = int(np.searchsorted(U, hi, side="left")) - 1  # last non-empty span
+        k = np.clip(k, p, last)
+        Pw = np.column_stack([self.ctrl * self.weights[:, None], self.weights])
+        idx = k[:, None] - p + np.arange(p + 1)[None, :]
+        d = Pw[idx]  # (K, p+1, 4)
+        for r in range(1, p + 1):
+            for j in range(p, r - 1, -1):
+                i = k - p + j
+                den = U[i + p + 1 - r] - U[i]
+                alpha = ((u - U[i]) / den)[:, None]
+                d[:, j] = (1.0 - alpha) * d[:, j - 1] + alpha * d[:, j]
+        out = d[:, p, :3] / d[:, p, 3:4]
+        return np.asarray(out, dtype=np.float64)
+
+    def end_tangent(self, at_end: bool, u_at: float | None = None, left: bool = True) -> FloatArray:
+        """Unit tangent (direction of travel) at a domain end or, with ``u_at``, one side of a knot."""
+        lo, hi = self.domain
+        h = 1e-7 * (hi - lo)
+        if u_at is None:
+            u0, u1 = (hi - h, hi) if at_end else (lo, lo + h)
+        else:
+            u0, u1 = (u_at - h, u_at) if left else (u_at, u_at + h)
+        P = self.points(np.array([u0, u1]))
+        t = P[1] - P[0]
+        return np.asarray(t / np.linalg.norm(t), dtype=np.float64)
+
+
+def _angle_deg(a: FloatArray, b: FloatArray) -> float:
+    return float(np.degrees(np.arccos(np.clip(float(np.dot(a, b)), -1.0, 1.0))))
+
+
+def corners(path: Sequence[Nurbs]) -> list[tuple[FloatArray, float]]:
+    """(position, angle in degrees) of every tangent break above SMOOTH_DEG: between segments and at C0 knots."""
+    out: list[tuple[FloatArray, float]] = []
+    for i, seg in enumerate(path):
+        lo, hi = seg.domain
+        vals, counts = np.unique(seg.knots, return_counts=True)
+        for v, c in zip(vals, counts, strict=True):
+            if lo < v < hi and c >= seg.degree:
+                ang = _angle_deg(seg.end_tangent(True, float(v), left=True), seg.end_tangent(True, float(v), False))
+                if ang > SMOOTH_DEG:
+                    out.append((seg.points(np.array([v]))[0], ang))
+        if i + 1 < len(path):
+            nxt = path[i + 1]
+            ang = _angle_deg(seg.end_tangent(True), nxt.end_tangent(False))
+            if ang > SMOOTH_DEG:
+                out.append((nxt.points(np.array([nxt.domain[0]]))[0], ang))
+    return out
+
+
+@dataclass
+class Dense:
+    """A dense polyline of the path: points (M, 3), their segment index and parameter."""
+
+    pts: FloatArray
+    seg: NDArray[np.int64]
+    u: FloatArray
+
+
+def dense_polyline(path: Sequence[Nurbs]) -> Dense:
+    """Sample every segment until no chord is longer than DENSE_CHORD_SHARE x the path length."""
+    per_seg: list[FloatArray] = []
+    for seg in path:
+        br = seg.spans()
+        t = np.linspace(0.0, 1.0, DENSE_PER_SPAN + 1)[:-1]
+        u = np.concatenate([a + (b - a) * t for a, b in itertools.pairwise(br)] + [br[-1:]])
+        per_seg.append(u)
+    total = sum(float(np.sum(np.linalg.norm(np.diff(s.points(u), axis=0), axis=1)))
+                for s, u in zip(path, per_seg, strict=True))
+    h = DENSE_CHORD_SHARE * total
+    for k, seg in enumerate(path):
+        u = per_seg[k]
+        for _ in range(DENSE_MAX_ROUNDS):
+            chord = np.linalg.norm(np.diff(seg.points(u), axis=0), axis=1)
+            long = chord > h
+            if not long.any() or u.size > DENSE_MAX_POINTS:
+                break
+            mids = 0.5 * (u[:-1] + u[1:])[long]
+            u = np.sort(np.concatenate([u, mids]))
+        per_seg[k] = u
+    pts = np.concatenate([s.points(u) for s, u in zip(path, per_seg, strict=True)])
+    segi = np.concatenate([np.full(u.size, i, dtype=np.int64) for i, u in enumerate(per_seg)])
+    return Dense(pts, segi, np.concatenate(per_seg))
+
+
+def path_distance(path: Sequence[Nurbs], x: FloatArray, dense: Dense | None = None) -> FloatArray:
+    """Distance (mm) of each point x (K, 3) from the path (union of the segments)."""
+    dense = dense or dense_polyline(path)
+    tree = cKDTree(dense.pts)
+    d0, j0 = tree.query(x, k=2)
+    best = np.asarray(d0[:, 0], dtype=np.float64).copy()
+    M = dense.pts.shape[0]
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    for col in range(2):
+        j = j0[:, col]
+        for si in np.unique(dense.seg[j]):
+            seg = path[int(si)]
+            m = dense.seg[j] == si
+            jj = j[m]
+            jl = np.maximum(jj - 1, 0)
+            jr = np.minimum(jj + 1, M - 1)
+            a = np.where(dense.seg[jl] == si, dense.u[jl], dense.u[jj])
+            b = np.where(dense.seg[jr] == si, dense.u[jr], dense.u[jj])
+            xm = x[m]
+            for _ in range(GOLDEN_ITERATIONS):
+                c = b - g * (b - a)
+                e = a + g * (b - a)
+                left = _dist(seg, c, xm) < _dist(seg, e, xm)
+                b = np.where(left, e, b)
+                a = np.where(left, a, c)
+            best[m] = np.minimum(best[m], _dist(seg, 0.5 * (a + b), xm))
+    # Points still off: the true foot lies within a chord of some dense point no farther than the
+    # nearest dense distance plus the longest chord (near a sharp corner the two nearest dense points
+    # can sit on the other branch); search the brackets of all of them.
+    chord = float(np.max(np.linalg.norm(np.diff(dense.pts, axis=0), axis=1))) if M > 1 else 0.0
+    for i in np.flatnonzero(best > PATH_TOL_MM):
+        cand = np.asarray(tree.query_ball_point(x[i], float(d0[i, 0]) + chord), dtype=np.int64)
+        for si in np.unique(dense.seg[cand]):
+            seg = path[int(si)]
+            jj = cand[dense.seg[cand] == si]
+            jl = np.maximum(jj - 1, 0)
+            jr = np.minimum(jj + 1, M - 1)
+            a = np.where(dense.seg[jl] == si, dense.u[jl], dense.u[jj])
+            b = np.where(dense.seg[jr] == si, dense.u[jr], dense.u[jj])
+            xm = np.repeat(x[i : i + 1], jj.size, axis=0)
+            for _ in range(GOLDEN_ITERATIONS):
+                c = b - g * (b - a)
+                e = a + g * (b - a)
+                left = _dist(seg, c, xm) < _dist(seg, e, xm)
+                b = np.where(left, e, b)
+                a = np.where(left, a, c)
+            best[i] = min(best[i], float(np.min(_dist(seg, 0.5 * (a + b), xm))))
+    return best
+
+
+def _dist(seg: Nurbs, u: FloatArray, x: FloatArray) -> FloatArray:
+    return np.asarray(np.linalg.norm(seg.points(u) - x, axis=1), dtype=np.float64)
+
+
+def fd_kinematics(position: FloatArray, Ts: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Velocity, acceleration and jerk by finite differences, with REST_PAD samples of rest at both ends."""
+    p = np.concatenate([np.repeat(position[:1], REST_PAD, axis=0), position,
+                        np.repeat(position[-1:], REST_PAD, axis=0)])
+    return np.diff(p, axis=0) / Ts, np.diff(p, n=2, axis=0) / Ts**2, np.diff(p, n=3, axis=0) / Ts**3
+
+
+def fd_drive(position: FloatArray, Ts: float, drive: dict[str, FloatArray]) -> tuple[FloatArray, FloatArray]:
+    """u and e at every padded interior point: central v, second difference a, central j."""
+    v, a, j = fd_kinematics(position, Ts)
+    L = a.shape[0] + 2
+    vc = 0.5 * (v[1 : L - 3] + v[2 : L - 2])
+    ac = a[1 : L - 3]
+    jc = 0.5 * (j[0 : L - 4] + j[1 : L - 3])
+    u = drive["M"] * ac + drive["b"] * vc + drive["c"] + drive["d"] * np.sign(vc)
+    e = drive["Kv"] * vc + drive["Ka"] * ac + drive["Kj"] * jc
+    return u, e
+
+
+@dataclass
+class Limits:
+    """Machine numbers as plain arrays (3,) per axis; ``drive`` keys M b c d Kv Ka Kj umax emax."""
+
+    vmax: FloatArray
+    amax: FloatArray
+    jmax: FloatArray
+    feed_max: float | None = None
+    drive: dict[str, FloatArray] | None = None
+
+
+@dataclass
+class Report:
+    utilisation: dict[str, float] = field(default_factory=dict)
+    violations: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.violations
+
+
+def check(
+    path: Sequence[Nurbs], lim: Limits, Ts: float, t: FloatArray, feed: FloatArray, position: FloatArray,
+    kinematic: bool, drive: bool, axis_velocity: bool = False,
+) -> Report:
+    """Check one sampled schedule; ``kinematic``: v, a, j limits; ``drive``: u, e (and v if ``axis_velocity``:
+    lp+nlp holds the LP's vmax only with ``Options.nlp_axis_velocity``; by default speed is limited through u, e)."""
+    rep = Report()
+    bad = rep.violations
+    arrays = {"t": t, "feed": feed, "position": position}
+    for name, arr in arrays.items():
+        if not np.all(np.isfinite(arr)):
+            bad.append(f"non-finite values in {name}")
+    if bad:
+        return rep
+    K = t.size
+    if K < 2 or position.shape != (K, 3) or feed.shape != (K,):
+        bad.append(f"shapes t {t.shape} feed {feed.shape} position {position.shape}")
+        return rep
+    # time: from 0 at the fixed period, strictly increasing
+    if t[0] != 0.0:
+        bad.append(f"t[0] = {t[0]}")
+    dt = np.diff(t)
+    if not np.all(dt > 0):
+        bad.append("t not strictly increasing")
+    if np.max(np.abs(t - Ts * np.arange(K))) > PERIOD_TOL * Ts:
+        bad.append(f"t off the fixed period by {np.max(np.abs(t - Ts * np.arange(K))):.3g} s")
+    # rest at the ends, on the path's end points
+    start = path[0].points(np.array([path[0].domain[0]]))[0]
+    end = path[-1].points(np.array([path[-1].domain[1]]))[0]
+    d_start = float(np.linalg.norm(position[0] - start))
+    d_end = float(np.linalg.norm(position[-1] - end))
+    rep.utilisation["end_offset_mm"] = max(d_start, d_end)
+    if d_start > END_TOL_MM or d_end > END_TOL_MM:
+        bad.append(f"end points off the path ends by {d_start:.3g}, {d_end:.3g} mm")
+    if feed[0] != 0.0 or feed[-1] != 0.0:
+        bad.append(f"feed at the ends {feed[0]}, {feed[-1]} (rest expected)")
+    if np.any(feed < 0):
+        bad.append(f"negative feed {float(np.min(feed))}")
+    # kinematics by finite differences
+    v, a, j = fd_kinematics(position, Ts)
+    axes = "xyz"
+    checks: list[tuple[str, FloatArray, FloatArray]] = []
+    if kinematic:
+        checks += [("velocity", v, lim.vmax), ("acceleration", a, lim.amax), ("jerk", j, lim.jmax)]
+    elif drive and axis_velocity:
+        checks.append(("velocity", v, lim.vmax))
+    if drive:
+        if lim.drive is None:
+            bad.append("drive check asked for but the machine has no drive model")
+            return rep
+        u, e = fd_drive(position, Ts, lim.drive)
+        checks += [("control_signal", u, lim.drive["umax"]), ("servo_error", e, lim.drive["emax"])]
+    for name, val, cap in checks:
+        for i, ax in enumerate(axes):
+            util = float(np.max(np.abs(val[:, i])) / cap[i])
+            key = f"{name}_{ax}"
+            rep.utilisation[key] = util
+            if util > LIMIT_FACTOR:
+                k = int(np.argmax(np.abs(val[:, i])))
+                bad.append(f"{key} at {util:.4f} x limit (padded index {k} of {val.shape[0]})")
+    speed = np.linalg.norm(v, axis=1)
+    if lim.feed_max is not None:
+        util = max(float(np.max(feed)), float(np.max(speed))) / lim.feed_max
+        rep.utilisation["feed"] = util
+        if util > LIMIT_FACTOR:
+            bad.append(f"feed at {util:.4f} x feed_max")
+    # feed: continuous (steps bounded by the machine's acceleration) and consistent with the travel;
+    # the bound is the machine's, not the one observed (a corner passed at speed would inflate that):
+    # |amax| for lp, and |a| <= (umax + |c| + d + b vmax) / M per axis from the drive model for lp+nlp
+    if kinematic or lim.drive is None:
+        a_bound = float(np.linalg.norm(lim.amax))
+    else:
+        dr = lim.drive
+        a_bound = float(np.linalg.norm((dr["umax"] + np.abs(dr["c"]) + dr["d"] + dr["b"] * lim.vmax) / dr["M"]))
+    f_peak = float(np.max(feed))
+    step = float(np.max(np.abs(np.diff(feed))))
+    rep.utilisation["feed_step"] = step / (LIMIT_FACTOR * a_bound * Ts) if a_bound > 0 else 0.0
+    if step > FEED_STEP_SLACK * LIMIT_FACTOR * a_bound * Ts:
+        bad.append(f"feed jumps by {step:.4g} mm/s between samples (acceleration bound {a_bound:.4g} mm/s^2)")
+    chord = speed[REST_PAD : REST_PAD + K - 1]
+    mean_feed = 0.5 * (feed[:-1] + feed[1:])
+    tol = FEED_CONSISTENCY * f_peak + a_bound * Ts
+    mismatch = float(np.max(np.abs(mean_feed - chord))) / tol if tol > 0 else math.inf
+    rep.utilisation["feed_mismatch"] = mismatch
+    if mismatch > 1.0:
+        bad.append(f"feed disagrees with the travelled distance by {mismatch:.3g} of the peak feed")
+    # every sample on the path
+    dense = dense_polyline(path)
+    dist = path_distance(path, position, dense)
+    worst = float(np.max(dist))
+    rep.utilisation["path_deviation"] = worst / PATH_TOL_MM
+    if worst > PATH_TOL_MM:
+        bad.append(f"sample {int(np.argmax(dist))} is {worst:.3g} mm off the path")
+    # rest at every corner: some sample within a Ts^2 of it moving at most a Ts (a: the bound above)
+    v_rest = CORNER_SLACK * a_bound * Ts
+    r_rest = CORNER_SLACK * a_bound * Ts * Ts
+    moving = np.minimum(speed[REST_PAD - 1 : REST_PAD - 1 + K], speed[REST_PAD : REST_PAD + K])
+    worst_corner = 0.0
+    for pos, ang in corners(path):
+        if ang <= CORNER_CHECK_DEG:
+            continue
+        near = np.linalg.norm(position - pos, axis=1) <= max(r_rest, END_TOL_MM)
+        slowest = float(np.min(moving[near])) if near.any() else math.inf
+        worst_corner = max(worst_corner, slowest / v_rest if v_rest > 0 else math.inf)
+        if not slowest <= v_rest:
+            bad.append(f"no stop at the {ang:.2f} degree corner at {pos.tolist()} (slowest nearby {slowest:.3g})")
+    rep.utilisation["corner_speed"] = worst_corner
+    return rep

@@ -1,0 +1,44 @@
+"""Schedule one random case with one method and check it independently (shared by tests and bench/)."""
+
+from __future__ import annotations
+
+import traceback
+from dataclasses import dataclass, field
+
+from solvers.pipeline import Options, schedule
+from tests.reliability import checker, gen
+
+TS = 1e-3
+METHODS = ("lp", "lp+nlp")
+
+
+@dataclass
+class Outcome:
+    seed: int
+    method: str
+    ok: bool
+    violations: list[str] = field(default_factory=list)
+    utilisation: dict[str, float] = field(default_factory=dict)
+    error: str | None = None
+    samples: int = 0
+    nlp_fallbacks: int = 0
+
+    def describe(self) -> str:
+        what = self.error or "; ".join(self.violations)
+        return f"seed {self.seed} method {self.method}: {what}"
+
+
+def run(case: gen.Case, method: str) -> Outcome:
+    """Schedule ``case`` with ``method`` and check the samples: lp -> v, a, j; lp+nlp -> u, e, v."""
+    m = case.lp_machine if method == "lp" else case.machine
+    try:
+        tp = case.toolpath()
+        sch = schedule(tp, m, Options(method=method, sample_period=TS))
+    except Exception as exc:
+        tb = traceback.format_exception_only(type(exc), exc)[-1].strip()
+        return Outcome(case.seed, method, False, error=f"{tb}")
+    smp = sch.samples
+    rep = checker.check(case.segments, gen.limits_of(m), TS, smp.t, smp.feed, smp.position,
+                        kinematic=method == "lp", drive=method == "lp+nlp")
+    fallbacks = len(sch.diagnostics.get("nlp_fallbacks", []))
+    return Outcome(case.seed, method, rep.ok, rep.violations, rep.utilisation, None, int(smp.t.size), fallbacks)

@@ -1,0 +1,97 @@
+"""The independent checker is not vacuous: its evaluator matches analytic curves, and it rejects
+schedules spoiled in each way it is meant to catch."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from geometry import examples as ex
+from geometry import primitives
+from geometry.toolpath import Toolpath
+from solvers.machine import router
+from solvers.pipeline import Options, schedule
+from tests.reliability import checker, gen
+
+TS = 1e-3
+RADIUS = 10.0
+#: Offsets used to spoil a schedule (mm): twice the path tolerance.
+OFF_PATH_MM = 2.0 * checker.PATH_TOL_MM
+
+
+def _nurbs(seg: object) -> checker.Nurbs:
+    return checker.Nurbs(seg.degree, seg.knots, seg.control_points, seg.weights)  # type: ignore[attr-defined]
+
+
+def test_de_boor_matches_the_circle_and_distance_is_exact() -> None:
+    n = _nurbs(ex.circle(RADIUS))
+    u = np.linspace(*n.domain, 101)
+    np.testing.assert_allclose(np.linalg.norm(n.points(u)[:, :2], axis=1), RADIUS, rtol=0, atol=1e-12)
+    rng = np.random.default_rng(3)
+    th = rng.uniform(0, 2 * np.pi, 400)
+    r = RADIUS + rng.uniform(-1e-3, 1e-3, 400)
+    x = np.column_stack([r * np.cos(th), r * np.sin(th), np.zeros_like(th)])
+    np.testing.assert_allclose(checker.path_distance([n], x), np.abs(r - RADIUS), rtol=0, atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def corner_run() -> tuple[list[checker.Nurbs], checker.Limits, object]:
+    segs = [primitives.line([0, 0, 0], [20, 0, 0]), primitives.line([20, 0, 0], [20, 15, 5])]
+    m = router()
+    sch = schedule(Toolpath(segs), m, Options(method="lp", sample_period=TS))
+    return [_nurbs(s) for s in segs], gen.limits_of(m), sch.samples
+
+
+def _check(path: list[checker.Nurbs], lim: checker.Limits, t: np.ndarray, feed: np.ndarray,
+           pos: np.ndarray) -> checker.Report:
+    return checker.check(path, lim, TS, t, feed, pos, kinematic=True, drive=False)
+
+
+def test_accepts_the_real_schedule(corner_run: tuple) -> None:  # type: ignore[type-arg]
+    path, lim, smp = corner_run
+    rep = _check(path, lim, smp.t, smp.feed, smp.position)
+    assert rep.ok, rep.violations
+    assert len(checker.corners(path)) == 1
+
+
+def test_rejects_a_sample_off_the_path(corner_run: tuple) -> None:  # type: ignore[type-arg]
+    path, lim, smp = corner_run
+    pos = smp.position.copy()
+    k = pos.shape[0] // 4
+    pos[k, 2] += OFF_PATH_MM
+    rep = _check(path, lim, smp.t, smp.feed, pos)
+    assert any("off the path" in v for v in rep.violations)
+
+
+def test_rejects_a_faster_replay(corner_run: tuple) -> None:  # type: ignore[type-arg]
+    """The same positions replayed at 1.05 x speed (every 21st sample dropped) exceed some limit."""
+    path, lim, smp = corner_run
+    keep = np.ones(smp.t.size, dtype=bool)
+    keep[1:-1:21] = False
+    n = int(keep.sum())
+    rep = _check(path, lim, TS * np.arange(n), smp.feed[keep] * 1.05, smp.position[keep])
+    assert not rep.ok
+
+
+def test_rejects_passing_a_corner_without_stopping() -> None:
+    """A constant 10 mm/s walk along the polyline: at the corner it never slows down."""
+    segs = [primitives.line([0, 0, 0], [2, 0, 0]), primitives.line([2, 0, 0], [2, 2, 0])]
+    path = [_nurbs(s) for s in segs]
+    lim = checker.Limits(np.full(3, 1e3), np.full(3, 1e2), np.full(3, 1e15))
+    s = np.linspace(0.0, 4.0, 401)
+    pos = np.where(s[:, None] <= 2.0, np.column_stack([s, 0 * s, 0 * s]),
+                   np.column_stack([2.0 + 0 * s, s - 2.0, 0 * s]))
+    feed = np.full(s.size, 4.0 / (400 * TS))
+    feed[0] = feed[-1] = 0.0
+    rep = checker.check(path, lim, TS, TS * np.arange(s.size), feed, pos, kinematic=True, drive=False)
+    assert any("no stop" in v for v in rep.violations)
+
+
+def test_rejects_nan_and_a_broken_period(corner_run: tuple) -> None:  # type: ignore[type-arg]
+    path, lim, smp = corner_run
+    pos = smp.position.copy()
+    pos[3, 0] = np.nan
+    assert not _check(path, lim, smp.t, smp.feed, pos).ok
+    t = smp.t.copy()
+    t[5] += 0.1 * TS
+    assert any("period" in v for v in _check(path, lim, t, smp.feed, smp.position).violations)
