@@ -62,7 +62,7 @@ class NurbsSegment:
     ) -> NurbsSegment:
         """Validate raw input and build a segment; raise GeometryError naming the field."""
         p = _check_degree(degree, name)
-        P = _as_points(control_points, f"{name}.control_points")
+        P = as_points(control_points, f"{name}.control_points")
         n = P.shape[0]
         if n < p + 1:
             raise GeometryError(
@@ -248,7 +248,8 @@ def _as_vector(values: object, fld: str) -> FloatArray:
     return a
 
 
-def _as_points(values: object, fld: str) -> FloatArray:
+def as_points(values: object, fld: str) -> FloatArray:
+    """(m, 3) float64 points (mm) from a list of [x, y] or [x, y, z]; GeometryError naming the bad entry."""
     try:
         a = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError) as exc:

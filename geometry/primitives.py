@@ -48,7 +48,7 @@ from typing import Final
 import numpy as np
 
 from geometry.errors import GeometryError
-from geometry.nurbs import FloatArray, NurbsSegment
+from geometry.nurbs import FloatArray, NurbsSegment, as_points
 
 #: Shortest line or polyline leg (mm); shorter ones have no length to travel.
 MIN_LENGTH_MM: Final = 1e-9
@@ -92,7 +92,7 @@ def polyline(points: object, name: str = "polyline") -> NurbsSegment:
         GeometryError: fewer than 2 points, non-finite coordinates, or a point repeating
             its predecessor (leg shorter than MIN_LENGTH_MM), naming its index.
     """
-    P = _points(points, f"{name}.points")
+    P = as_points(points, f"{name}.points")
     if P.shape[0] < 2:
         raise GeometryError(f"{name}.points", P.shape[0], "a polyline needs at least 2 points")
     legs = np.linalg.norm(np.diff(P, axis=0), axis=1)
@@ -293,19 +293,3 @@ def _point(value: object, fld: str) -> FloatArray:
     if bad.size:
         raise GeometryError(f"{fld}[{bad[0]}]", float(p[bad[0]]), "must be finite (no NaN/Inf)")
     return p if p.shape == (3,) else np.append(p, 0.0)
-
-
-def _points(value: object, fld: str) -> FloatArray:
-    try:
-        P = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise GeometryError(fld, value, "must be a list of [x, y] or [x, y, z] points in mm") from exc
-    if P.ndim != 2 or P.shape[1] not in (2, 3):
-        raise GeometryError(fld, P.shape, "must be a list of [x, y] or [x, y, z] points in mm")
-    bad = np.argwhere(~np.isfinite(P))
-    if bad.size:
-        i, k = (int(v) for v in bad[0])
-        raise GeometryError(f"{fld}[{i}][{k}]", float(P[i, k]), "must be finite (no NaN/Inf)")
-    if P.shape[1] == 2:
-        P = np.column_stack([P, np.zeros(P.shape[0])])
-    return np.ascontiguousarray(P)
