@@ -207,11 +207,14 @@ class WindowLP:
     """Builds and solves the two-stage LP of one window, with cutting planes."""
 
     def __init__(
-        self, spec: WindowSpec, lim: LimitSet, geometry: GeometryFn, solver: str, breaks: FloatArray | None = None
+        self, spec: WindowSpec, lim: LimitSet, geometry: GeometryFn, solver: str, breaks: FloatArray | None = None,
+        verify: FloatArray | None = None,
     ) -> None:
         """``breaks``: piece-local s where the geometry's third derivative may jump
-        (NURBS knots); both sides of each are verified."""
+        (NURBS knots); both sides of each are verified.  ``verify``: more piece-local s
+        to verify (sampled points the pipeline found over a limit, ``solvers.verify``)."""
         self.breaks = np.zeros(0) if breaks is None else np.asarray(breaks, dtype=np.float64)
+        self.verify = np.zeros(0) if verify is None else np.asarray(verify, dtype=np.float64)
         self.spec = spec
         self.lim = lim
         self.geometry = geometry
@@ -414,7 +417,8 @@ class WindowLP:
         s_fine = (s_check[:-1, None] + np.diff(s_check)[:, None] * frac[None, :]).ravel()
         lo, hi = s_check[0], s_check[-1]
         br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
-        return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br]))
+        extra = self.verify[(self.verify > lo) & (self.verify < hi)]
+        return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br, extra]))
 
     def _floor(self, g: PathSamples) -> float:
         """FLOOR_SHARE x the largest constant q that meets every limit at the points g (verification grid):

@@ -97,7 +97,9 @@ def test_cusp_is_a_typed_error() -> None:
     for method in ("lp", "lp+nlp"):
         with pytest.raises(ScheduleError) as err:
             schedule(Toolpath([seg]), router(), Options(method=method))
-        assert err.value.field == "toolpath" and "stalls" in err.value.rule
+        # the feed stalls at the cusp (lp), or the samples there exceed a limit after the
+        # re-verification rounds (lp+nlp): typed, attributed to the toolpath, never a partial result
+        assert err.value.field == "toolpath" and ("stalls" in err.value.rule or "x its limit" in err.value.rule)
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
