@@ -321,7 +321,10 @@ class WindowLP:
         if not np.isfinite(Q) or Q <= 0:
             raise InfeasibleError("window has no positive velocity bound", window=spec.index)
         n = spec.ncols
-        w = bspline.integral_weights(spec.k0, spec.k1, spec.d, spec.k0, n) * Q
+        # objective: maximise integral q = sum w_j c_j; only its direction matters, so it is
+        # normalised (with Q ~ 1e8 the raw weights made HiGHS's dual simplex fail, status NotSet)
+        w = bspline.integral_weights(spec.k0, spec.k1, spec.d, spec.k0, n)
+        w = w / float(np.max(np.abs(w)))
         # q >= 0 everywhere, not only at checkpoints: the B-spline basis is non-negative, so
         # c >= 0 suffices (the rows keep q >= 0 only at checkpoints, and q dipping below 0
         # between them stalls the feed inside the path).  The control point outside a rest end
@@ -365,18 +368,19 @@ class WindowLP:
 
         # stage 2: + q <= q*, pseudo-jerk
         qstar = self._qstar(c_star, g.s)
-        r2 = base.copy()
-        self._stage1_rows(r2, g, Q, qstar)
-        self._jerk_rows(r2, g, Q, qstar)
-        try:
-            chat2 = self._run(r2, w, floor_lo, col_hi)
-        except InfeasibleError:  # a fresh model (the solver keeps its column bounds)
-            floor_lo = col_lo
-            r2 = base.copy()
+
+        def stage2(lo: FloatArray) -> tuple[FloatArray, tuple[int, int, int]]:
+            r2 = base.copy()  # a fresh model each time (the solver keeps its column bounds)
             self._stage1_rows(r2, g, Q, qstar)
             self._jerk_rows(r2, g, Q, qstar)
-            chat2 = self._run(r2, w, floor_lo, col_hi)
-        chat2, pts2 = self._cuts(chat2, r2, w, floor_lo, col_hi, Q, s_check, c_star)
+            return self._cuts(self._run(r2, w, lo, col_hi), r2, w, lo, col_hi, Q, s_check, c_star)
+
+        try:
+            chat2, pts2 = stage2(floor_lo)
+        except InfeasibleError:  # the floor (or a cut round under it) is infeasible: drop the floor
+            if floor_lo is col_lo:
+                raise
+            chat2, pts2 = stage2(col_lo)
         return WindowResult(chat2 * Q, c_star, self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1], pts2[2])
 
     def _stage1(
