@@ -221,6 +221,7 @@ class WindowLP:
         self.solver = solver
         self.iterations = 0
         self.Q = 1.0
+        self._fine_g: tuple[FloatArray, PathSamples] | None = None
 
     # ----- row blocks ---------------------------------------------------------
     def _mats(self, s: FloatArray) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
@@ -357,7 +358,7 @@ class WindowLP:
         # time 1 / sqrt(q) diverges and the feed stalls.  If the floor makes the window
         # infeasible (an inherited start below it), it is dropped.
         floor_lo = col_lo.copy()
-        floor_lo[floor_cols] = min(self._floor(self.geometry(self._fine(s_check))), FLOOR_SHARE * step_cap) / Q
+        floor_lo[floor_cols] = min(self._floor(self._fine_geometry(s_check)), FLOOR_SHARE * step_cap) / Q
         try:
             chat1, c_star, pts1 = self._stage1(base, g, w, floor_lo, col_hi, Q, s_check)
         except InfeasibleError:
@@ -424,6 +425,12 @@ class WindowLP:
         extra = self.verify[(self.verify > lo) & (self.verify < hi)]
         return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br, extra]))
 
+    def _fine_geometry(self, s_check: FloatArray) -> PathSamples:
+        """Geometry on the verification grid of ``s_check``, evaluated once per window."""
+        if self._fine_g is None or self._fine_g[0] is not s_check:
+            self._fine_g = (s_check, self.geometry(self._fine(s_check)))
+        return self._fine_g[1]
+
     def _floor(self, g: PathSamples) -> float:
         """FLOOR_SHARE x the largest constant q that meets every limit at the points g (verification grid):
         q <= ub (velocity, feed), |x_ss| q <= amax, |x_sss| q sqrt(ub) <= jmax (pseudo-jerk, q* <= ub)."""
@@ -452,7 +459,7 @@ class WindowLP:
         c_star: FloatArray | None,
     ) -> tuple[FloatArray, tuple[int, int, int]]:
         """Verify on a finer grid; add violated points as rows and re-solve."""
-        g = self.geometry(self._fine(s_check))
+        g = self._fine_geometry(s_check)
         rounds = added = 0
         for i in range(MAX_CUT_ROUNDS + 1):
             viol = self._violations(chat * Q, g, c_star)

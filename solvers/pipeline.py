@@ -501,7 +501,10 @@ def schedule(
                     toolpath, machine, opt, [prof], [jn], lim, None, [piece], verify_s, nlp_stats
                 )[0][0]
             profiles[piece.index] = prof
-    lp_motion_time = float(sum(PieceTiming.build(p).duration for p in lp_profiles))
+    # (with method lp the LP profiles are the sampled ones: their motion time is known)
+    lp_motion_time = motion_time if nlp_stats is None else float(
+        sum(PieceTiming.build(p).duration for p in lp_profiles)
+    )
     if chk.failed:
         kind, axis, util, k = chk.worst
         raise LimitViolationError(
