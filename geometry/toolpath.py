@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from geometry.arclength import ArcLengthTable
 from geometry.errors import GeometryError
+from geometry.nurbs import ZERO_SPEED_SHARE
 from geometry.segment import Segment
 
 FloatArray = NDArray[np.float64]
@@ -275,9 +276,11 @@ class Toolpath:
             m = k == kk
             seg = self.subs[kk].segment
             Dk = seg.derivatives(u[m])
-            stuck = ~(np.einsum("ij,ij->i", Dk[1], Dk[1]) > 0.0)
+            lo, hi = seg.domain
+            # zero speed, or a rounding residue of it (|C'| ~ 1e-16 at a cusp's knot): no tangent there
+            tiny = ZERO_SPEED_SHARE * self.subs[kk].length / (hi - lo)
+            stuck = ~(np.einsum("ij,ij->i", Dk[1], Dk[1]) > tiny * tiny)
             if stuck.any():
-                lo, hi = seg.domain
                 um = u[m][stuck]
                 nudge = np.where(um < 0.5 * (lo + hi), 1.0, -1.0) * ZERO_SPEED_NUDGE * (hi - lo)
                 Dk[1:, stuck, :] = seg.derivatives(um + nudge)[1:]

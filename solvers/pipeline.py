@@ -204,9 +204,21 @@ def plan_piece(piece: Piece, machine: Machine, opt: Options, n_int: int | None =
 
 
 def _local(toolpath: Toolpath, piece: Piece) -> Any:
+    """The piece's geometry at piece-local s, as the solvers see it.
+
+    At the two rest ends x_ss and x_sss are set to 0: there q = 0 exactly, so they only ever
+    multiply 0 in the kinematics, and at a cusp (a zero-speed knot made a corner) they are
+    rounding residues of 0/0 (~1e17 and ~1e37) that would wreck the LP's scaling."""
     def geometry(s_local: FloatArray) -> PathSamples:
-        g = toolpath.evaluate(np.asarray(s_local) + piece.s_start, piece)
-        return PathSamples(np.asarray(s_local, dtype=np.float64), g.position, g.d1, g.d2, g.d3, g.feed_limit)
+        s_local = np.asarray(s_local, dtype=np.float64)
+        g = toolpath.evaluate(s_local + piece.s_start, piece)
+        rest = (s_local <= 0.0) | (s_local >= piece.length)
+        d2, d3 = g.d2, g.d3
+        if rest.any():
+            d2, d3 = d2.copy(), d3.copy()
+            d2[rest] = 0.0
+            d3[rest] = 0.0
+        return PathSamples(s_local, g.position, g.d1, d2, d3, g.feed_limit)
 
     return geometry
 
