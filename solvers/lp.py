@@ -405,7 +405,7 @@ class WindowLP:
         br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
         if br.size == 0:
             return np.inf
-        jump = np.abs(self.geometry(br).d2 - self.geometry(br - BREAK_EPS_MM).d2)
+        jump = np.abs(self.geometry(br + BREAK_EPS_MM).d2 - self.geometry(br - BREAK_EPS_MM).d2)
         with np.errstate(divide="ignore"):
             cap = np.min(np.where(jump > AXIS_EPS, self.lim.a_step[None, :] / np.where(jump > AXIS_EPS, jump, 1.0),
                                   np.inf), axis=1)
@@ -417,13 +417,18 @@ class WindowLP:
         return float(np.min(cap[keep]))
 
     def _fine(self, s_check: FloatArray) -> FloatArray:
-        """The verification grid: VERIFY_SUBDIV points per checkpoint gap and both sides of geometry knots."""
+        """The verification grid: VERIFY_SUBDIV points per checkpoint gap, both sides of geometry
+        knots, and both sides of every knot of q (q'' and so the jerk jump there; a checkpoint on a
+        knot lands on either side by rounding: 935 d from linspace floors to interval 934)."""
         frac = np.arange(1, VERIFY_SUBDIV) / VERIFY_SUBDIV
         s_fine = (s_check[:-1, None] + np.diff(s_check)[:, None] * frac[None, :]).ravel()
         lo, hi = s_check[0], s_check[-1]
+        spec = self.spec
+        kd = np.arange(spec.k0 + 1, spec.k1) * spec.d
+        q_knots = np.concatenate([kd - BREAK_EPS_MM, kd + BREAK_EPS_MM])
         br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
         extra = self.verify[(self.verify > lo) & (self.verify < hi)]
-        return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br, extra]))
+        return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br + BREAK_EPS_MM, q_knots, extra]))
 
     def _fine_geometry(self, s_check: FloatArray) -> PathSamples:
         """Geometry on the verification grid of ``s_check``, evaluated once per window."""

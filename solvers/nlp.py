@@ -803,7 +803,7 @@ class NlpRefiner:
         br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
         if br.size == 0:
             return br, np.zeros(0)
-        jump = np.abs(geometry(br).d2 - geometry(br - BREAK_EPS_MM).d2)
+        jump = np.abs(geometry(br + BREAK_EPS_MM).d2 - geometry(br - BREAK_EPS_MM).d2)
         with np.errstate(divide="ignore"):
             cap_q = np.min(np.where(jump > AXIS_EPS, self.lim.a_step / np.where(jump > AXIS_EPS, jump, 1.0), np.inf),
                            axis=1)
@@ -825,7 +825,7 @@ class NlpRefiner:
         s = np.linspace(s0, s1, n_fine + 1)
         br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
         extra = self.verify[(self.verify > s0) & (self.verify < s1)]
-        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br, extra]))
+        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br + BREAK_EPS_MM, extra]))
 
     def _shrink_to_feasible(
         self,
@@ -909,7 +909,7 @@ def _third_derivative_envelope(
     s_lo, s_hi = sub[:, 0], sub[:, -1]
     br = breaks[(breaks > s_lo[0]) & (breaks < s_hi[-1])]
     if br.size:
-        gb = geometry(np.concatenate([br - BREAK_EPS_MM, br]))
+        gb = geometry(np.concatenate([br - BREAK_EPS_MM, br + BREAK_EPS_MM]))
         d3b = gb.d3.reshape(2, br.size, 3)
         # cells containing each break (a break lies in at most a few cells)
         i0 = np.searchsorted(s_hi, br, side="left")

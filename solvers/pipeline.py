@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from geometry.toolpath import PathSamples, Piece, Toolpath
 from solvers import kinematics, verify
 from solvers.errors import InvalidMachineError, InvalidOptionsError, LimitViolationError
-from solvers.lp import LimitSet, WindowLP, WindowSpec, velocity_bound
+from solvers.lp import LimitSet, WindowLP, WindowResult, WindowSpec, velocity_bound
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.nlp import NlpLimits, NlpRefiner, NlpStats
 from solvers.timing import PieceProfile, PieceTiming, stuck
@@ -50,6 +50,8 @@ BINDING_UTILISATION = 0.98
 KNOT_REFINEMENTS = 3
 #: Rounds of re-solving pieces whose samples exceed a limit (``solvers.verify``) before giving up.
 SAMPLE_REPAIR_ROUNDS = 2
+#: Points verified per sample gap next to a sample found over a limit.
+REPAIR_SUBDIV = 8
 #: Samples computed per chunk (bounds memory in the reconstruction).
 SAMPLE_CHUNK = 100_000
 
@@ -226,6 +228,7 @@ def _local(toolpath: Toolpath, piece: Piece) -> Any:
 def solve_piece(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any],
     on_window: Callable[[float], None] | None = None, verify: FloatArray | None = None,
+    cache: dict[tuple[int, int, int], tuple[Any, FloatArray, WindowResult]] | None = None,
 ) -> tuple[PieceProfile, list[int]]:
     """Walk LP windows over one piece and assemble its control points.
 
@@ -241,24 +244,28 @@ def solve_piece(
     for attempt in range(KNOT_REFINEMENTS + 1):
         plan = plan_piece(piece, machine, opt, n_int)
         prof, joins = _solve_windows(
-            toolpath, piece, plan, opt, lim, stats, on_window if attempt == 0 else None, verify
+            toolpath, piece, plan, opt, lim, stats, on_window if attempt == 0 else None, verify, cache
         )
         if not stuck(prof):
             break
         n_int = 2 * plan.n_int
         stats["knot_refinements"] = stats.get("knot_refinements", 0) + 1
-    stats["control_points"] += prof.c.size
-    stats["checkpoints"] += plan.n_int * opt.checkpoints_per_interval + 1
-    stats["knot_spacing"].append(plan.d)
     return prof, joins
 
 
 def _solve_windows(
     toolpath: Toolpath, piece: Piece, plan: WindowPlan, opt: Options, lim: LimitSet, stats: dict[str, Any],
     on_window: Callable[[float], None] | None, verify: FloatArray | None,
+    cache: dict[tuple[int, int, int], tuple[Any, FloatArray, WindowResult]] | None = None,
 ) -> tuple[PieceProfile, list[int]]:
-    """The LP windows of ``solve_piece`` on one knot plan."""
+    """The LP windows of ``solve_piece`` on one knot plan.
+
+    ``cache`` (kept across calls for one piece) maps (n_int, k0, k1) to the window's start state,
+    the extra verification points inside it and its result: while every earlier window was
+    reused and neither changed, a window is not solved again (a repair round re-solves from the
+    first window that has new verification points on)."""
     geometry = _local(toolpath, piece)
+    chain_same = True
     breaks = _breaks(toolpath, piece)
     joins: list[int] = []
     c = np.zeros(plan.n_int + 2)
@@ -274,14 +281,24 @@ def _solve_windows(
             k1 = plan.n_int
         spec = WindowSpec(stats["windows"], k0, k1, plan.d, plan.n_int, start, k1 == plan.n_int, prev_qstar, prev_c)
         s_check = np.linspace(k0 * plan.d, k1 * plan.d, (k1 - k0) * N + 1)
-        t0 = time.perf_counter()
-        res = WindowLP(spec, lim, geometry, opt.solver, breaks, verify).solve(s_check)
-        stats["window_times"].append(time.perf_counter() - t0)
-        stats["windows"] += 1
-        stats["iterations"] += res.iterations
-        stats["cut_rounds"] += res.cut_rounds
-        stats["cut_points"] += res.added_points
-        stats["unverified"] += res.unverified
+        v_in = np.zeros(0) if verify is None else verify[(verify > k0 * plan.d) & (verify < k1 * plan.d)]
+        st = np.array(start if start is not None else (np.nan, np.nan))
+        key = (plan.n_int, k0, k1)
+        hit = cache.get(key) if cache is not None and chain_same else None
+        if hit is not None and np.array_equal(hit[0], st, equal_nan=True) and np.array_equal(hit[1], v_in):
+            res = hit[2]
+        else:
+            chain_same = False
+            t0 = time.perf_counter()
+            res = WindowLP(spec, lim, geometry, opt.solver, breaks, verify).solve(s_check)
+            stats["window_times"].append(time.perf_counter() - t0)
+            stats["windows"] += 1
+            stats["iterations"] += res.iterations
+            stats["cut_rounds"] += res.cut_rounds
+            stats["cut_points"] += res.added_points
+            stats["unverified"] += res.unverified
+            if cache is not None:
+                cache[key] = (st, v_in, res)
         if spec.end_rest:
             c[k0 : k1 + 2] = res.c
             break
@@ -452,7 +469,7 @@ def schedule(
     )
     stats: dict[str, Any] = {
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
-        "control_points": 0, "checkpoints": 0, "unverified": 0, "knot_spacing": [], "window_times": [],
+        "unverified": 0, "window_times": [],
     }
     if opt.method == "lp+nlp" and not machine.has_drives:
         raise InvalidMachineError(
@@ -466,11 +483,12 @@ def schedule(
             progress(min(1.0, fraction))
 
     solved: list[tuple[PieceProfile, list[int]]] = []
+    caches: list[dict[tuple[int, int, int], tuple[Any, FloatArray, WindowResult]]] = [{} for _ in toolpath.pieces]
     for p in toolpath.pieces:
         def on_window(s_done: float, s0: float = p.s_start) -> None:
             report(lp_share * (s0 + s_done) / toolpath.length)
 
-        solved.append(solve_piece(toolpath, p, machine, opt, lim, stats, on_window))
+        solved.append(solve_piece(toolpath, p, machine, opt, lim, stats, on_window, None, caches[p.index]))
         report(lp_share * p.s_end / toolpath.length)
     lp_profiles = [sp for sp, _ in solved]
     joins = [j for _, j in solved]
@@ -499,14 +517,20 @@ def schedule(
         if not chk.repair.any() or rnd == SAMPLE_REPAIR_ROUNDS:
             break
         stats["sample_repairs"] += 1
-        s_bad = samples.s[chk.repair]
+        # the flagged samples and REPAIR_SUBDIV points in each gap after them (a peak between
+        # two samples is what a difference over neighbouring samples sees)
+        k_bad = np.flatnonzero(chk.repair[:-1])
+        gap = samples.s[k_bad + 1] - samples.s[k_bad]
+        s_bad = (samples.s[k_bad, None] + gap[:, None] * (np.arange(REPAIR_SUBDIV) / REPAIR_SUBDIV)).ravel()
         owner = np.clip(np.searchsorted(starts, s_bad, side="right") - 1, 0, len(starts) - 1)
         redo = [toolpath.pieces[i] for i in np.unique(owner)]
         for piece in redo:
             s_loc = s_bad[owner == piece.index] - piece.s_start
             s_loc = s_loc[(s_loc > 0.0) & (s_loc < piece.length)]
             verify_s[piece.index] = np.union1d(verify_s.get(piece.index, np.zeros(0)), s_loc)
-            prof, jn = solve_piece(toolpath, piece, machine, opt, lim, stats, None, verify_s[piece.index])
+            prof, jn = solve_piece(
+                toolpath, piece, machine, opt, lim, stats, None, verify_s[piece.index], caches[piece.index]
+            )
             lp_profiles[piece.index], joins[piece.index] = prof, jn
             if nlp_stats is not None:
                 prof = refine_pieces(
@@ -542,9 +566,9 @@ def schedule(
         "unverified_points": stats["unverified"],
         # rounds of re-solving pieces whose samples were over a limit (solvers.verify)
         "sample_repairs": stats["sample_repairs"],
-        "control_points": stats["control_points"],
-        "checkpoints": stats["checkpoints"],
-        "knot_spacing": float(np.min(stats["knot_spacing"])),
+        "control_points": int(sum(p.c.size for p in profiles)),
+        "checkpoints": int(sum(p.n_int * opt.checkpoints_per_interval + 1 for p in profiles)),
+        "knot_spacing": float(min(p.d for p in profiles)),
         "samples": int(samples.t.size),
         "sample_period": opt.sample_period,
         "peak_utilisation": _peak_utilisation(

@@ -36,6 +36,7 @@ KNOWN_FAILURES: dict[int, dict[str, str]] = {
     30: {'lp+nlp': 'servo-error'},
     35: {'lp+nlp': 'servo-error'},
     48: {'lp+nlp': 'servo-error'},
+    64: {'lp+nlp': 'servo-error'},
     70: {'lp+nlp': 'servo-error'},
     71: {'lp+nlp': 'servo-error'},
     75: {'lp+nlp': 'servo-error'},
