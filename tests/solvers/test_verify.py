@@ -50,7 +50,7 @@ def test_every_geometry_knot_is_verified_from_both_sides() -> None:
     lo, hi = s_check[0], s_check[-1]
     br = w.breaks[(w.breaks > lo + 1e-3) & (w.breaks < hi - 1e-3)]
     assert br.size > 10
-    sub, u = tp.locate(fine)
+    _, u = tp.locate(fine)
     u_knots = np.unique(tp.subs[0].segment.knots)
     for b in br:
         near = np.abs(fine - b) < AT_KNOT_MM
