@@ -12,7 +12,7 @@ PYTEST_ARGS ?=
 LOCK := requirements.lock
 PIP := $(BIN)/python -m pip install -q -c $(LOCK)
 
-.PHONY: venv run test lint typecheck pytest bench clean openapi load browser screenshot lock
+.PHONY: venv run test lint typecheck pytest bench clean openapi load browser screenshot lock soak
 
 $(STAMP): pyproject.toml $(LOCK)
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -64,6 +64,11 @@ openapi: $(STAMP)
 DURATION ?= 60
 load: $(STAMP)
 	$(BIN)/python -m bench.load --duration $(DURATION)
+
+# 2 x the server's concurrency limit for SOAK_S s: the excess gets 503, RSS of server and workers sampled
+SOAK_S ?= 600
+soak: $(STAMP)
+	$(BIN)/python -m bench.load --duration $(SOAK_S) --overload 2 --out bench/results/load_overload.json
 
 # headless Chromium for tests/service/test_browser.py: Debian's package (as root), never a browser download
 browser:
