@@ -7,7 +7,10 @@
 - ``DaskExecutor`` (``FEEDSCHED_DASK_SCHEDULER=tcp://host:8786``): tasks go to
   a Dask distributed scheduler; a worker that dies mid-task has its task
   re-run elsewhere by Dask; cancellation sets a Dask Event the task polls
-  after every LP window and cancels the future.
+  after every LP window, cancels the future and raises ``Cancelled`` in the
+  worker thread running the task (``_interrupt``: the solve stops at the next
+  Python bytecode, i.e. when the current HiGHS / IPOPT call returns, instead
+  of at the end of the LP window or NLP chain).
 
 ``run`` returns a ``Result`` or raises ``WorkFailed`` (problem dict),
 ``WorkTimeout``, ``WorkerLost`` or ``asyncio.CancelledError``.
@@ -17,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ctypes
 import multiprocessing as mp
 import secrets
 import threading
@@ -43,6 +47,28 @@ class Executor(Protocol):
                   progress: Progress | None = None, tag: str = "") -> Result: ...
 
     def running_pids(self) -> dict[str, int]: ...
+
+
+#: Completed solver tasks between two malloc_trim calls (LocalProcessExecutor).
+TRIM_EVERY = 64
+
+
+def _malloc_trim() -> Callable[[], None]:
+    """glibc's malloc_trim(0), or a no-op elsewhere.
+
+    Results arrive unpickled in the pipe-reader threads and are freed on the event loop thread: glibc keeps
+    the freed chunks in the reader threads' arenas, and the service's RSS crept up by about 1.5 KB per
+    request (0.8 MB/min under load).  Trimming every TRIM_EVERY tasks hands the free pages back."""
+    try:
+        fn = ctypes.CDLL("libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return lambda: None
+    fn.argtypes = [ctypes.c_size_t]
+
+    def trim() -> None:
+        fn(0)
+
+    return trim
 
 
 def _reader(conn: Connection, loop: asyncio.AbstractEventLoop, q: asyncio.Queue[tuple[str, Any]]) -> None:
@@ -74,6 +100,8 @@ class LocalProcessExecutor:
         self._sem: asyncio.Semaphore | None = None
         self._pids: dict[str, int] = {}
         self._lock = threading.Lock()
+        self._done = 0
+        self._trim = _malloc_trim()
 
     async def start(self) -> None:
         self._sem = asyncio.Semaphore(self.workers)
@@ -141,6 +169,9 @@ class LocalProcessExecutor:
             await asyncio.shield(loop.run_in_executor(self._threads, proc.join, 5.0))
             with self._lock:
                 self._pids.pop(tag, None)
+            self._done += 1
+            if self._done % TRIM_EVERY == 0:
+                self._threads.submit(self._trim)
 
 
 def _noop() -> None:
@@ -198,7 +229,7 @@ class DaskExecutor:
         if progress is not None:
             self._progress[key] = progress
         self._tags[key] = tag
-        fut = self._client.submit(worker.dask_task, request, budget, key, key=key, pure=False)
+        fut = self._client.submit(_dask_entry, request, budget, key, key=key, pure=False)
         try:
             try:
                 async with asyncio.timeout(timeout):
@@ -218,12 +249,51 @@ class DaskExecutor:
             if not fut.done():
                 with contextlib.suppress(Exception):
                     await Event(f"{key}-cancel", client=self._client).set()
+                with contextlib.suppress(Exception):  # stop the solve now, not at its next progress report
+                    await self._client.run(_interrupt, key)
                 with contextlib.suppress(Exception):
                     await fut.cancel()
             raise
         finally:
             self._progress.pop(key, None)
             self._pids.pop(self._tags.pop(key, ""), None)
+
+
+# --- runs on the Dask workers ---------------------------------------------------
+#: Worker threads running a solve that may be interrupted: {thread id: task key}.  An entry exists only while
+#: the thread is inside ``_dask_entry``; ``_interrupt`` removes it when it raises into the thread, so a
+#: thread is interrupted at most once per task and never after it left the task.
+_RUNNING: dict[int, str] = {}
+_RUNNING_LOCK = threading.Lock()
+
+
+def _dask_entry(request: dict[str, Any], budget: Budget, job_key: str) -> tuple[str, Any]:
+    """The Dask task: ``worker.dask_task`` inside an interruptible region."""
+    ident = threading.get_ident()
+    with _RUNNING_LOCK:
+        _RUNNING[ident] = job_key
+    try:
+        return worker.dask_task(request, budget, job_key)
+    except worker.Cancelled:  # raised by _interrupt outside dask_task's own handler
+        return "cancelled", None
+    finally:
+        with _RUNNING_LOCK:
+            if _RUNNING.get(ident) == job_key:
+                del _RUNNING[ident]
+
+
+def _interrupt(job_key: str) -> int:
+    """Client.run target on every worker: raise ``worker.Cancelled`` in the thread solving ``job_key``.
+
+    CPython delivers it at the thread's next bytecode (a C call in progress, e.g. one HiGHS solve, finishes
+    first).  Returns the number of threads interrupted here (0 or 1)."""
+    with _RUNNING_LOCK:
+        for ident, key in list(_RUNNING.items()):
+            if key == job_key:
+                del _RUNNING[ident]
+                return int(ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident),
+                                                                      ctypes.py_object(worker.Cancelled)))
+    return 0
 
 
 def make_executor(workers: int, dask_scheduler: str | None) -> Executor:
