@@ -12,7 +12,7 @@ PYTEST_ARGS ?=
 LOCK := requirements.lock
 PIP := $(BIN)/python -m pip install -q -c $(LOCK)
 
-.PHONY: venv run test lint typecheck pytest bench clean openapi load browser screenshot lock soak
+.PHONY: venv run test lint typecheck pytest bench clean openapi load browser screenshot lock soak fuzz
 
 $(STAMP): pyproject.toml $(LOCK)
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -69,6 +69,11 @@ load: $(STAMP)
 SOAK_S ?= 600
 soak: $(STAMP)
 	$(BIN)/python -m bench.load --duration $(SOAK_S) --overload 2 --out bench/results/load_overload.json
+
+# schemathesis: EXAMPLES generated cases per operation and mode against a real server (>= 1000 requests)
+EXAMPLES ?= 80
+fuzz: $(STAMP)
+	$(BIN)/python -m bench.fuzz_api --examples $(EXAMPLES)
 
 # headless Chromium for tests/service/test_browser.py: Debian's package (as root), never a browser download
 browser:

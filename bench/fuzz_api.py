@@ -1,6 +1,6 @@
 """schemathesis against a real uvicorn server: generated requests for every operation of the served spec.
 
-    python -m bench.fuzz_api [--examples 40] [--time-limit 1500] [--url http://127.0.0.1:8000]
+    python -m bench.fuzz_api [--examples 80] [--time-limit 1500] [--url http://127.0.0.1:8000]
 
 Without --url a uvicorn server is started on a free loopback port (FEEDSCHED_WORKERS=2, sync and job timeouts
 10 s, a job queue deep enough that sequential requests never fill it) and stopped at the end.  For each
@@ -38,21 +38,52 @@ class Tally:
         self.stop = time.monotonic() + time_limit
 
 
-def run_operation(op: Any, mode: Any, examples: int, t: Tally) -> None:
+def known_values(url: str) -> dict[str, list[str]]:
+    """Path parameter values that exist on the server: jobs that succeeded, failed and were cancelled, preset
+    and example names.  Positive cases use one of them half of the time, so the routes answer 200/409 too."""
+    from service.schemas import EXAMPLE
+
+    with httpx.Client(base_url=url, timeout=60) as c:
+        ok = c.post("/v1/jobs", json=EXAMPLE).json()["id"]
+        lp = c.post("/v1/jobs", json={**EXAMPLE, "options": {"method": "lp"}}).json()["id"]
+        bad = c.post("/v1/jobs", json={"toolpath": {"segments": [{"degree": 1, "knots": [0, 0, 1, 1],
+                                                                  "control_points": [[0, 0], [0, 0]]}]}}).json()["id"]
+        long = {"toolpath": {"segments": [{"degree": 1, "knots": [0, 0, 1, 1],
+                                           "control_points": [[0, 0, 0], [40_000, 0, 0]]}]}, "machine": "router"}
+        cancelled = c.post("/v1/jobs", json=long).json()["id"]
+        c.delete(f"/v1/jobs/{cancelled}")
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            if all(c.get(f"/v1/jobs/{i}").json()["status"] not in ("queued", "running") for i in (ok, lp, bad)):
+                break
+            time.sleep(0.2)
+        return {"job_id": [ok, lp, bad, cancelled], "name": c.get("/v1/machines").json()["machines"]
+                + [e["name"] for e in c.get("/v1/examples").json()["examples"]]}
+
+
+def run_operation(op: Any, mode: Any, examples: int, t: Tally, known: dict[str, list[str]]) -> None:
     """Up to ``examples`` generated cases of one operation in one mode, each sent and checked once."""
     from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
     from hypothesis.errors import Unsatisfiable
+    from schemathesis.generation.modes import GenerationMode
     from schemathesis.specs.openapi.checks import positive_data_acceptance
 
     label = f"{op.method.upper()} {op.path}"
     counts = t.by_op.setdefault(label, Counter())
+    # path parameters that can take known values (positive mode only: negative cases must stay invalid)
+    params = [p for p in known if "{" + p + "}" in op.path] if mode == GenerationMode.POSITIVE else []
+    pick = st.integers(0, 2 * max((len(known[p]) for p in params), default=0))
 
-    @given(case=op.as_strategy(mode))
+    @given(case=op.as_strategy(mode), k=pick)
     @settings(max_examples=examples, deadline=None, suppress_health_check=list(HealthCheck), database=None,
               derandomize=True)
-    def one(case: Any) -> None:
+    def one(case: Any, k: int) -> None:
         if time.monotonic() > t.stop:
             return
+        for p in params:
+            if k < len(known[p]) and not (p == "name" and "plots" in op.path):
+                case.path_parameters[p] = known[p][k]
         try:
             resp = case.call(timeout=60)
         except Exception as exc:  # connection refused / reset: the server must never do that
@@ -83,10 +114,11 @@ def fuzz(url: str, examples: int, time_limit: float) -> dict[str, Any]:
     ops = [r.ok() for r in schema.get_all_operations()]
     t = Tally(time_limit)
     t0 = time.monotonic()
+    known = known_values(url)
     for mode, op in itertools.product((GenerationMode.POSITIVE, GenerationMode.NEGATIVE), ops):
         if time.monotonic() > t.stop:
             break
-        run_operation(op, mode, examples, t)
+        run_operation(op, mode, examples, t, known)
     wall = time.monotonic() - t0
     return {
         "operations": len(ops), "examples_per_operation_and_mode": examples,
@@ -103,7 +135,7 @@ def main() -> None:
     from bench.load import start_server
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--examples", type=int, default=40, help="cases per operation and generation mode")
+    ap.add_argument("--examples", type=int, default=80, help="cases per operation and generation mode")
     ap.add_argument("--time-limit", type=float, default=1500.0, help="stop generating after this many seconds")
     ap.add_argument("--url", default=None, help="an already running server (loopback); default: start one")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "fuzz_api.json"))
