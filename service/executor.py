@@ -7,10 +7,7 @@
 - ``DaskExecutor`` (``FEEDSCHED_DASK_SCHEDULER=tcp://host:8786``): tasks go to
   a Dask distributed scheduler; a worker that dies mid-task has its task
   re-run elsewhere by Dask; cancellation sets a Dask Event the task polls
-  after every LP window, cancels the future and raises ``Cancelled`` in the
-  worker thread running the task (``_interrupt``: the solve stops at the next
-  Python bytecode, i.e. when the current HiGHS / IPOPT call returns, instead
-  of at the end of the LP window or NLP chain).
+  after every LP window and cancels the future.
 
 ``run`` returns a ``Result`` or raises ``WorkFailed`` (problem dict),
 ``WorkTimeout``, ``WorkerLost`` or ``asyncio.CancelledError``.
@@ -229,7 +226,7 @@ class DaskExecutor:
         if progress is not None:
             self._progress[key] = progress
         self._tags[key] = tag
-        fut = self._client.submit(_dask_entry, request, budget, key, key=key, pure=False)
+        fut = self._client.submit(worker.dask_task, request, budget, key, key=key, pure=False)
         try:
             try:
                 async with asyncio.timeout(timeout):
@@ -249,51 +246,12 @@ class DaskExecutor:
             if not fut.done():
                 with contextlib.suppress(Exception):
                     await Event(f"{key}-cancel", client=self._client).set()
-                with contextlib.suppress(Exception):  # stop the solve now, not at its next progress report
-                    await self._client.run(_interrupt, key)
                 with contextlib.suppress(Exception):
                     await fut.cancel()
             raise
         finally:
             self._progress.pop(key, None)
             self._pids.pop(self._tags.pop(key, ""), None)
-
-
-# --- runs on the Dask workers ---------------------------------------------------
-#: Worker threads running a solve that may be interrupted: {thread id: task key}.  An entry exists only while
-#: the thread is inside ``_dask_entry``; ``_interrupt`` removes it when it raises into the thread, so a
-#: thread is interrupted at most once per task and never after it left the task.
-_RUNNING: dict[int, str] = {}
-_RUNNING_LOCK = threading.Lock()
-
-
-def _dask_entry(request: dict[str, Any], budget: Budget, job_key: str) -> tuple[str, Any]:
-    """The Dask task: ``worker.dask_task`` inside an interruptible region."""
-    ident = threading.get_ident()
-    with _RUNNING_LOCK:
-        _RUNNING[ident] = job_key
-    try:
-        return worker.dask_task(request, budget, job_key)
-    except worker.Cancelled:  # raised by _interrupt outside dask_task's own handler
-        return "cancelled", None
-    finally:
-        with _RUNNING_LOCK:
-            if _RUNNING.get(ident) == job_key:
-                del _RUNNING[ident]
-
-
-def _interrupt(job_key: str) -> int:
-    """Client.run target on every worker: raise ``worker.Cancelled`` in the thread solving ``job_key``.
-
-    CPython delivers it at the thread's next bytecode (a C call in progress, e.g. one HiGHS solve, finishes
-    first).  Returns the number of threads interrupted here (0 or 1)."""
-    with _RUNNING_LOCK:
-        for ident, key in list(_RUNNING.items()):
-            if key == job_key:
-                del _RUNNING[ident]
-                return int(ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident),
-                                                                      ctypes.py_object(worker.Cancelled)))
-    return 0
 
 
 def make_executor(workers: int, dask_scheduler: str | None) -> Executor:

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import os
 import signal
-import threading
-import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -17,7 +15,7 @@ from service.app import create_app
 from service.config import Settings
 from service.schemas import EXAMPLE
 from service.worker import CANCELLED_TOPIC
-from tests.service.conftest import WAIT_S, long_line, pid_gone, wait_for
+from tests.service.conftest import long_line, pid_gone, wait_for
 from tests.service.test_jobs import poll_done
 
 
@@ -83,29 +81,3 @@ def test_cancel_through_dask_stops_the_task(dask_client: TestClient, cluster: Lo
 
 def _executing(dask_worker: Any) -> int:
     return int(dask_worker.state.executing_count)
-
-
-def test_interrupt_raises_into_the_solving_thread_once(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The Dask cancel path without Dask: _interrupt stops a thread inside _dask_entry at its next bytecode."""
-    from service import executor, worker
-
-    started = threading.Event()
-
-    def busy(request: Any, budget: Any, key: str) -> tuple[str, Any]:  # a solve that never reports progress
-        started.set()
-        deadline = time.monotonic() + WAIT_S
-        while time.monotonic() < deadline:
-            sum(range(1000))
-        return "ok", None
-
-    monkeypatch.setattr(worker, "dask_task", busy)
-    out: list[Any] = []
-    t = threading.Thread(target=lambda: out.append(executor._dask_entry({}, None, "job-a")))  # type: ignore[arg-type]
-    t.start()
-    assert started.wait(WAIT_S)
-    assert executor._interrupt("job-b") == 0  # another key: nothing happens
-    t0 = time.monotonic()
-    assert executor._interrupt("job-a") == 1
-    t.join(WAIT_S)
-    assert out == [("cancelled", None)] and time.monotonic() - t0 < WAIT_S
-    assert executor._interrupt("job-a") == 0 and not executor._RUNNING  # left the region: never again
