@@ -4,11 +4,12 @@ ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 \
     FEEDSCHED_DATA_DIR=/data HOST=0.0.0.0 PORT=8000
 RUN useradd --create-home --uid 10001 app && mkdir -p /data && chown app:app /data
 WORKDIR /app
-COPY pyproject.toml README.md ./
+COPY pyproject.toml requirements.lock README.md ./
 COPY geometry geometry
 COPY solvers solvers
 COPY service service
-RUN pip install --no-cache-dir '.[dask]'
+# the versions of the checked-in lock, as `make run` installs them
+RUN pip install --no-cache-dir -c requirements.lock '.[dask]'
 USER app
 VOLUME ["/data"]
 EXPOSE 8000

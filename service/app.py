@@ -26,6 +26,7 @@ from service.errors import ServiceError, install_handlers, not_found, too_large
 from service.executor import Executor, make_executor
 from service.http import FORMAT_NAMES, BodyLimit, negotiate, render
 from service.jobs import JobManager
+from service.limits import Gate
 from service.plots import FORMATS as PLOT_MEDIA
 from service.reports import EXAMPLES, PlotService, example, index_page, report_page, report_pending
 from service.schemas import (
@@ -55,9 +56,25 @@ UNITS = {"vmax": "mm/s", "amax": "mm/s^2", "jmax": "mm/s^3", "M": "V s^2/mm", "b
          "stopping_distance_mm": "mm"}
 
 
-def _problems(*codes: int) -> dict[int | str, dict[str, Any]]:
-    return {c: {"content": {MEDIA_PROBLEM: {"schema": {"$ref": "#/components/schemas/Problem"}}},
-                "description": "RFC 9457 problem details"} for c in codes}
+PROBLEM_CONTENT = {MEDIA_PROBLEM: {"schema": {"$ref": "#/components/schemas/Problem"}}}
+RETRY_AFTER = {"Retry-After": {"description": "seconds to wait before retrying", "required": True,
+                               "schema": {"type": "integer", "minimum": 1}}}
+BUSY = {
+    "schedule": "busy: FEEDSCHED_MAX_INFLIGHT synchronous schedules are already in flight (answered at once, "
+                "never queued; retry after Retry-After seconds or POST the body to /v1/jobs), or the solver "
+                "process was lost",
+    "jobs": "busy: FEEDSCHED_JOB_QUEUE_DEPTH jobs are already queued or running; retry after Retry-After seconds",
+}
+
+
+def _problems(*codes: int, busy: str | None = None) -> dict[int | str, dict[str, Any]]:
+    """Problem responses of a route; ``busy`` documents its 503 (with Retry-After)."""
+    out: dict[int | str, dict[str, Any]] = {
+        c: {"content": PROBLEM_CONTENT, "description": "RFC 9457 problem details"} for c in codes}
+    if busy is not None:
+        out[503] = {"content": PROBLEM_CONTENT, "headers": RETRY_AFTER,
+                    "description": "RFC 9457 problem details; " + BUSY[busy]}
+    return out
 
 
 SAMPLE_FORMATS: dict[str, Any] = {
@@ -76,6 +93,7 @@ class Service:
         self.executor: Executor = make_executor(settings.workers, settings.dask_scheduler)
         self.jobs = JobManager(self.store, self.executor, settings)
         self.plots = PlotService(self.store.dir / "plots")
+        self.sync_gate = Gate(settings.max_inflight, "synchronous schedules", "FEEDSCHED_MAX_INFLIGHT")
         self.sync_budget = Budget(settings.sync_max_samples, settings.sync_max_intervals,
                                   where="the synchronous API (POST /v1/jobs takes more)")
 
@@ -169,8 +187,13 @@ def _check_plots(body: ScheduleRequest, media: str) -> None:
 
 def _routes(app: FastAPI) -> None:
     @app.get("/healthz", response_model=Health)
-    async def healthz() -> dict[str, str]:
-        return {"status": "ok"}
+    async def healthz(request: Request) -> dict[str, Any]:
+        """Liveness, and how full the service is (synchronous schedules in flight, jobs queued or running)."""
+        svc = _svc(request)
+        return {"status": "ok", "schedules_in_flight": svc.sync_gate.current,
+                "schedules_limit": svc.sync_gate.limit, "schedules_refused": svc.sync_gate.refused,
+                "jobs_active": svc.jobs.active_count(), "jobs_limit": svc.settings.job_queue_depth,
+                "jobs_refused": svc.jobs.refused}
 
     @app.get("/v1/machines", response_model=MachineList)
     async def machines() -> dict[str, Any]:
@@ -194,7 +217,7 @@ def _routes(app: FastAPI) -> None:
         "/v1/schedule",
         response_model=ScheduleResponse,
         responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule (JSON columns, CSV or NDJSON rows "
-                         "by Accept)"}, **_problems(400, 406, 413, 422, 503)},
+                         "by Accept)"}, **_problems(400, 406, 413, 422, busy="schedule")},
     )
     async def post_schedule(body: ScheduleRequest, request: Request) -> Response:
         """Schedule a toolpath now.  `Accept: text/csv` or `application/x-ndjson` for rows."""
@@ -207,10 +230,12 @@ def _routes(app: FastAPI) -> None:
                             field="toolpath.segments", value=n,
                             rule=f"at most {svc.settings.sync_max_control_points} control points")
         _check_plots(body, media)
-        res = await svc.executor.run(body.model_dump(mode="json"), svc.sync_budget, svc.settings.sync_timeout)
-        figs = None
-        if body.options.plots:
-            figs = await svc.plots.inline(res, body, list(dict.fromkeys(body.options.plots)), body.options.plot_format)
+        with svc.sync_gate.enter():  # 503 at once when FEEDSCHED_MAX_INFLIGHT schedules are in flight
+            res = await svc.executor.run(body.model_dump(mode="json"), svc.sync_budget, svc.settings.sync_timeout)
+            figs = None
+            if body.options.plots:
+                figs = await svc.plots.inline(res, body, list(dict.fromkeys(body.options.plots)),
+                                              body.options.plot_format)
         return await render(res, media, plots=figs)
 
     @app.post(
@@ -218,7 +243,7 @@ def _routes(app: FastAPI) -> None:
         response_model=ScheduleResponse,
         openapi_extra={"requestBody": {"required": True, "content": {GCODE_MEDIA: {"schema": {"type": "string"}}}}},
         responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule (JSON columns, CSV or NDJSON rows "
-                         "by Accept)"}, **_problems(400, 406, 413, 415, 422, 503)},
+                         "by Accept)"}, **_problems(400, 406, 413, 415, 422, busy="schedule")},
     )
     async def post_schedule_gcode(
         request: Request,
@@ -253,7 +278,7 @@ def _routes(app: FastAPI) -> None:
 
     @app.post("/v1/jobs", status_code=202, response_model=JobOut,
               responses={200: {"model": JobOut, "description": "an existing job (same Idempotency-Key)"},
-                         **_problems(400, 413, 422)})
+                         **_problems(400, 413, 422, busy="jobs")})
     async def post_job(
         body: ScheduleRequest, request: Request,
         idempotency_key: Annotated[str | None, Header(alias="Idempotency-Key", max_length=200)] = None,

@@ -33,6 +33,12 @@ class Settings:
         workers: solver processes at once (FEEDSCHED_WORKERS, default the number of cores).
         dask_scheduler: address of a Dask distributed scheduler; when set, solver work goes there
             (FEEDSCHED_DASK_SCHEDULER, e.g. tcp://10.0.0.5:8786).
+        max_inflight: synchronous schedules (POST /v1/schedule and /v1/schedule/gcode) being solved or waiting
+            for a solver process at once; one more is answered 503 with Retry-After at once
+            (FEEDSCHED_MAX_INFLIGHT, default 2 x workers: one solving and one waiting per solver process).
+        job_queue_depth: jobs queued or running at once; one more POST /v1/jobs is answered 503
+            (FEEDSCHED_JOB_QUEUE_DEPTH, default 32 x workers).
+        job_retry_after: Retry-After seconds of a 503 for a full job queue (FEEDSCHED_JOB_RETRY_AFTER, default 10).
     """
 
     data_dir: Path = field(default_factory=lambda: Path(_env("FEEDSCHED_DATA_DIR", "var")))
@@ -48,3 +54,15 @@ class Settings:
     job_max_attempts: int = field(default_factory=lambda: int(_env("FEEDSCHED_JOB_MAX_ATTEMPTS", "2")))
     workers: int = field(default_factory=lambda: int(_env("FEEDSCHED_WORKERS", str(os.cpu_count() or 1))))
     dask_scheduler: str | None = field(default_factory=lambda: os.environ.get("FEEDSCHED_DASK_SCHEDULER") or None)
+    max_inflight: int = field(default_factory=lambda: int(_env("FEEDSCHED_MAX_INFLIGHT", "0")))
+    job_queue_depth: int = field(default_factory=lambda: int(_env("FEEDSCHED_JOB_QUEUE_DEPTH", "0")))
+    job_retry_after: int = field(default_factory=lambda: int(_env("FEEDSCHED_JOB_RETRY_AFTER", "10")))
+
+    def __post_init__(self) -> None:
+        # 0 (the default) derives the limit from the number of solver processes
+        workers = max(1, self.workers)
+        if self.max_inflight <= 0:
+            object.__setattr__(self, "max_inflight", 2 * workers)
+        if self.job_queue_depth <= 0:
+            object.__setattr__(self, "job_queue_depth", 32 * workers)
+        object.__setattr__(self, "job_retry_after", max(1, self.job_retry_after))

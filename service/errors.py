@@ -32,7 +32,8 @@ class ServiceError(Exception):
     """A failure the service itself detects (budget, missing job, conflict...)."""
 
     def __init__(self, status: int, slug: str, title: str, detail: str, *, field: str | None = None,
-                 value: Any = None, rule: str | None = None, **extra: Any) -> None:
+                 value: Any = None, rule: str | None = None, headers: dict[str, str] | None = None,
+                 **extra: Any) -> None:
         super().__init__(detail)
         self.status = status
         self.slug = slug
@@ -41,6 +42,7 @@ class ServiceError(Exception):
         self.field = field
         self.value = value
         self.rule = rule or detail
+        self.headers = headers
         self.extra = extra
 
 
@@ -169,7 +171,11 @@ def install_handlers(app: FastAPI) -> None:
     """Every 4xx/5xx leaves as application/problem+json."""
 
     async def _any(request: Request, exc: Exception) -> JSONResponse:
-        return problem_response(problem_from_exception(exc), request.url.path)
+        headers = dict(exc.headers or {}) if isinstance(exc, ServiceError) else {}
+        problem = problem_from_exception(exc)
+        if problem["status"] == 503:  # busy, worker lost: worth retrying, say when
+            headers.setdefault("Retry-After", str(problem.get("retry_after_s", 1)))
+        return problem_response(problem, request.url.path, headers=headers or None)
 
     async def _http(request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, StarletteHTTPException)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ctypes
 import multiprocessing as mp
 import secrets
 import threading
@@ -43,6 +44,28 @@ class Executor(Protocol):
                   progress: Progress | None = None, tag: str = "") -> Result: ...
 
     def running_pids(self) -> dict[str, int]: ...
+
+
+#: Completed solver tasks between two malloc_trim calls (LocalProcessExecutor).
+TRIM_EVERY = 64
+
+
+def _malloc_trim() -> Callable[[], None]:
+    """glibc's malloc_trim(0), or a no-op elsewhere.
+
+    Results arrive unpickled in the pipe-reader threads and are freed on the event loop thread: glibc keeps
+    the freed chunks in the reader threads' arenas, and the service's RSS crept up by about 1.5 KB per
+    request (0.8 MB/min under load).  Trimming every TRIM_EVERY tasks hands the free pages back."""
+    try:
+        fn = ctypes.CDLL("libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return lambda: None
+    fn.argtypes = [ctypes.c_size_t]
+
+    def trim() -> None:
+        fn(0)
+
+    return trim
 
 
 def _reader(conn: Connection, loop: asyncio.AbstractEventLoop, q: asyncio.Queue[tuple[str, Any]]) -> None:
@@ -74,6 +97,8 @@ class LocalProcessExecutor:
         self._sem: asyncio.Semaphore | None = None
         self._pids: dict[str, int] = {}
         self._lock = threading.Lock()
+        self._done = 0
+        self._trim = _malloc_trim()
 
     async def start(self) -> None:
         self._sem = asyncio.Semaphore(self.workers)
@@ -141,6 +166,9 @@ class LocalProcessExecutor:
             await asyncio.shield(loop.run_in_executor(self._threads, proc.join, 5.0))
             with self._lock:
                 self._pids.pop(tag, None)
+            self._done += 1
+            if self._done % TRIM_EVERY == 0:
+                self._threads.submit(self._trim)
 
 
 def _noop() -> None:

@@ -12,6 +12,7 @@ from service.config import Settings
 from service.convert import Budget, save_result
 from service.errors import WorkerLost, problem_from_exception
 from service.executor import Executor
+from service.limits import busy
 from service.store import ACTIVE, Job, JobStore
 
 log = logging.getLogger("feedsched.jobs")
@@ -30,6 +31,7 @@ class JobManager:
         self._written: dict[str, float] = {}
         self._sem = asyncio.Semaphore(max(1, settings.workers))
         self._closing = False
+        self.refused = 0
 
     async def start(self) -> None:
         """Re-run jobs a previous process left queued or running (or fail them after too many attempts)."""
@@ -52,7 +54,24 @@ class JobManager:
             with contextlib.suppress(BaseException):
                 await t
 
+    def active_count(self) -> int:
+        """Jobs queued or running in this process."""
+        return len(self._tasks)
+
     def submit(self, request: dict[str, Any], idempotency_key: str | None) -> tuple[Job, bool]:
+        """Create and start a job (or return the job of a known idempotency key); 503 when the queue is full."""
+        if idempotency_key is not None:
+            old = self.store.by_key(idempotency_key)
+            if old is not None:
+                return old, False
+        n = self.active_count()
+        if n >= self.settings.job_queue_depth:
+            self.refused += 1
+            ra = self.settings.job_retry_after
+            raise busy(f"{n} jobs queued or running, the queue holds {self.settings.job_queue_depth}; "
+                       f"retry after {ra} s", value=n,
+                       rule=f"at most {self.settings.job_queue_depth} jobs queued or running "
+                       "(FEEDSCHED_JOB_QUEUE_DEPTH)", retry_after=ra)
         job, created = self.store.create(request, idempotency_key)
         if created:
             self._spawn(job.id)

@@ -284,3 +284,9 @@ class MachineOut(BaseModel):
 
 class Health(BaseModel):
     status: Literal["ok"]
+    schedules_in_flight: int = Field(description="synchronous schedules being solved or waiting for a solver")
+    schedules_limit: int = Field(description="FEEDSCHED_MAX_INFLIGHT: one more is answered 503")
+    schedules_refused: int = Field(description="503 answers to POST /v1/schedule since the start")
+    jobs_active: int = Field(description="jobs queued or running")
+    jobs_limit: int = Field(description="FEEDSCHED_JOB_QUEUE_DEPTH: one more POST /v1/jobs is answered 503")
+    jobs_refused: int = Field(description="503 answers to POST /v1/jobs since the start")

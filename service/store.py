@@ -99,6 +99,10 @@ class JobStore:
         assert job is not None
         return job, True
 
+    def by_key(self, idempotency_key: str) -> Job | None:
+        with self._lock:
+            return self._get(self._db.execute("SELECT * FROM jobs WHERE idempotency_key=?", (idempotency_key,)))
+
     def _get(self, cur: sqlite3.Cursor) -> Job | None:
         return self._row(cur.fetchone())
 

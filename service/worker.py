@@ -71,11 +71,17 @@ def child_main(conn: Connection, request: dict[str, Any], budget: Budget) -> Non
         os.nice(int(os.environ.get("FEEDSCHED_WORKER_NICE", "5")))
 
     def progress(fraction: float) -> None:
-        conn.send(("progress", float(fraction)))
+        try:
+            conn.send(("progress", float(fraction)))
+        except OSError:  # the service stopped listening (cancelled, timed out, shut down): nobody wants the result
+            os._exit(4)
 
     kind, payload = run_captured(request, budget, progress)
-    conn.send((kind, payload))
-    conn.close()
+    try:
+        conn.send((kind, payload))
+        conn.close()
+    except OSError:
+        os._exit(4)
 
 
 # --- Dask -----------------------------------------------------------------------

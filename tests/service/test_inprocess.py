@@ -36,7 +36,8 @@ def assert_problem(r: Any, status: int, field: str | None = None) -> dict[str, A
 
 
 def test_healthz(client: TestClient) -> None:
-    assert client.get("/healthz").json() == {"status": "ok"}
+    h = client.get("/healthz").json()
+    assert h["status"] == "ok" and h["schedules_in_flight"] == 0 and h["schedules_limit"] == 4  # 2 x workers
 
 
 def test_example_schedules_and_is_exact_arc(client: TestClient) -> None:
