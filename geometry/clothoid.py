@@ -209,11 +209,11 @@ def blend_corner(
     """Two clothoids replacing the corner at ``vertex`` (unit directions t_in, t_out), or None
     if the corner turns less than MIN_BLEND_ANGLE_RAD or is a reversal."""
     cos_t = float(np.clip(np.dot(t_in, t_out), -1.0, 1.0))
-    theta = math.acos(cos_t)
+    # the turn from atan2 (acos loses half the digits near 0: collinear legs came out as 1.5e-8 rad)
+    theta = math.atan2(float(np.linalg.norm(np.cross(t_in, t_out))), cos_t)
     if theta < MIN_BLEND_ANGLE_RAD or theta > math.pi - MAX_BLEND_ANGLE_MARGIN_RAD:
         return None
-    n = t_out - cos_t * t_in
-    n = n / np.linalg.norm(n)
+    n = _normal(t_in[None, :], t_out[None, :], np.array([cos_t]))[0]
     g, h = blend_factors(theta)
     L = min(tolerance_mm / h, max_setback_mm / g)
     if not L > MIN_CLOTHOID_LENGTH_MM:
@@ -251,7 +251,7 @@ def blend_polyline(points: object, tolerance_mm: float, name: str = "polyline") 
     m = len(legs)  # corners j = 0 .. m - 2 at P[j + 1], between legs j and j + 1
     t_in, t_out, V = units[:-1], units[1:], P[1:-1]
     cos_t = np.clip(np.einsum("ij,ij->i", t_in, t_out), -1.0, 1.0)
-    theta = np.arccos(cos_t)
+    theta = np.arctan2(np.linalg.norm(np.cross(t_in, t_out), axis=1), cos_t)
     ok = (theta >= MIN_BLEND_ANGLE_RAD) & (theta <= math.pi - MAX_BLEND_ANGLE_MARGIN_RAD) & (tolerance_mm > 0.0)
     j = np.arange(m - 1)
     room = np.minimum(lengths[:-1] * np.where(j == 0, 1.0, 0.5), lengths[1:] * np.where(j + 1 == m - 1, 1.0, 0.5))
@@ -260,8 +260,7 @@ def blend_polyline(points: object, tolerance_mm: float, name: str = "polyline") 
     L = np.minimum(tolerance_mm / h, room / g)
     ok &= L > MIN_CLOTHOID_LENGTH_MM
     L = np.where(ok, L, 1.0)
-    n = t_out - cos_t[:, None] * t_in
-    n = n / np.where(ok, np.linalg.norm(n, axis=1), 1.0)[:, None]
+    n = _normal(t_in, t_out, cos_t)
     d = g * L
     c = th / (L * L)
     A = V - d[:, None] * t_in
@@ -308,6 +307,15 @@ def blend_polyline(points: object, tolerance_mm: float, name: str = "polyline") 
             out.append(ClothoidSegment(M[idx], t_in[idx], n[idx], 0.5 * float(th[idx]), float(th[idx] / L[idx]),
                                        -float(c[idx]), float(L[idx]), f"{name}.corner[{idx + 1}].out"))
     return out
+
+
+def _normal(t_in: FloatArray, t_out: FloatArray, cos_t: FloatArray) -> FloatArray:
+    """Unit normals (K, 3) in the plane of t_in, t_out, towards the turn, orthogonal to t_in to rounding
+    even for nearly straight joints (where t_out - cos t_in is mostly rounding noise)."""
+    n = t_out - cos_t[:, None] * t_in
+    n = n / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+    n = n - np.einsum("ij,ij->i", n, t_in)[:, None] * t_in
+    return np.asarray(n / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None], dtype=np.float64)
 
 
 def _blend_factors(theta: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -136,7 +136,9 @@ def _uniform(v: float) -> Machine:
     (1e10, 1.0),
     pytest.param(1e12, 1.0, marks=pytest.mark.xfail(
         reason="limits of 1e12: HiGHS returns no status (SolverFailure, no field) although the window is scaled "
-               "by the reachable q; the rows still span ~1e12 (rest rows vs jerk rows)", strict=True)),
+               "by the reachable q; the rows still span ~1e12 (rest rows vs jerk rows). Not strict: whether HiGHS "
+               "answers depends on the last bit of the geometry (the line evaluated in closed form, 1 ulp from its "
+               "arc-length table, schedules within limits; through the table it fails)", strict=False)),
     pytest.param(1e12, 100.0, marks=pytest.mark.xfail(reason="as (1e12, 1.0)", strict=True)),
 ])
 def test_extreme_limits_schedule(limit: float, length: float) -> None:
