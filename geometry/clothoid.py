@@ -70,7 +70,7 @@ MIN_CLOTHOID_LENGTH_MM: Final = 1e-9
 FRAME_TOL: Final = 1e-12
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, slots=True)
 class ClothoidSegment:
     """One Euler spiral, u = arc length s in [0, length] (see the module docstring).
 
@@ -301,10 +301,11 @@ def blend_polyline(points: object, tolerance_mm: float, name: str = "polyline") 
         if kind == 0:
             out.append(segs[idx])
         elif kind == 1:
-            out.append(ClothoidSegment(A[idx], t_in[idx], n[idx], 0.0, 0.0, float(c[idx]), float(L[idx]),
+            e1, e2 = t_in[idx], n[idx]  # one frame (two array views) for both spirals of the corner
+            out.append(ClothoidSegment(A[idx], e1, e2, 0.0, 0.0, float(c[idx]), float(L[idx]),
                                        f"{name}.corner[{idx + 1}].in"))
         else:
-            out.append(ClothoidSegment(M[idx], t_in[idx], n[idx], 0.5 * float(th[idx]), float(th[idx] / L[idx]),
+            out.append(ClothoidSegment(M[idx], e1, e2, 0.5 * float(th[idx]), float(th[idx] / L[idx]),
                                        -float(c[idx]), float(L[idx]), f"{name}.corner[{idx + 1}].out"))
     return out
 

@@ -80,10 +80,15 @@ def line(start: object, end: object, name: str = "line") -> NurbsSegment:
     """
     A = _point(start, f"{name}.start")
     B = _point(end, f"{name}.end")
-    length = float(np.linalg.norm(B - A))
+    chord = B - A
+    length = float(np.linalg.norm(chord))
     if not length > MIN_LENGTH_MM:
         raise GeometryError(f"{name}.end", length, f"zero-length line: end is within {MIN_LENGTH_MM} mm of start")
-    return lines(A[None, :], B[None, :], [name])[0]
+    span = float(np.max(np.abs(chord)))
+    if not span > DEGENERATE_SPAN_MM:  # as NurbsSegment.create says
+        raise GeometryError(f"{name}.control_points", span, "degenerate segment: all control points coincide")
+    # the segment NurbsSegment.create would build from these (already checked) inputs
+    return NurbsSegment(1, np.array([0.0, 0.0, length, length]), np.array([A, B]), np.ones(2), name)
 
 
 def lines(starts: FloatArray, ends: FloatArray, names: Sequence[str]) -> list[NurbsSegment]:
@@ -321,7 +326,7 @@ def _point(value: object, fld: str) -> FloatArray:
         raise GeometryError(fld, value, "must be an [x, y] or [x, y, z] point in mm") from exc
     if p.shape not in ((2,), (3,)):
         raise GeometryError(fld, p.shape, "must be an [x, y] or [x, y, z] point in mm")
-    bad = np.flatnonzero(~np.isfinite(p))
-    if bad.size:
+    if not np.isfinite(p).all():
+        bad = np.flatnonzero(~np.isfinite(p))
         raise GeometryError(f"{fld}[{bad[0]}]", float(p[bad[0]]), "must be finite (no NaN/Inf)")
     return p if p.shape == (3,) else np.append(p, 0.0)

@@ -296,7 +296,7 @@ class Toolpath:
         sub_kind: (S,) GENERIC, LINE or CLOTHOID per sub-segment (how it is evaluated).
         sub_origin: (S,) index of the input segment each sub-segment came from.
         offsets: (S + 1,) cumulative arc length at each sub-segment start, mm.
-        knot_s: arc lengths of the knots inside sub-segments and of the junctions between them.
+        knot_s: arc lengths (sorted, unique) of the knots inside sub-segments and of the junctions between them.
         junction_jumps: (S - 1, 2) the jumps of C_ss and of C_sss (Euclidean norm, 1/mm and 1/mm^2)
             across each junction between sub-segments (corners included).
         corners: rest points inside the path, in order of s.
