@@ -58,6 +58,8 @@ ZERO_SPEED_NUDGE = 1e-7
 
 #: Kinds of sub-segment: evaluated by the segment itself through its arc-length table, or in
 #: closed form from the columns of ``_Closed`` (straight line, clothoid).
+#: Junctions whose end derivatives are evaluated at once (bounds the temporaries of a dense path).
+JUNCTION_CHUNK: Final = 65_536
 GENERIC: Final = 0
 LINE: Final = 1
 CLOTHOID: Final = 2
@@ -355,6 +357,7 @@ class Toolpath:
             closed = _Closed(parts, kind_a)
         self._closed = closed
         self._generic = tables
+        self._generic_idx = np.asarray(sorted(tables), dtype=np.int64)
         self.sub_kind = kind_a
         self.subs = SubTables(parts, dict(tables))
         self.sub_origin = origin
@@ -364,11 +367,7 @@ class Toolpath:
         # are piece ends, outside every piece); closed-form parts have no inner knots
         inner = [self.offsets[k] + t.s_of_u(t.segment.breakpoints[1:-1]) for k, t in sorted(tables.items())]
         self.knot_s = np.union1d(np.concatenate([np.zeros(0), *inner]), self.offsets[1:-1])
-        # end derivatives of every sub-segment, computed once: junction k is (end of k, start of k+1)
-        D_start, D_end = self._end_derivs()
-        self._check_gaps(D_end[0, :-1], D_start[0, 1:], gap_tol)
-        self.junction_jumps = self._jumps(D_end[:, :-1], D_start[:, 1:])
-        self.corners = self._find_corners(D_end[1, :-1], D_start[1, 1:], D_start[0, 1:], np.radians(corner_tol_deg))
+        self._junctions(gap_tol, np.radians(corner_tol_deg))
         self.pieces = self._pieces()
 
     @property
@@ -408,20 +407,36 @@ class Toolpath:
             D[1:] = seg.derivatives(u)[1:, 0, :]
         return D
 
-    def _end_derivs(self) -> tuple[FloatArray, FloatArray]:
-        """C, C', C'', C''' (4, S, 3 each) at the start and at the end of every sub-segment."""
+    def _end_derivs(self, lo: int, hi: int, at_end: bool) -> FloatArray:
+        """C and its first three u-derivatives (4, hi - lo, 3) at the start (or end) of sub-segments lo .. hi - 1."""
         cf = self._closed
-        k = np.arange(len(self.subs))
-        D_start = cf.derivatives(k, np.zeros(k.size))
-        D_end = cf.derivatives(k, cf.length)
-        D_end[0] = cf.end  # exact ends: a line's end point, a clothoid's by the same Fresnel form
-        for j in self._generic:
-            D_start[:, j] = self._generic_end_derivs(j, False)
-            D_end[:, j] = self._generic_end_derivs(j, True)
-        return D_start, D_end
+        k = np.arange(lo, hi)
+        D = cf.derivatives(k, cf.length[k] if at_end else np.zeros(k.size))
+        if at_end:
+            D[0] = cf.end[k]  # exact ends: a line's end point, a clothoid's by the same Fresnel form
+        g = self._generic_idx
+        for j in g[np.searchsorted(g, lo) : np.searchsorted(g, hi)].tolist():
+            D[:, j - lo] = self._generic_end_derivs(j, at_end)
+        return D
 
-    def _check_gaps(self, p_out: FloatArray, p_in: FloatArray, gap_tol: float) -> None:
-        gaps = np.linalg.norm(p_in - p_out, axis=1)
+    def _junctions(self, gap_tol: float, tol_rad: float) -> None:
+        """Gaps (error), jumps of C_ss and C_sss (``junction_jumps``) and corners at every junction,
+        from the end derivatives of the sub-segments on either side, JUNCTION_CHUNK junctions at a time."""
+        J = len(self.subs) - 1
+        gaps = np.empty(J)
+        cos = np.empty(J)
+        p_in = np.empty((J, 3))
+        self.junction_jumps = np.empty((J, 2))
+        for a in range(0, J, JUNCTION_CHUNK):
+            b = min(J, a + JUNCTION_CHUNK)  # junction k joins the end of sub k to the start of sub k + 1
+            D_out = self._end_derivs(a, b, True)
+            D_in = self._end_derivs(a + 1, b + 1, False)
+            gaps[a:b] = np.linalg.norm(D_in[0] - D_out[0], axis=1)
+            self.junction_jumps[a:b] = self._jumps(D_out, D_in)
+            t_out, t_in = D_out[1], D_in[1]
+            norms = np.linalg.norm(t_out, axis=1) * np.linalg.norm(t_in, axis=1)
+            cos[a:b] = np.einsum("ij,ij->i", t_out, t_in) / norms
+            p_in[a:b] = D_in[0]
         bad = np.flatnonzero(~(gaps <= gap_tol))
         if bad.size:
             k = int(bad[0])
@@ -433,6 +448,16 @@ class Toolpath:
                 f"gap of {gap:.6g} mm to the previous segment's end exceeds {gap_tol} mm",
                 i,
             )
+        angle = np.arccos(np.clip(cos, -1.0, 1.0))
+        self.corners = [
+            Corner(
+                s=float(self.offsets[k + 1]),
+                angle_deg=float(np.degrees(angle[k])),
+                segment=int(self.sub_origin[k + 1]),
+                position=(float(p_in[k, 0]), float(p_in[k, 1]), float(p_in[k, 2])),
+            )
+            for k in np.flatnonzero(angle > tol_rad).tolist()
+        ]
 
     @staticmethod
     def _jumps(D_out: FloatArray, D_in: FloatArray) -> FloatArray:
@@ -442,19 +467,6 @@ class Toolpath:
         _, a2, a3 = arc_length_derivatives(D_out)
         _, b2, b3 = arc_length_derivatives(D_in)
         return np.column_stack([np.linalg.norm(b2 - a2, axis=1), np.linalg.norm(b3 - a3, axis=1)])
-
-    def _find_corners(self, t_out: FloatArray, t_in: FloatArray, p_in: FloatArray, tol_rad: float) -> list[Corner]:
-        c = np.einsum("ij,ij->i", t_out, t_in) / (np.linalg.norm(t_out, axis=1) * np.linalg.norm(t_in, axis=1))
-        angle = np.arccos(np.clip(c, -1.0, 1.0))
-        return [
-            Corner(
-                s=float(self.offsets[k + 1]),
-                angle_deg=float(np.degrees(angle[k])),
-                segment=int(self.sub_origin[k + 1]),
-                position=(float(p_in[k, 0]), float(p_in[k, 1]), float(p_in[k, 2])),
-            )
-            for k in np.flatnonzero(angle > tol_rad)
-        ]
 
     def _pieces(self) -> list[Piece]:
         starts = [0] + [int(np.searchsorted(self.offsets, c.s)) for c in self.corners]
