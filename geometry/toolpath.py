@@ -344,7 +344,9 @@ class Toolpath:
         length[kind_a != GENERIC] = closed.length[kind_a != GENERIC]
         origin = np.asarray(origin_l, dtype=np.int64)
         keep = length > MIN_SEGMENT_LENGTH_MM
-        missing = np.setdiff1d(np.arange(len(self.segments)), origin[keep])
+        covered = np.zeros(len(self.segments), dtype=bool)
+        covered[origin[keep]] = True
+        missing = np.flatnonzero(~covered)
         if missing.size:
             i = int(missing[0])
             raise GeometryError(f"segments[{i}]", 0.0, f"zero-length segment (< {MIN_SEGMENT_LENGTH_MM} mm)", i)
@@ -381,6 +383,15 @@ class Toolpath:
         if len(feed_limits) != n:
             raise GeometryError("feed_limits", len(feed_limits), f"needs one entry per segment ({n})")
         out = np.full(n, np.inf)
+        # all at once when every limit is valid (a dense program has 10^5 segments) ...
+        given = [i for i, f in enumerate(feed_limits) if f is not None]
+        vals = [feed_limits[i] for i in given]
+        if all(isinstance(f, (int, float)) and not isinstance(f, bool) for f in vals):
+            arr = np.asarray(vals, dtype=np.float64)
+            if np.all(np.isfinite(arr) & (arr > 0.0)):
+                out[given] = arr
+                return out
+        # ... else one by one, naming the first bad one
         for i, f in enumerate(feed_limits):
             if f is None:
                 continue
