@@ -31,6 +31,9 @@ FloatArray = NDArray[np.float64]
 #: A segment whose control points all lie within this distance (mm) of each
 #: other is degenerate: it has no length to travel.
 DEGENERATE_SPAN_MM = 1e-9
+#: An interior knot where |C'| is at most this share of the control polygon's length per unit u
+#: is a zero-speed point (repeated control points): the segment is split there.
+ZERO_SPEED_SHARE = 1e-9
 
 
 @dataclass(frozen=True, eq=False)
@@ -185,13 +188,58 @@ class NurbsSegment:
         h = self._hom(np.clip(np.asarray(u, dtype=np.float64), lo, hi), 0)
         return np.asarray(h[:, :3] / h[:, 3:4], dtype=np.float64)
 
+    def zero_speed_knots(self) -> FloatArray:
+        """Interior knots (multiplicity < p) where |C'(u)| vanishes, (Z,).
+
+        p equal consecutive control points P_i = ... = P_{i+p-1} make p - 1
+        consecutive control points of C' zero, so C' = 0 at the knot between
+        them: the curve stops there and its tangent may reverse (a cusp)."""
+        lo, hi = self.domain
+        vals, counts = np.unique(self.knots, return_counts=True)
+        cand = vals[(vals > lo) & (vals < hi) & (counts < self.degree)]
+        if cand.size == 0:
+            return cand
+        polygon = float(np.sum(np.linalg.norm(np.diff(self.control_points, axis=0), axis=1)))
+        return np.asarray(cand[self.speed(cand) <= ZERO_SPEED_SHARE * polygon / (hi - lo)], dtype=np.float64)
+
+    def insert_knot(self, u: float, times: int = 1) -> NurbsSegment:
+        """The same curve with knot u inserted ``times`` times (Boehm; Piegl & Tiller A5.1).
+
+        With U_k <= u < U_k+1, each insertion replaces the homogeneous control points
+        Pw_i, k-p+1 <= i <= k, by alpha_i Pw_i + (1 - alpha_i) Pw_i-1 with
+        alpha_i = (u - U_i) / (U_i+p - U_i) (alpha = 0 where U_i = u)."""
+        p = self.degree
+        U = self.knots
+        Pw = np.column_stack([self.control_points * self.weights[:, None], self.weights])
+        for _ in range(times):
+            k = int(np.searchsorted(U, u, side="right")) - 1
+            n = Pw.shape[0]
+            Q = np.empty((n + 1, 4))
+            Q[: k - p + 1] = Pw[: k - p + 1]
+            Q[k + 1 :] = Pw[k:]
+            i = np.arange(k - p + 1, k + 1)
+            alpha = ((u - U[i]) / (U[i + p] - U[i]))[:, None]
+            Q[i] = alpha * Pw[i] + (1.0 - alpha) * Pw[i - 1]
+            U = np.insert(U, k + 1, u)
+            Pw = Q
+        return NurbsSegment(degree=p, knots=U, control_points=Pw[:, :3] / Pw[:, 3:4], weights=Pw[:, 3].copy(),
+                            name=self.name)
+
     def split_at_c0_knots(self) -> list[NurbsSegment]:
-        """Split at interior knots of multiplicity p (where the curve is only C0).
+        """Split at interior knots of multiplicity p (where the curve is only C0), and at
+        zero-speed knots (``zero_speed_knots``: first raised to multiplicity p), where the
+        tangent may reverse: the Toolpath then sees the cusp as a corner.
 
         With multiplicity p at knot value k (first index j in U) the curve passes
         through P_{j-1}; the left piece keeps U[:j+p] + [k] and P[:j], the right
         piece [k] + U[j:] and P[j-1:].
         """
+        seg = self
+        for v in self.zero_speed_knots():
+            seg = seg.insert_knot(float(v), self.degree - int(np.sum(seg.knots == v)))
+        return seg._split_c0()
+
+    def _split_c0(self) -> list[NurbsSegment]:
         p = self.degree
         lo, hi = self.domain
         U = self.knots

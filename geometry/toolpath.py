@@ -39,7 +39,7 @@ from scipy.special import fresnel
 from geometry.arclength import ArcLengthTable
 from geometry.clothoid import ClothoidSegment
 from geometry.errors import GeometryError
-from geometry.nurbs import NurbsSegment
+from geometry.nurbs import ZERO_SPEED_SHARE, NurbsSegment
 from geometry.segment import Segment
 
 FloatArray = NDArray[np.float64]
@@ -525,9 +525,11 @@ class Toolpath:
                 seg = table.segment
                 um = table.u_of_s(x[m])
                 Dk = seg.derivatives(um)
-                stuck = ~(np.einsum("ij,ij->i", Dk[1], Dk[1]) > 0.0)
+                lo, hi = seg.domain
+                # zero speed, or a rounding residue of it (|C'| ~ 1e-16 at a cusp's knot): no tangent there
+                tiny = ZERO_SPEED_SHARE * table.length / (hi - lo)
+                stuck = ~(np.einsum("ij,ij->i", Dk[1], Dk[1]) > tiny * tiny)
                 if stuck.any():
-                    lo, hi = seg.domain
                     us = um[stuck]
                     nudge = np.where(us < 0.5 * (lo + hi), 1.0, -1.0) * ZERO_SPEED_NUDGE * (hi - lo)
                     Dk[1:, stuck, :] = seg.derivatives(us + nudge)[1:]

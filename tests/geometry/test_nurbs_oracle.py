@@ -200,3 +200,43 @@ def test_random_nurbs_match_geomdl(case: tuple[RawNurbs, np.ndarray]) -> None:
     if on_knot.any():
         worst = int(counts[inner].max())
         assert_matches_geomdl(raw, u[on_knot], orders=range(min(3, raw.degree - worst) + 1))
+
+
+#: Knot insertion leaves the curve unchanged to rounding (mm, on a 50 mm control net).
+INSERTION_TOL_MM = 1e-9
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**31 - 1), degree=st.integers(2, 5), at_knot=st.booleans())
+def test_knot_insertion_keeps_the_curve(seed: int, degree: int, at_knot: bool) -> None:
+    """Boehm insertion (NurbsSegment.insert_knot) at a random u or at an existing interior knot,
+    up to multiplicity p: the same curve (geomdl evaluates the original), split at a C0 knot when
+    full, and each piece evaluates to the original over its own domain."""
+    rng = np.random.default_rng(seed)
+    raw = random_nurbs(rng, degree, 3)
+    seg = raw.segment()
+    lo, hi = seg.domain
+    inner = np.unique(raw.knots[(raw.knots > lo) & (raw.knots < hi)])
+    u0 = float(rng.choice(inner)) if at_knot else float(rng.uniform(lo + 0.05, hi - 0.05))
+    have = int(np.sum(raw.knots == u0))
+    times = degree - have
+    ins = seg.insert_knot(u0, times)
+    assert ins.knots.size == raw.knots.size + times and int(np.sum(ins.knots == u0)) == degree
+    u = np.linspace(lo, hi, 301)
+    ref = geomdl_curve(raw)
+    np.testing.assert_allclose(ins.points(u), np.array(ref.evaluate_list(list(u))), atol=INSERTION_TOL_MM)
+    parts = ins._split_c0()
+    assert any(p.domain[1] == u0 for p in parts)
+    for part in parts:
+        a, b = part.domain
+        uu = np.linspace(a, b, 101)
+        np.testing.assert_allclose(part.points(uu), seg.points(uu), atol=INSERTION_TOL_MM)
+
+
+def test_zero_speed_knot_found_only_where_control_points_repeat() -> None:
+    """p equal control points stop a degree-p curve at one knot; p - 1 of them do not."""
+    cusp = NurbsSegment.create(3, [0, 0, 0, 0, 0.5, 1, 1, 1, 1], [[0, 0], [10, 0], [10, 0], [10, 0], [0, 10]])
+    np.testing.assert_array_equal(cusp.zero_speed_knots(), [0.5])
+    assert len(cusp.split_at_c0_knots()) == 2
+    double = NurbsSegment.create(3, [0, 0, 0, 0, 0.5, 1, 1, 1, 1], [[0, 0], [10, 0], [10, 0], [10, 5], [0, 10]])
+    assert double.zero_speed_knots().size == 0 and len(double.split_at_c0_knots()) == 1
