@@ -70,7 +70,7 @@ MIN_CLOTHOID_LENGTH_MM: Final = 1e-9
 FRAME_TOL: Final = 1e-12
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, slots=True)
 class ClothoidSegment:
     """One Euler spiral, u = arc length s in [0, length] (see the module docstring).
 
@@ -209,11 +209,11 @@ def blend_corner(
     """Two clothoids replacing the corner at ``vertex`` (unit directions t_in, t_out), or None
     if the corner turns less than MIN_BLEND_ANGLE_RAD or is a reversal."""
     cos_t = float(np.clip(np.dot(t_in, t_out), -1.0, 1.0))
-    theta = math.acos(cos_t)
+    # the turn from atan2 (acos loses half the digits near 0: collinear legs came out as 1.5e-8 rad)
+    theta = math.atan2(float(np.linalg.norm(np.cross(t_in, t_out))), cos_t)
     if theta < MIN_BLEND_ANGLE_RAD or theta > math.pi - MAX_BLEND_ANGLE_MARGIN_RAD:
         return None
-    n = t_out - cos_t * t_in
-    n = n / np.linalg.norm(n)
+    n = _normal(t_in[None, :], t_out[None, :], np.array([cos_t]))[0]
     g, h = blend_factors(theta)
     L = min(tolerance_mm / h, max_setback_mm / g)
     if not L > MIN_CLOTHOID_LENGTH_MM:
@@ -235,6 +235,10 @@ def blend_polyline(points: object, tolerance_mm: float, name: str = "polyline") 
     tolerance. Reversals (theta > pi - MAX_BLEND_ANGLE_MARGIN_RAD) stay corners (rest
     points). ``tolerance_mm`` = 0 returns the plain lines (stop at every corner).
 
+    All corners are computed at once (numpy over the corners; ``blend_corner`` is the same
+    construction for one corner), so a chain of 10^5 legs costs about as much as building
+    its segment objects.
+
     Returns:
         Segments in path order: lines (degree-1 NurbsSegment) and ClothoidSegments.
     """
@@ -244,27 +248,84 @@ def blend_polyline(points: object, tolerance_mm: float, name: str = "polyline") 
     legs = np.diff(P, axis=0)
     lengths = np.linalg.norm(legs, axis=1)
     units = legs / lengths[:, None]
+    m = len(legs)  # corners j = 0 .. m - 2 at P[j + 1], between legs j and j + 1
+    t_in, t_out, V = units[:-1], units[1:], P[1:-1]
+    cos_t = np.clip(np.einsum("ij,ij->i", t_in, t_out), -1.0, 1.0)
+    theta = np.arctan2(np.linalg.norm(np.cross(t_in, t_out), axis=1), cos_t)
+    ok = (theta >= MIN_BLEND_ANGLE_RAD) & (theta <= math.pi - MAX_BLEND_ANGLE_MARGIN_RAD) & (tolerance_mm > 0.0)
+    j = np.arange(m - 1)
+    room = np.minimum(lengths[:-1] * np.where(j == 0, 1.0, 0.5), lengths[1:] * np.where(j + 1 == m - 1, 1.0, 0.5))
+    th = np.where(ok, theta, 1.0)  # placeholder turn where no blend is made (keeps the arithmetic finite)
+    g, h = _blend_factors(th)
+    L = np.minimum(tolerance_mm / h, room / g)
+    ok &= L > MIN_CLOTHOID_LENGTH_MM
+    L = np.where(ok, L, 1.0)
+    n = _normal(t_in, t_out, cos_t)
+    d = g * L
+    c = th / (L * L)
+    A = V - d[:, None] * t_in
+    B = V + d[:, None] * t_out
+    # junction M = end of the first spiral (phi0 = kappa0 = 0, c > 0): ClothoidSegment.points at L
+    a = np.sqrt(np.pi / c)
+    S1, C1 = fresnel(L / a)
+    M = A + (a * C1)[:, None] * t_in + (a * S1)[:, None] * n
+    # the chain: a line up to each blend's entry A (or to an unblended corner), the two spirals
+    prev = np.concatenate([P[:1], np.where(ok[:, None], B, V)])  # where the path stands after corner j - 1
+    line_a: list[FloatArray] = []
+    line_b: list[FloatArray] = []
+    line_name: list[str] = []
+    # placeholders: a line's index into line_a, or a corner's (j, first or second spiral)
+    order: list[tuple[int, int]] = []
+    for jj in range(m - 1):
+        i = jj + 1
+        if ok[jj]:
+            if np.linalg.norm(A[jj] - prev[jj]) > primitives.MIN_LENGTH_MM:
+                order.append((0, len(line_a)))
+                line_a.append(prev[jj])
+                line_b.append(A[jj])
+                line_name.append(f"{name}.line[{i - 1}]")
+            order.extend(((1, jj), (2, jj)))
+        else:
+            order.append((0, len(line_a)))
+            line_a.append(prev[jj])
+            line_b.append(V[jj])
+            line_name.append(f"{name}.line[{i - 1}]")
+    if np.linalg.norm(P[-1] - prev[-1]) > primitives.MIN_LENGTH_MM:
+        order.append((0, len(line_a)))
+        line_a.append(prev[-1])
+        line_b.append(P[-1])
+        line_name.append(f"{name}.line[{m - 1}]")
+    segs = primitives.lines(np.array(line_a).reshape(-1, 3), np.array(line_b).reshape(-1, 3), line_name)
     out: list[Segment] = []
-    current = P[0]
-    last = len(legs) - 1
-    for i in range(1, len(P) - 1):
-        blend = None
-        if tolerance_mm > 0.0:
-            room_in = lengths[i - 1] * (1.0 if i - 1 == 0 else 0.5)
-            room_out = lengths[i] * (1.0 if i == last else 0.5)
-            room = min(room_in, room_out)
-            blend = blend_corner(P[i], units[i - 1], units[i], tolerance_mm, room, f"{name}.corner[{i}]")
-        if blend is None:
-            out.append(primitives.line(current, P[i], name=f"{name}.line[{i - 1}]"))
-            current = P[i]
-            continue
-        if np.linalg.norm(blend.entry - current) > primitives.MIN_LENGTH_MM:
-            out.append(primitives.line(current, blend.entry, name=f"{name}.line[{i - 1}]"))
-        out.extend(blend.spirals)
-        current = blend.exit
-    if np.linalg.norm(P[-1] - current) > primitives.MIN_LENGTH_MM:
-        out.append(primitives.line(current, P[-1], name=f"{name}.line[{last}]"))
+    for kind, idx in order:
+        if kind == 0:
+            out.append(segs[idx])
+        elif kind == 1:
+            e1, e2 = t_in[idx], n[idx]  # one frame (two array views) for both spirals of the corner
+            out.append(ClothoidSegment(A[idx], e1, e2, 0.0, 0.0, float(c[idx]), float(L[idx]),
+                                       f"{name}.corner[{idx + 1}].in"))
+        else:
+            out.append(ClothoidSegment(M[idx], e1, e2, 0.5 * float(th[idx]), float(th[idx] / L[idx]),
+                                       -float(c[idx]), float(L[idx]), f"{name}.corner[{idx + 1}].out"))
     return out
+
+
+def _normal(t_in: FloatArray, t_out: FloatArray, cos_t: FloatArray) -> FloatArray:
+    """Unit normals (K, 3) in the plane of t_in, t_out, towards the turn, orthogonal to t_in to rounding
+    even for nearly straight joints (where t_out - cos t_in is mostly rounding noise)."""
+    n = t_out - cos_t[:, None] * t_in
+    n = n / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+    n = n - np.einsum("ij,ij->i", n, t_in)[:, None] * t_in
+    return np.asarray(n / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None], dtype=np.float64)
+
+
+def _blend_factors(theta: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``blend_factors`` for many turns at once."""
+    z = np.sqrt(theta / np.pi)
+    S, C = fresnel(z)
+    fx, fy = C / z, S / z
+    half = 0.5 * theta
+    return fx + fy * np.tan(half), fy / np.cos(half)
 
 
 def _vec(value: object, fld: str) -> FloatArray:

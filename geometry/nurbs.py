@@ -17,7 +17,8 @@ follow from the quotient rule (Piegl & Tiller eq. 4.8):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,7 +53,6 @@ class NurbsSegment:
     control_points: FloatArray
     weights: FloatArray
     name: str = "segment"
-    _spl: BSpline = field(init=False, repr=False)
 
     @classmethod
     def create(
@@ -128,9 +128,12 @@ class NurbsSegment:
             )
         return cls(degree=p, knots=U, control_points=P, weights=w, name=name)
 
-    def __post_init__(self) -> None:
+    @cached_property
+    def _spl(self) -> BSpline:
+        """The homogeneous B-spline [wP, w], built on first evaluation (a dense G-code program holds
+        hundreds of thousands of lines that ``Toolpath`` evaluates in closed form and never needs it)."""
         hom = np.column_stack([self.control_points * self.weights[:, None], self.weights])
-        object.__setattr__(self, "_spl", BSpline(self.knots, hom, self.degree, extrapolate=False))
+        return BSpline(self.knots, hom, self.degree, extrapolate=False)
 
     @property
     def domain(self) -> tuple[float, float]:

@@ -15,19 +15,31 @@ Checks: |C_s| = 1, C_s . C_ss = 0, |C_ss| = curvature (1/mm).
 Corners: where the unit tangent turns by more than ``corner_tol_deg`` between
 consecutive segments (or at a C0 knot inside one) the feed must come to rest.
 The path is split there into *pieces*, each scheduled rest to rest.
+
+Closed forms for dense paths. Straight lines (degree-1 NURBS with two control points
+and equal weights, u linear in s) and clothoids (u = s) are measured and evaluated in
+closed form for all of them at once, from columns of their parameters: a G-code
+program of 150,000 short moves has about 450,000 such sub-segments after corner
+blending, and a Python loop over them (one arc-length table each, one evaluation
+call each) dominated both building the toolpath and scheduling it. Every other
+segment keeps its adaptive arc-length table (``ArcLengthTable``); ``subs`` builds
+the tables of closed-form sub-segments only when asked for.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import Final, overload
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import fresnel
 
 from geometry.arclength import ArcLengthTable
+from geometry.clothoid import ClothoidSegment
 from geometry.errors import GeometryError
-from geometry.nurbs import ZERO_SPEED_SHARE
+from geometry.nurbs import ZERO_SPEED_SHARE, NurbsSegment
 from geometry.segment import Segment
 
 FloatArray = NDArray[np.float64]
@@ -43,6 +55,170 @@ MIN_SEGMENT_LENGTH_MM = 1e-9
 #: inside (fraction of the parameter domain): the arc-length derivatives have a
 #: limit there but the u-derivative formulas divide by |C'|.
 ZERO_SPEED_NUDGE = 1e-7
+
+#: Kinds of sub-segment: evaluated by the segment itself through its arc-length table, or in
+#: closed form from the columns of ``_Closed`` (straight line, clothoid).
+#: Junctions whose end derivatives are evaluated at once (bounds the temporaries of a dense path).
+JUNCTION_CHUNK: Final = 65_536
+GENERIC: Final = 0
+LINE: Final = 1
+CLOTHOID: Final = 2
+
+
+def segment_kind(seg: Segment) -> int:
+    """LINE for a degree-1 NURBS with two control points and equal weights (u is then linear in
+    arc length), CLOTHOID for a ``ClothoidSegment`` (u = arc length), GENERIC otherwise."""
+    if isinstance(seg, ClothoidSegment):
+        return CLOTHOID
+    if (isinstance(seg, NurbsSegment) and seg.degree == 1 and seg.control_points.shape[0] == 2
+            and seg.weights[0] == seg.weights[1]):
+        return LINE
+    return GENERIC
+
+
+class _Closed:
+    """Columns of the closed-form sub-segments (rows of other kinds hold zeros).
+
+    Line k: C(s) = start_k + s e1_k (e1 the unit direction), u = u0_k + s du_k.
+    Clothoid k (``geometry.clothoid``): start, e1, e2, phi0, kappa0, sharpness c; with
+    a = sqrt(pi / |c|), b = kappa0 / c, sigma = sign(c), Fresnel S0, C0 at b / a and
+    amp = a exp(i (phi0 - kappa0^2 / (2 c))):
+        C(s) = start + Re(w) e1 + Im(w) e2,  w = amp ((Cf(t) - C0) + i sigma (Sf(t) - S0)),  t = (s + b) / a
+    (the same operations as ``ClothoidSegment.points``).
+    """
+
+    def __init__(self, subs: Sequence[Segment], kind: IntArray) -> None:
+        S = len(subs)
+        self.kind = kind
+        self.start = np.zeros((S, 3))
+        self.e1 = np.zeros((S, 3))
+        self.e2 = np.zeros((S, 3))
+        self.end = np.zeros((S, 3))
+        self.length = np.zeros(S)
+        self.u0 = np.zeros(S)
+        self.du = np.zeros(S)
+        lines = np.flatnonzero(kind == LINE)
+        if lines.size:
+            segs = [subs[i] for i in lines.tolist()]
+            P = np.array([s.control_points for s in segs if isinstance(s, NurbsSegment)])
+            U = np.array([s.domain for s in segs])
+            chord = P[:, 1] - P[:, 0]
+            L = np.linalg.norm(chord, axis=1)
+            self.start[lines] = P[:, 0]
+            self.end[lines] = P[:, 1]
+            self.e1[lines] = chord / np.where(L > 0.0, L, 1.0)[:, None]
+            self.length[lines] = L
+            self.u0[lines] = U[:, 0]
+            self.du[lines] = (U[:, 1] - U[:, 0]) / np.where(L > 0.0, L, 1.0)
+        self.phi0 = np.zeros(S)
+        self.kappa0 = np.zeros(S)
+        self.sharp = np.zeros(S)
+        self.a = np.ones(S)
+        self.b = np.zeros(S)
+        self.sigma = np.ones(S)
+        self.S0 = np.zeros(S)
+        self.C0 = np.zeros(S)
+        self.amp = np.zeros(S, dtype=np.complex128)
+        cl = np.flatnonzero(kind == CLOTHOID)
+        if cl.size:
+            cs = [c for c in (subs[i] for i in cl.tolist()) if isinstance(c, ClothoidSegment)]
+            self.start[cl] = np.array([c.start for c in cs])
+            self.e1[cl] = np.array([c.e1 for c in cs])
+            self.e2[cl] = np.array([c.e2 for c in cs])
+            par = np.array([(c.phi0, c.kappa0, c.sharpness, c.length) for c in cs])
+            phi0, k0, c, L = par.T
+            self.phi0[cl], self.kappa0[cl], self.sharp[cl], self.length[cl] = phi0, k0, c, L
+            self.du[cl] = 1.0
+            a = np.sqrt(np.pi / np.abs(c))
+            b = k0 / c
+            self.a[cl], self.b[cl] = a, b
+            self.sigma[cl] = np.where(c > 0, 1.0, -1.0)
+            self.S0[cl], self.C0[cl] = fresnel(b / a)
+            self.amp[cl] = a * np.exp(1j * (phi0 - k0 * k0 / (2.0 * c)))
+            self.end[cl] = self._clothoid_points(cl, L)
+
+    def _clothoid_points(self, k: IntArray, x: FloatArray) -> FloatArray:
+        S1, C1 = fresnel((x + self.b[k]) / self.a[k])
+        w = self.amp[k] * ((C1 - self.C0[k]) + 1j * self.sigma[k] * (S1 - self.S0[k]))
+        return np.asarray(self.start[k] + np.real(w)[:, None] * self.e1[k] + np.imag(w)[:, None] * self.e2[k],
+                          dtype=np.float64)
+
+    def _clothoid_frame(self, k: IntArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Unit tangent T, normal N (K, 3) and curvature kappa (K,) of clothoids k at s = x."""
+        phi = self.phi0[k] + self.kappa0[k] * x + 0.5 * self.sharp[k] * x * x
+        cos, sin = np.cos(phi)[:, None], np.sin(phi)[:, None]
+        T = cos * self.e1[k] + sin * self.e2[k]
+        N = -sin * self.e1[k] + cos * self.e2[k]
+        return T, N, self.kappa0[k] + self.sharp[k] * x
+
+    def clip(self, k: IntArray, x: FloatArray) -> FloatArray:
+        return np.asarray(np.minimum(np.maximum(x, 0.0), self.length[k]), dtype=np.float64)
+
+    def points(self, k: IntArray, x: FloatArray) -> FloatArray:
+        """C at local arc length x (clipped to the sub-segment) of closed-form sub-segments k, (K, 3)."""
+        x = self.clip(k, x)
+        out = self.start[k] + x[:, None] * self.e1[k]
+        cl = self.kind[k] == CLOTHOID
+        if cl.any():
+            out[cl] = self._clothoid_points(k[cl], x[cl])
+        return np.asarray(out, dtype=np.float64)
+
+    def derivatives(self, k: IntArray, x: FloatArray) -> FloatArray:
+        """(4, K, 3): C and its first three derivatives in u = s (lines: u - u0 = s / du, the same
+        direction; ``arc_length_derivatives`` normalises either way)."""
+        x = self.clip(k, x)
+        D = np.zeros((4, x.size, 3))
+        D[0] = self.start[k] + x[:, None] * self.e1[k]
+        D[1] = self.e1[k]
+        cl = np.flatnonzero(self.kind[k] == CLOTHOID)
+        if cl.size:
+            kc, xc = k[cl], x[cl]
+            T, N, kap = self._clothoid_frame(kc, xc)
+            D[0, cl] = self._clothoid_points(kc, xc)
+            D[1, cl] = T
+            D[2, cl] = kap[:, None] * N
+            D[3, cl] = self.sharp[kc][:, None] * N - (kap * kap)[:, None] * T
+        return D
+
+    def end_tangents(self, k: IntArray) -> tuple[FloatArray, FloatArray]:
+        """Unit tangents (K, 3) at the start and at the end of closed-form sub-segments k."""
+        t0 = self.e1[k].copy()
+        t1 = self.e1[k].copy()
+        cl = np.flatnonzero(self.kind[k] == CLOTHOID)
+        if cl.size:
+            t0[cl] = self._clothoid_frame(k[cl], np.zeros(cl.size))[0]
+            t1[cl] = self._clothoid_frame(k[cl], self.length[k[cl]])[0]
+        return t0, t1
+
+
+class SubTables(Sequence[ArcLengthTable]):
+    """``Toolpath.subs``: the arc-length table of every sub-segment, built on first access for
+    closed-form sub-segments (lines, clothoids), which ``Toolpath`` measures without one."""
+
+    def __init__(self, segments: list[Segment], tables: dict[int, ArcLengthTable]) -> None:
+        self._segments = segments
+        self._tables = tables
+
+    def __len__(self) -> int:
+        return len(self._segments)
+
+    @overload
+    def __getitem__(self, i: int) -> ArcLengthTable: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> list[ArcLengthTable]: ...
+
+    def __getitem__(self, i: int | slice) -> ArcLengthTable | list[ArcLengthTable]:
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        j = range(len(self))[i]
+        t = self._tables.get(j)
+        if t is None:
+            t = self._tables[j] = ArcLengthTable.build(self._segments[j])
+        return t
+
+    def __iter__(self) -> Iterator[ArcLengthTable]:
+        return (self[j] for j in range(len(self)))
 
 
 @dataclass(frozen=True)
@@ -118,9 +294,13 @@ class Toolpath:
 
     Attributes:
         segments: the input segments (as given, in order).
-        subs: sub-segments after splitting at C0 knots, with their arc-length tables.
+        subs: sub-segments after splitting at C0 knots, with their arc-length tables (``SubTables``).
+        sub_kind: (S,) GENERIC, LINE or CLOTHOID per sub-segment (how it is evaluated).
         sub_origin: (S,) index of the input segment each sub-segment came from.
         offsets: (S + 1,) cumulative arc length at each sub-segment start, mm.
+        knot_s: arc lengths (sorted, unique) of the knots inside sub-segments and of the junctions between them.
+        junction_jumps: (S - 1, 2) the jumps of C_ss and of C_sss (Euclidean norm, 1/mm and 1/mm^2)
+            across each junction between sub-segments (corners included).
         corners: rest points inside the path, in order of s.
         pieces: rest-to-rest stretches.
     """
@@ -140,34 +320,56 @@ class Toolpath:
             raise GeometryError("corner_tolerance_deg", corner_tol_deg, "must be in [0, 180)")
         self.segments = list(segments)
         self._feed = self._check_feed_limits(feed_limits, len(self.segments))
-        subs: list[ArcLengthTable] = []
-        origin: list[int] = []
+        parts: list[Segment] = []
+        origin_l: list[int] = []
+        kinds: list[int] = []
+        tables: dict[int, ArcLengthTable] = {}
+        lengths: list[float] = []
         for i, seg in enumerate(self.segments):
-            for part in seg.split_at_c0_knots():
-                table = ArcLengthTable.build(part)
-                if table.length > MIN_SEGMENT_LENGTH_MM:
-                    subs.append(table)
-                    origin.append(i)
-            if not origin or origin[-1] != i:
-                raise GeometryError(
-                    f"segments[{i}]", 0.0, f"zero-length segment (< {MIN_SEGMENT_LENGTH_MM} mm)", i
-                )
-        self.subs = subs
-        self.sub_origin = np.asarray(origin, dtype=np.int64)
-        self.offsets = np.concatenate([[0.0], np.cumsum([t.length for t in subs])])
-        #: global arc length of every knot inside the sub-segments (where C''' may jump)
-        # ... and the junctions between sub-segments (where the curvature may jump too; those that
-        # are corners are piece ends, outside every piece)
-        self.knot_s = np.union1d(
-            np.concatenate(
-                [off + t.s_of_u(t.segment.breakpoints[1:-1]) for off, t in zip(self.offsets[:-1], subs, strict=True)]
-            ),
-            self.offsets[1:-1],
-        )
-        # end derivatives at every junction, computed once: (out of sub k, into sub k+1)
-        junctions = [(self._end_derivs(k, True), self._end_derivs(k + 1, False)) for k in range(len(subs) - 1)]
-        self._check_gaps(junctions, gap_tol)
-        self.corners = self._find_corners(junctions, np.radians(corner_tol_deg))
+            kind = segment_kind(seg)
+            for part in [seg] if kind != GENERIC else seg.split_at_c0_knots():
+                pk = kind if kind != GENERIC else segment_kind(part)
+                if pk == GENERIC:
+                    table = ArcLengthTable.build(part)
+                    tables[len(parts)] = table
+                    lengths.append(table.length)
+                else:
+                    lengths.append(np.nan)  # measured below, all closed-form parts at once
+                parts.append(part)
+                origin_l.append(i)
+                kinds.append(pk)
+        kind_a = np.asarray(kinds, dtype=np.int64)
+        closed = _Closed(parts, kind_a)
+        length = np.asarray(lengths, dtype=np.float64)
+        length[kind_a != GENERIC] = closed.length[kind_a != GENERIC]
+        origin = np.asarray(origin_l, dtype=np.int64)
+        keep = length > MIN_SEGMENT_LENGTH_MM
+        covered = np.zeros(len(self.segments), dtype=bool)
+        covered[origin[keep]] = True
+        missing = np.flatnonzero(~covered)
+        if missing.size:
+            i = int(missing[0])
+            raise GeometryError(f"segments[{i}]", 0.0, f"zero-length segment (< {MIN_SEGMENT_LENGTH_MM} mm)", i)
+        if not keep.all():
+            idx = np.flatnonzero(keep)
+            new = {int(j): n for n, j in enumerate(idx)}
+            parts = [parts[j] for j in idx]
+            tables = {new[j]: t for j, t in tables.items() if j in new}
+            kind_a, origin, length = kind_a[idx], origin[idx], length[idx]
+            closed = _Closed(parts, kind_a)
+        self._closed = closed
+        self._generic = tables
+        self._generic_idx = np.asarray(sorted(tables), dtype=np.int64)
+        self.sub_kind = kind_a
+        self.subs = SubTables(parts, dict(tables))
+        self.sub_origin = origin
+        self.offsets = np.concatenate([[0.0], np.cumsum(length)])
+        # global arc length of every knot inside the sub-segments (where C''' may jump) and of the
+        # junctions between sub-segments (where the curvature may jump too; those that are corners
+        # are piece ends, outside every piece); closed-form parts have no inner knots
+        inner = [self.offsets[k] + t.s_of_u(t.segment.breakpoints[1:-1]) for k, t in sorted(tables.items())]
+        self.knot_s = np.union1d(np.concatenate([np.zeros(0), *inner]), self.offsets[1:-1])
+        self._junctions(gap_tol, np.radians(corner_tol_deg))
         self.pieces = self._pieces()
 
     @property
@@ -181,6 +383,15 @@ class Toolpath:
         if len(feed_limits) != n:
             raise GeometryError("feed_limits", len(feed_limits), f"needs one entry per segment ({n})")
         out = np.full(n, np.inf)
+        # all at once when every limit is valid (a dense program has 10^5 segments) ...
+        given = [i for i, f in enumerate(feed_limits) if f is not None]
+        vals = [feed_limits[i] for i in given]
+        if all(isinstance(f, (int, float)) and not isinstance(f, bool) for f in vals):
+            arr = np.asarray(vals, dtype=np.float64)
+            if np.all(np.isfinite(arr) & (arr > 0.0)):
+                out[given] = arr
+                return out
+        # ... else one by one, naming the first bad one
         for i, f in enumerate(feed_limits):
             if f is None:
                 continue
@@ -193,11 +404,11 @@ class Toolpath:
         """Programmed feed limit (mm/s) at arc lengths s, (K,); inf where none; None if no segment has one."""
         if self._feed is None:
             return None
-        k, _ = self.locate(s, piece)
+        k = self._sub_index(np.asarray(s, dtype=np.float64), piece)
         return np.asarray(self._feed[self.sub_origin[k]], dtype=np.float64)
 
-    def _end_derivs(self, k: int, at_end: bool) -> FloatArray:
-        seg = self.subs[k].segment
+    def _generic_end_derivs(self, k: int, at_end: bool) -> FloatArray:
+        seg = self._generic[k].segment
         lo, hi = seg.domain
         u = np.array([hi if at_end else lo])
         D = seg.derivatives(u)[:, 0, :]
@@ -207,35 +418,66 @@ class Toolpath:
             D[1:] = seg.derivatives(u)[1:, 0, :]
         return D
 
-    def _check_gaps(self, junctions: list[tuple[FloatArray, FloatArray]], gap_tol: float) -> None:
-        for k, (D_out, D_in) in enumerate(junctions):
-            gap = float(np.linalg.norm(D_in[0] - D_out[0]))
-            if gap > gap_tol:
-                i = int(self.sub_origin[k + 1])
-                raise GeometryError(
-                    f"segments[{i}].control_points[0]",
-                    gap,
-                    f"gap of {gap:.6g} mm to the previous segment's end exceeds {gap_tol} mm",
-                    i,
-                )
+    def _end_derivs(self, lo: int, hi: int, at_end: bool) -> FloatArray:
+        """C and its first three u-derivatives (4, hi - lo, 3) at the start (or end) of sub-segments lo .. hi - 1."""
+        cf = self._closed
+        k = np.arange(lo, hi)
+        D = cf.derivatives(k, cf.length[k] if at_end else np.zeros(k.size))
+        if at_end:
+            D[0] = cf.end[k]  # exact ends: a line's end point, a clothoid's by the same Fresnel form
+        g = self._generic_idx
+        for j in g[np.searchsorted(g, lo) : np.searchsorted(g, hi)].tolist():
+            D[:, j - lo] = self._generic_end_derivs(j, at_end)
+        return D
 
-    def _find_corners(self, junctions: list[tuple[FloatArray, FloatArray]], tol_rad: float) -> list[Corner]:
-        corners: list[Corner] = []
-        for k, (D_out, D_in) in enumerate(junctions):
+    def _junctions(self, gap_tol: float, tol_rad: float) -> None:
+        """Gaps (error), jumps of C_ss and C_sss (``junction_jumps``) and corners at every junction,
+        from the end derivatives of the sub-segments on either side, JUNCTION_CHUNK junctions at a time."""
+        J = len(self.subs) - 1
+        gaps = np.empty(J)
+        cos = np.empty(J)
+        p_in = np.empty((J, 3))
+        self.junction_jumps = np.empty((J, 2))
+        for a in range(0, J, JUNCTION_CHUNK):
+            b = min(J, a + JUNCTION_CHUNK)  # junction k joins the end of sub k to the start of sub k + 1
+            D_out = self._end_derivs(a, b, True)
+            D_in = self._end_derivs(a + 1, b + 1, False)
+            gaps[a:b] = np.linalg.norm(D_in[0] - D_out[0], axis=1)
+            self.junction_jumps[a:b] = self._jumps(D_out, D_in)
             t_out, t_in = D_out[1], D_in[1]
-            c = float(np.dot(t_out, t_in) / (np.linalg.norm(t_out) * np.linalg.norm(t_in)))
-            angle = float(np.arccos(np.clip(c, -1.0, 1.0)))
-            if angle > tol_rad:
-                p = D_in[0]
-                corners.append(
-                    Corner(
-                        s=float(self.offsets[k + 1]),
-                        angle_deg=float(np.degrees(angle)),
-                        segment=int(self.sub_origin[k + 1]),
-                        position=(float(p[0]), float(p[1]), float(p[2])),
-                    )
-                )
-        return corners
+            norms = np.linalg.norm(t_out, axis=1) * np.linalg.norm(t_in, axis=1)
+            cos[a:b] = np.einsum("ij,ij->i", t_out, t_in) / norms
+            p_in[a:b] = D_in[0]
+        bad = np.flatnonzero(~(gaps <= gap_tol))
+        if bad.size:
+            k = int(bad[0])
+            gap = float(gaps[k])
+            i = int(self.sub_origin[k + 1])
+            raise GeometryError(
+                f"segments[{i}].control_points[0]",
+                gap,
+                f"gap of {gap:.6g} mm to the previous segment's end exceeds {gap_tol} mm",
+                i,
+            )
+        angle = np.arccos(np.clip(cos, -1.0, 1.0))
+        self.corners = [
+            Corner(
+                s=float(self.offsets[k + 1]),
+                angle_deg=float(np.degrees(angle[k])),
+                segment=int(self.sub_origin[k + 1]),
+                position=(float(p_in[k, 0]), float(p_in[k, 1]), float(p_in[k, 2])),
+            )
+            for k in np.flatnonzero(angle > tol_rad).tolist()
+        ]
+
+    @staticmethod
+    def _jumps(D_out: FloatArray, D_in: FloatArray) -> FloatArray:
+        """Norms of the jumps of C_ss and C_sss at each junction, (J, 2)."""
+        if D_out.shape[1] == 0:
+            return np.zeros((0, 2))
+        _, a2, a3 = arc_length_derivatives(D_out)
+        _, b2, b3 = arc_length_derivatives(D_in)
+        return np.column_stack([np.linalg.norm(b2 - a2, axis=1), np.linalg.norm(b3 - a3, axis=1)])
 
     def _pieces(self) -> list[Piece]:
         starts = [0] + [int(np.searchsorted(self.offsets, c.s)) for c in self.corners]
@@ -251,17 +493,48 @@ class Toolpath:
             for i, (a, b) in enumerate(zip(starts, ends, strict=True))
         ]
 
+    def _sub_index(self, s: FloatArray, piece: Piece | None) -> IntArray:
+        lo_sub, hi_sub = (0, len(self.subs) - 1) if piece is None else (piece.first_sub, piece.last_sub)
+        k = np.searchsorted(self.offsets, s, side="right") - 1
+        return np.asarray(np.clip(k, lo_sub, hi_sub), dtype=np.int64)
+
     def locate(self, s: FloatArray, piece: Piece | None = None) -> tuple[IntArray, FloatArray]:
         """Sub-segment index and parameter u for each arc length s (mm)."""
         s = np.asarray(s, dtype=np.float64)
-        lo_sub, hi_sub = (0, len(self.subs) - 1) if piece is None else (piece.first_sub, piece.last_sub)
-        k = np.searchsorted(self.offsets, s, side="right") - 1
-        k = np.clip(k, lo_sub, hi_sub).astype(np.int64)
-        u = np.empty_like(s)
-        for kk in np.unique(k):
-            m = k == kk
-            u[m] = self.subs[kk].u_of_s(s[m] - self.offsets[kk])
+        k = self._sub_index(s, piece)
+        x = s - self.offsets[k]
+        cf = self._closed
+        u = np.asarray(cf.u0[k] + cf.clip(k, x) * cf.du[k], dtype=np.float64)
+        gen = self.sub_kind[k] == GENERIC
+        if gen.any():
+            for kk in np.unique(k[gen]):
+                m = k == kk
+                u[m] = self._generic[int(kk)].u_of_s(x[m])
         return k, u
+
+    def _derivatives(self, s: FloatArray, piece: Piece | None) -> tuple[IntArray, FloatArray]:
+        """Sub-segment index (K,) and C, C', C'', C''' (4, K, 3) at arc lengths s."""
+        k = self._sub_index(s, piece)
+        x = s - self.offsets[k]
+        D = self._closed.derivatives(k, x)
+        gen = self.sub_kind[k] == GENERIC
+        if gen.any():
+            for kk in np.unique(k[gen]):
+                m = k == kk
+                table = self._generic[int(kk)]
+                seg = table.segment
+                um = table.u_of_s(x[m])
+                Dk = seg.derivatives(um)
+                lo, hi = seg.domain
+                # zero speed, or a rounding residue of it (|C'| ~ 1e-16 at a cusp's knot): no tangent there
+                tiny = ZERO_SPEED_SHARE * table.length / (hi - lo)
+                stuck = ~(np.einsum("ij,ij->i", Dk[1], Dk[1]) > tiny * tiny)
+                if stuck.any():
+                    us = um[stuck]
+                    nudge = np.where(us < 0.5 * (lo + hi), 1.0, -1.0) * ZERO_SPEED_NUDGE * (hi - lo)
+                    Dk[1:, stuck, :] = seg.derivatives(us + nudge)[1:]
+                D[:, m, :] = Dk
+        return k, D
 
     def evaluate(self, s: FloatArray, piece: Piece | None = None) -> PathSamples:
         """Position and arc-length derivatives at arc lengths s (mm), shape (K,).
@@ -270,21 +543,7 @@ class Toolpath:
         only (so a corner's s is evaluated on the correct side).
         """
         s = np.asarray(s, dtype=np.float64)
-        k, u = self.locate(s, piece)
-        D = np.empty((4, s.size, 3))
-        for kk in np.unique(k):
-            m = k == kk
-            seg = self.subs[kk].segment
-            Dk = seg.derivatives(u[m])
-            lo, hi = seg.domain
-            # zero speed, or a rounding residue of it (|C'| ~ 1e-16 at a cusp's knot): no tangent there
-            tiny = ZERO_SPEED_SHARE * self.subs[kk].length / (hi - lo)
-            stuck = ~(np.einsum("ij,ij->i", Dk[1], Dk[1]) > tiny * tiny)
-            if stuck.any():
-                um = u[m][stuck]
-                nudge = np.where(um < 0.5 * (lo + hi), 1.0, -1.0) * ZERO_SPEED_NUDGE * (hi - lo)
-                Dk[1:, stuck, :] = seg.derivatives(um + nudge)[1:]
-            D[:, m, :] = Dk
+        k, D = self._derivatives(s, piece)
         d1, d2, d3 = arc_length_derivatives(D)
         fl = None if self._feed is None else np.asarray(self._feed[self.sub_origin[k]], dtype=np.float64)
         return PathSamples(s=s, position=D[0], d1=d1, d2=d2, d3=d3, feed_limit=fl)
@@ -292,9 +551,13 @@ class Toolpath:
     def positions(self, s: FloatArray, piece: Piece | None = None) -> FloatArray:
         """C(s) only, (K, 3) mm."""
         s = np.asarray(s, dtype=np.float64)
-        k, u = self.locate(s, piece)
-        out = np.empty((s.size, 3))
-        for kk in np.unique(k):
-            m = k == kk
-            out[m] = self.subs[kk].segment.points(u[m])
+        k = self._sub_index(s, piece)
+        x = s - self.offsets[k]
+        out = self._closed.points(k, x)
+        gen = self.sub_kind[k] == GENERIC
+        if gen.any():
+            for kk in np.unique(k[gen]):
+                m = k == kk
+                table = self._generic[int(kk)]
+                out[m] = table.segment.points(table.u_of_s(x[m]))
         return out

@@ -290,7 +290,10 @@ def _solve_windows(
         else:
             chain_same = False
             t0 = time.perf_counter()
-            res = WindowLP(spec, lim, geometry, opt.solver, breaks, verify).solve(s_check)
+            # only the window's own breaks (WindowLP looks at no others): masking all of a long piece's
+            # breaks in every window grew with the square of the path length
+            b0, b1 = np.searchsorted(breaks, (k0 * plan.d, k1 * plan.d))
+            res = WindowLP(spec, lim, geometry, opt.solver, breaks[b0:b1], v_in).solve(s_check)
             stats["window_times"].append(time.perf_counter() - t0)
             stats["windows"] += 1
             stats["iterations"] += res.iterations
@@ -338,9 +341,9 @@ def _join_knot(geometry: Any, c_win: FloatArray, k0: int, k_last: int, plan: Win
 def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
     """Piece-local arc lengths strictly inside the piece where the geometry's third derivative (or a
     programmed feed limit) may jump: knots inside segments and junctions between them."""
-    ks = np.concatenate([toolpath.knot_s, toolpath.offsets[1:-1]])  # knots inside segments and junctions
-    ks = np.unique(ks[(ks > piece.s_start) & (ks < piece.s_end)])
-    return np.asarray(ks - piece.s_start, dtype=np.float64)
+    ks = toolpath.knot_s  # sorted and unique: knots inside segments and the junctions between them
+    lo, hi = np.searchsorted(ks, piece.s_start, side="right"), np.searchsorted(ks, piece.s_end, side="left")
+    return np.asarray(ks[lo:hi] - piece.s_start, dtype=np.float64)
 
 
 def refine_pieces(

@@ -43,3 +43,31 @@ def test_blended_zigzag_lp_nlp_within_drive_limits() -> None:
     sch = schedule(blended, m, Options(method="lp+nlp"))
     _check_drive(m, sch)
     assert sch.summary["motion_time"] < lp
+
+
+def test_dense_g01_spiral_blended_within_limits_and_on_the_path() -> None:
+    """Dense CAM output (issue 7 item 4), small: 1,500 G01 moves of 0.5 mm (0.75 m spiral) blended at
+    0.02 mm run as one piece within every limit (sampled FD), each sample within the blend tolerance of
+    the programmed polyline. ``bench/dense_gcode.py`` runs the same program at 150,000 moves."""
+    from bench.dense_gcode import spiral_program
+    from geometry import gcode
+
+    prog = gcode.parse(spiral_program(1500))
+    tp = prog.toolpath(0.5, blend_mm=0.02)
+    assert len(tp.pieces) == 2  # the rapid to the start, then the whole G01 run without a stop
+    assert {int(k) for k in tp.sub_kind} == {1, 2}  # lines and clothoids, all in closed form
+    m = router()
+    sch = schedule(tp, m, Options(method="lp"))
+    _check(tp, m, sch)
+    # distance of every sample of the G01 run to the programmed polyline (the blend tolerance)
+    vertices = np.array([seg.control_points[-1] for seg in prog.segments])
+    run = sch.samples.position[sch.samples.s > tp.pieces[1].s_start]
+    a, b = vertices[:-1], vertices[1:]
+    best = np.full(run.shape[0], np.inf)
+    for i in range(0, a.shape[0], 200):  # legs in blocks (memory)
+        aa, bb = a[i : i + 200], b[i : i + 200]
+        d = bb - aa
+        t = np.clip(np.einsum("kij,ij->ki", run[:, None, :] - aa[None], d) / np.einsum("ij,ij->i", d, d), 0, 1)
+        near = aa[None] + t[..., None] * d[None]
+        best = np.minimum(best, np.linalg.norm(run[:, None, :] - near, axis=2).min(axis=1))
+    assert best.max() <= 0.02 * (1 + 1e-6)
