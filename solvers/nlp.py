@@ -35,9 +35,17 @@ coefficients and weights as parameters and the fixed control points and row
 bounds given per call, then re-called window after window.
 
 Between checkpoints the limits are verified on a VERIFY_SUBDIV-times finer
-grid (and both sides of geometry knots); the bounds at the two checkpoints
-around a violated point are tightened by the overshoot and the window is
-re-solved warm (at most MAX_CUT_ROUNDS times).
+grid (and both sides of geometry knots), bisected where the tangent turns
+fast (REFINE_TURN) or a utilisation changes fast (REFINE_UTIL) between its
+points, so features narrower than the grid (sharp turns, curvature peaks) are
+seen.  Then, per round (at most MAX_CUT_ROUNDS, re-solved warm): the worst
+point of a stretch over a limit by more than SLOT_OVERSHOOT, or any stretch
+once the window uses slots, gets a *cut slot*: a checkpoint placed there, one
+per knot interval, with the path's exact derivatives (the window switches to
+its shape with slot rows); a stretch next to a used slot tightens that slot's
+bounds; the other stretches tighten the bounds of the checkpoints around them
+by the overshoot.  (Tightening alone cannot hold a feature the checkpoints do
+not see: a 0.2 mm turn between checkpoints 0.55 mm apart reached 1.7 x emax.)
 
 Dual windows (spec §6): the LP walks the piece in large windows; within each
 LP window's committed span [K_m, K_{m+1}] the NLP windows walk a *chain* that
@@ -104,6 +112,17 @@ DELTA_F = 1e-3
 BREAK_EPS_MM = 1e-6
 #: An axis whose path derivatives are all below this in a window has no rows there.
 AXIS_EPS = 1e-12
+#: Adaptive verification: a fine-grid cell is bisected (at most REFINE_LEVELS times) where the
+#: tangent turns by more than REFINE_TURN (rad) or a utilisation changes by more than REFINE_UTIL
+#: across it (features narrower than the uniform grid: sharp turns, curvature peaks).
+REFINE_LEVELS = 6
+REFINE_TURN = 0.05
+REFINE_UTIL = 0.05
+REFINE_MAX_POINTS = 20_000
+#: A window starts using cut slots when a violated stretch's worst point is over a limit by more than
+#: this factor (a feature the checkpoints do not see); smaller overshoots tighten the checkpoints
+#: around them.  Once it uses slots, every violated stretch gets one while its interval's is free.
+SLOT_OVERSHOOT = 1.05
 #: Scale-down steps of the LP hand-over until it meets the NLP's limits.
 HANDOVER_SHRINK = 0.97
 HANDOVER_MAX_STEPS = 30
@@ -235,10 +254,12 @@ class _Shape:
     third derivative jumps near a checkpoint (NURBS knots).
     Rows, per moving axis: u, e_hi (upper bound only), e_lo (lower only), [a, j_hi, j_lo]; then f,
     whose upper bound min(Fmax, min_x vmax_x / |x_s|) carries the feed and axis velocity limits.
+    With ``slotted``: n cut slots (``_Slots``), parameters tau (n), then x_s, x_ss, x_sss (n each)
+    per moving axis; rows as above (x_sss exact, so e_hi = e_lo) and f, per slot.
     """
 
-    def __init__(self, n: int, N: int, axes: tuple[int, ...], with_aj: bool) -> None:
-        self.n, self.N, self.axes, self.with_aj = n, N, axes, with_aj
+    def __init__(self, n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool = False) -> None:
+        self.n, self.N, self.axes, self.with_aj, self.slotted = n, N, axes, with_aj, slotted
         k, tau = checkpoint_layout(n, N)
         K = k.size
         self.K = K
@@ -246,7 +267,7 @@ class _Shape:
         self.B0, B1, B2 = _interval_basis(k, tau, ncols)
         na = len(axes)
         x = ca.SX.sym("p", ncols)
-        P = ca.SX.sym("P", 2 + 4 * na * K + 2 * K + 8 * na)
+        P = ca.SX.sym("P", 2 + 4 * na * K + 2 * K + 8 * na + (n * (1 + 3 * na) if slotted else 0))
         Fs, inv_d = P[0], P[1]
         off = 2
 
@@ -267,10 +288,42 @@ class _Shape:
         f = Fs * fh
         f1 = Fs * inv_d * ca.mtimes(ca.DM(B1), x)
         f2 = Fs * inv_d * inv_d * ca.mtimes(ca.DM(B2), x)
+        rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj)
+        rows.append(fh)
+        if slotted:
+            # cut slots, one per knot interval at a tau given per call, with the path's exact derivatives
+            # there (no envelope); unused slots have unbounded rows
+            ts = take(n)
+            sxs = [take(n) for _ in axes]
+            sxss = [take(n) for _ in axes]
+            sxsss = [take(n) for _ in axes]
+            c0, c1, c2 = x[0:n], x[1 : n + 1], x[2 : n + 2]
+            sfh = 0.5 * (c0 + c1) + ts * ((c1 - c0) + 0.5 * (c0 - 2 * c1 + c2) * ts)
+            sf = Fs * sfh
+            sf1 = Fs * inv_d * ((c1 - c0) + (c0 - 2 * c1 + c2) * ts)
+            sf2 = Fs * inv_d * inv_d * (c0 - 2 * c1 + c2)
+            rows += self._axis_rows(sf, sf1, sf2, sxs, sxss, sxsss, sxsss, coef, with_aj)
+            rows.append(sfh)
+        g = ca.vertcat(*rows)
+        obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh)
+        self.solver = ca.nlpsol("feed_nlp", "ipopt", {"x": x, "p": P, "f": obj, "g": g}, IPOPT_OPTIONS)
+        # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
+        Pm = sp.triu(self.B0.T @ self.B0, format="csc")
+        A = sp.vstack([sp.eye(ncols), self.B0], format="csc")
+        self.fit = osqp.OSQP()
+        self.fit.setup(
+            Pm, np.zeros(ncols), A, np.full(ncols + K, -np.inf), np.full(ncols + K, np.inf),
+            verbose=False, eps_abs=1e-6, eps_rel=1e-6, polishing=True,
+        )
+
+    @staticmethod
+    def _axis_rows(f: Any, f1: Any, f2: Any, xs: list[Any], xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any],
+                   coef: list[Any], with_aj: bool) -> list[Any]:
+        """Per moving axis: u, e_hi, e_lo, [a, j_hi, j_lo] at points with feed f, f', f''."""
         f_sq = f * f
         f_cu = f_sq * f
         rows = []
-        for i in range(na):
+        for i in range(len(xs)):
             v = xs[i] * f
             a = xss[i] * f_sq + xs[i] * f * f1
             j_rest = 3.0 * xss[i] * f_sq * f1 + xs[i] * (f * f1 * f1 + f_sq * f2)
@@ -285,18 +338,7 @@ class _Shape:
                 rows.append(cf[6] * a)
                 rows.append(cf[7] * j_hi)
                 rows.append(cf[7] * j_lo)
-        rows.append(fh)
-        g = ca.vertcat(*rows)
-        obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh)
-        self.solver = ca.nlpsol("feed_nlp", "ipopt", {"x": x, "p": P, "f": obj, "g": g}, IPOPT_OPTIONS)
-        # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
-        Pm = sp.triu(self.B0.T @ self.B0, format="csc")
-        A = sp.vstack([sp.eye(ncols), self.B0], format="csc")
-        self.fit = osqp.OSQP()
-        self.fit.setup(
-            Pm, np.zeros(ncols), A, np.full(ncols + K, -np.inf), np.full(ncols + K, np.inf),
-            verbose=False, eps_abs=1e-6, eps_rel=1e-6, polishing=True,
-        )
+        return rows
 
     def handover(self, y: FloatArray, fixed: dict[int, float]) -> FloatArray:
         """Control points (scaled) fitting y (K,) at the checkpoints with f >= 0 and fixed points held."""
@@ -349,14 +391,14 @@ class NlpRefiner:
         self.window = window
         self.overlap = overlap
         self.fault = fault
-        self.shapes: dict[tuple[int, tuple[int, ...]], _Shape] = {}
+        self.shapes: dict[tuple[int, tuple[int, ...], bool], _Shape] = {}
         self.stats = stats if stats is not None else NlpStats()
 
-    def _shape(self, n: int, axes: tuple[int, ...]) -> _Shape:
-        key = (n, axes)
+    def _shape(self, n: int, axes: tuple[int, ...], slotted: bool = False) -> _Shape:
+        key = (n, axes, slotted)
         if key not in self.shapes:
             lim = self.lim
-            self.shapes[key] = _Shape(n, self.N, axes, lim.amax is not None)
+            self.shapes[key] = _Shape(n, self.N, axes, lim.amax is not None, slotted)
         return self.shapes[key]
 
     # ----- a piece -------------------------------------------------------------------
@@ -585,19 +627,38 @@ class NlpRefiner:
                 np.minimum.at(feed_ub, kc + off, np.where(near_lp[kc + off], np.inf, f_cap))
         fine = self._fine_points(a * d, min(b, commit + VERIFY_PAST_COMMIT) * d, d, breaks)
         floor_u, floor_e = self._inherited_floor(prev, g, xsss_hi, xsss_lo, k_loc, tau, d, moving)
-        g_fine = geometry(fine)
+        fine, g_fine = _refine_turns(geometry, fine, geometry(fine))
+        # cut slots may sit where a free control point acts, off the fixed states at the window ends
+        slot_lo = (a + (1 if len(start) == 3 else 0)) * d
+        slots = _Slots(n, a, d, moving, slot_lo + BREAK_EPS_MM, b * d - BREAK_EPS_MM, 0.5 * d / N)
+
+        def verify(pw: FloatArray) -> tuple[kinematics.FeedDerivs, dict[str, FloatArray]]:
+            fd = kinematics.from_f(*bspline.evaluate(pw, fine, d, col0=a, k_lo=a, k_hi=b - 1))
+            util = lim.utilisation(g_fine, fd)
+            if br.size:
+                at = np.searchsorted(fine, br)
+                ok_at = (at < fine.size) & (fine[np.minimum(at, fine.size - 1)] == br)
+                step = np.zeros(fine.size)
+                step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
+                util["step"] = step
+            return fd, util
+
         x = x0
         lam_g = None
         worst = math.inf
         best: tuple[float, FloatArray] | None = None
-        prev_fac: tuple[FloatArray, FloatArray, FloatArray] | None = None
+        prev_fac: tuple[FloatArray, ...] | None = None
         retries = 0
         rnd = 0
         while rnd <= MAX_CUT_ROUNDS:
             lbg, ubg = self._row_bounds(moving, fac_u, fac_e, fac_k, sig_hi, sig_lo, feed_ub, Fs, free_rows, keep)
+            if slots.any:
+                s_lo, s_hi = slots.bounds(self, prev)
+                lbg, ubg = np.concatenate([lbg, s_lo]), np.concatenate([ubg, s_hi])
             if self.fault is not None:
                 self.fault(index)
-            args: dict[str, Any] = {"x0": x, "p": pvec, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
+            p_all = np.concatenate([pvec, slots.params()]) if slots.any else pvec
+            args: dict[str, Any] = {"x0": x, "p": p_all, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
             if lam_g is not None:
                 args["lam_g0"] = lam_g
             res = shape.solver(**args)
@@ -611,7 +672,7 @@ class NlpRefiner:
                     # tightening made the window infeasible: retry with half of it (geometric mean)
                     retries += 1
                     self.stats.softer_retries += 1
-                    for cur, old in zip((fac_u, fac_e, fac_k), prev_fac, strict=True):
+                    for cur, old in zip((fac_u, fac_e, fac_k, slots.fac), prev_fac, strict=True):
                         cur[...] = np.sqrt(cur * old)
                     x = best[1] / Fs if best is not None else x0
                     lam_g = None
@@ -623,19 +684,18 @@ class NlpRefiner:
             if not np.all(np.isfinite(x)):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("Ipopt returned a non-finite point", index, status)
-            # verify on the fine grid
+            # verify on the fine grid, refined where a utilisation changes fast between its points
             pw = x * Fs
-            fd = kinematics.from_f(*bspline.evaluate(pw, fine, d, col0=a, k_lo=a, k_hi=b - 1))
+            fd, util = verify(pw)
+            for _ in range(REFINE_LEVELS):
+                mids = _fast_cells(fine, util)
+                if mids.size == 0 or fine.size + mids.size > REFINE_MAX_POINTS:
+                    break
+                fine, g_fine = _merge(fine, g_fine, mids, geometry(mids))
+                fd, util = verify(pw)
             if np.any(fd[0] <= 0.0):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("feed reaches zero inside the window", index, "nonpositive feed")
-            util = lim.utilisation(g_fine, fd)
-            if br.size:
-                at = np.searchsorted(fine, br)
-                ok_at = (at < fine.size) & (fine[np.minimum(at, fine.size - 1)] == br)
-                step = np.zeros(fine.size)
-                step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
-                util["step"] = step
             worst = max(float(np.max(u)) for u in util.values())
             if best is None or worst < best[0]:
                 best = (worst, pw)
@@ -645,7 +705,14 @@ class NlpRefiner:
                 break
             rnd += 1
             self.stats.cut_rounds += 1
-            prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy())
+            # the worst point of each violated stretch gets a cut slot while slots last; the rest
+            # tighten the bounds of the checkpoints around them
+            prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy(), slots.fac.copy())
+            had_slots = slots.any
+            util = slots.place(fine, g_fine, util)
+            if slots.any and not had_slots:  # the window's shape with slot rows (warm start from x only)
+                shape = self._shape(n, moving, slotted=True)
+                lam_g = None
             self._tighten(util, fine, a * d, d, moving, fac_u, fac_e, fac_k)
             # bounds of constant rows stay as they are (tightening them could only make the window infeasible)
             fac_u[~keep] = BOUND_FACTOR
@@ -858,6 +925,172 @@ def _lp_state(c: FloatArray, d: float, k: int) -> tuple[float, float]:
     f = math.sqrt(q)
     f1 = q1 / (2.0 * f)
     return f - 0.5 * f1 * d, f + 0.5 * f1 * d
+
+
+class _Slots:
+    """The cut slots of one window (``_Shape`` with ``slotted``): one per knot interval.
+
+    A slot at piece-local s (interval k, tau) is a checkpoint placed per call: rows u, e (and a,
+    j when kept) of every moving axis with the path's derivatives at s itself (no envelope),
+    bounded like a checkpoint's, and f >= 0.  The worst point of a stretch of the fine grid over
+    a limit gets its interval's slot (like the LP's cutting planes), if that slot is free and a
+    free control point acts there (s in (s_lo, s_hi)).  Unused slots have unbounded rows.
+    """
+
+    def __init__(
+        self, n: int, a: int, d: float, moving: tuple[int, ...], s_lo: float, s_hi: float, near: float
+    ) -> None:
+        """``near``: a violation this close to a used slot (mm) tightens that slot's bounds."""
+        self.n, self.a, self.d, self.moving, self.near = n, a, d, moving, near
+        self.s_lo, self.s_hi = s_lo, s_hi
+        self.used = np.zeros(n, dtype=bool)
+        #: bound factor of each slot's u, e, a, j rows (tightened when a violation next to the slot remains)
+        self.fac = np.full(n, BOUND_FACTOR)
+        self.tau = np.full(n, 0.5)
+        self.d1 = np.zeros((n, 3))
+        self.d2 = np.zeros((n, 3))
+        self.d3 = np.zeros((n, 3))
+        self.feed_limit = np.full(n, np.inf)
+
+    @property
+    def any(self) -> bool:
+        return bool(self.used.any())
+
+    def params(self) -> FloatArray:
+        """tau (n), then x_s, x_ss, x_sss (n each) per moving axis, in ``_Shape``'s order."""
+        ax = list(self.moving)
+        return np.concatenate([self.tau, *self.d1[:, ax].T, *self.d2[:, ax].T, *self.d3[:, ax].T])
+
+    def _samples(self) -> PathSamples:
+        s = (self.a + np.arange(self.n) + self.tau) * self.d
+        return PathSamples(s, np.zeros((self.n, 3)), self.d1, self.d2, self.d3, self.feed_limit)
+
+    def bounds(self, ref: NlpRefiner, prev: FloatArray | None) -> tuple[FloatArray, FloatArray]:
+        """Row bounds of the slot rows (scaled units), in ``_Shape``'s order."""
+        lim, n, on = ref.lim, self.n, self.used
+        per_axis = 6 if lim.amax is not None else 3
+        lo = np.full((len(self.moving) * per_axis + 1, n), -np.inf)
+        hi = np.full_like(lo, np.inf)
+        if not on.any():
+            return lo.ravel(), hi.ravel()
+        g = self._samples()
+        k = np.arange(n, dtype=np.int64)
+        # on the intervals inherited from the previous window its (verified) solution stays admissible
+        fu, fe = ref._inherited_floor(prev, g, g.d3, g.d3, k, self.tau, self.d, self.moving)
+        for i, ax in enumerate(self.moving):
+            xs = g.d1[:, ax]
+            unsure = np.abs(xs) < SIGN_EPS
+            sg_hi = np.where(unsure, 1.0, np.sign(xs))
+            sg_lo = np.where(unsure, -1.0, np.sign(xs))
+            um, c, dd = lim.umax[ax], lim.c[ax], lim.d[ax]
+            bu = np.maximum(self.fac, fu[:, i])
+            be = np.maximum(self.fac, fe[:, i])
+            bk = np.minimum(1.0, self.fac / BOUND_FACTOR)
+            r = i * per_axis
+            lo[r, on] = ((-um * bu - c - dd * sg_lo) / um)[on]
+            hi[r, on] = ((um * bu - c - dd * sg_hi) / um)[on]
+            hi[r + 1, on] = be[on]
+            lo[r + 2, on] = -be[on]
+            if per_axis == 6:
+                lo[r + 3, on], hi[r + 3, on] = -bk[on], bk[on]
+                hi[r + 4, on] = bk[on]
+                lo[r + 5, on] = -bk[on]
+        lo[-1, on] = 0.0
+        return lo.ravel(), hi.ravel()
+
+    def place(self, fine: FloatArray, g_fine: PathSamples, util: dict[str, FloatArray]) -> dict[str, FloatArray]:
+        """Put free slots on the worst point of each violated stretch of the fine grid (worst stretches
+        first); returns ``util`` with the stretches that got a slot cleared (for the tightening)."""
+        names = [k for k in ("control_signal", "servo_error", "acceleration", "jerk") if k in util]
+        if not names:
+            return util
+        r = np.max(np.column_stack([np.max(util[k], axis=1) for k in names]), axis=1)
+        bad = r > 1.0 + VERIFY_TOL
+        ok = bad & (fine > self.s_lo) & (fine < self.s_hi)
+        if not self.used.any():  # the first slot needs a large overshoot (then the slotted shape is in use)
+            for run in np.split(np.flatnonzero(bad), np.flatnonzero(np.diff(np.flatnonzero(bad)) > 1) + 1):
+                if run.size and np.max(r[run]) <= SLOT_OVERSHOOT:
+                    ok[run] = False
+        if not ok.any():
+            return util
+        kint = np.clip(np.floor(fine / self.d) - self.a, 0, self.n - 1).astype(np.int64)
+        idx = np.flatnonzero(bad)
+        runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+        cand: list[tuple[float, int, NDArray[np.int64]]] = []
+        for run in runs:
+            run_ok = run[ok[run]]
+            if run_ok.size:
+                i = int(run_ok[np.argmax(r[run_ok])])
+                cand.append((float(r[i]), i, run))
+        cand.sort(key=lambda t: -t[0])
+        out = util
+        for worst, i, run in cand:
+            k = int(kint[i])
+            if self.used[k]:
+                # the feature next to this interval's slot is still over: tighten the slot like a checkpoint
+                if abs(fine[i] - (self.a + k + self.tau[k]) * self.d) <= self.near:
+                    self.fac[k] = max(MIN_BOUND_FACTOR, self.fac[k] * (worst**-TIGHTEN_POWER - TIGHTEN_MARGIN))
+                    if out is util:
+                        out = {name: v.copy() for name, v in util.items()}
+                    for name in names:
+                        out[name][run] = 0.0
+                continue
+            if out is util:
+                out = {name: v.copy() for name, v in util.items()}
+            self.used[k] = True
+            self.tau[k] = fine[i] / self.d - self.a - k
+            self.d1[k], self.d2[k], self.d3[k] = g_fine.d1[i], g_fine.d2[i], g_fine.d3[i]
+            if g_fine.feed_limit is not None:
+                self.feed_limit[k] = g_fine.feed_limit[i]
+            for name in names:
+                out[name][run] = 0.0
+        return out
+
+
+def _take(g: PathSamples, idx: NDArray[np.int64]) -> PathSamples:
+    fl = None if g.feed_limit is None else g.feed_limit[idx]
+    return PathSamples(g.s[idx], g.position[idx], g.d1[idx], g.d2[idx], g.d3[idx], fl)
+
+
+def _concat(g1: PathSamples, g2: PathSamples) -> PathSamples:
+    fl = None
+    if g1.feed_limit is not None and g2.feed_limit is not None:
+        fl = np.concatenate([g1.feed_limit, g2.feed_limit])
+    return PathSamples(
+        np.concatenate([g1.s, g2.s]), np.concatenate([g1.position, g2.position]), np.concatenate([g1.d1, g2.d1]),
+        np.concatenate([g1.d2, g2.d2]), np.concatenate([g1.d3, g2.d3]), fl,
+    )
+
+
+def _merge(fine: FloatArray, g: PathSamples, s_new: FloatArray, g_new: PathSamples) -> tuple[FloatArray, PathSamples]:
+    """Verification points and their geometry with new points added, sorted by s."""
+    order = np.argsort(np.concatenate([fine, s_new]), kind="stable")
+    return np.concatenate([fine, s_new])[order], _take(_concat(g, g_new), order)
+
+
+def _refine_turns(geometry: GeometryFn, fine: FloatArray, g: PathSamples) -> tuple[FloatArray, PathSamples]:
+    """Bisect fine-grid cells where the tangent turns by more than REFINE_TURN (REFINE_LEVELS times at most)."""
+    for _ in range(REFINE_LEVELS):
+        width = np.diff(fine)
+        turn = np.linalg.norm(np.diff(g.d1, axis=0), axis=1)
+        cells = (turn > REFINE_TURN) & (width > 4 * BREAK_EPS_MM)
+        if not cells.any() or fine.size + int(cells.sum()) > REFINE_MAX_POINTS:
+            break
+        mids = 0.5 * (fine[:-1] + fine[1:])[cells]
+        fine, g = _merge(fine, g, mids, geometry(mids))
+    return fine, g
+
+
+def _fast_cells(fine: FloatArray, util: dict[str, FloatArray]) -> FloatArray:
+    """Midpoints of fine-grid cells across which some utilisation changes by more than REFINE_UTIL."""
+    jump = np.zeros(fine.size - 1)
+    for name, u in util.items():
+        if name == "step":
+            continue
+        du = np.abs(np.diff(u, axis=0))
+        np.maximum(jump, du if du.ndim == 1 else np.max(du, axis=1), out=jump)
+    cells = (jump > REFINE_UTIL) & (np.diff(fine) > 4 * BREAK_EPS_MM)
+    return np.asarray(0.5 * (fine[:-1] + fine[1:])[cells], dtype=np.float64)
 
 
 def _friction_signs(d1: FloatArray) -> tuple[FloatArray, FloatArray]:
