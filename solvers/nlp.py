@@ -108,7 +108,8 @@ ENVELOPE_SUBDIV = 2
 LAMBDA_TAIL = 1e-2
 #: Offset added to f in 1/f of the time objective (scaled units).
 DELTA_F = 1e-3
-#: Offset (mm) used to evaluate the left side of a geometry knot.
+#: Offset (mm) used to evaluate either side of a geometry knot (at the knot's own s the path may be
+#: evaluated on either side: bench seed 6 gave the left side at s and the right side at s + 1e-12).
 BREAK_EPS_MM = 1e-6
 #: An axis whose path derivatives are all below this in a window has no rows there.
 AXIS_EPS = 1e-12
@@ -174,10 +175,14 @@ class NlpLimits:
     feed_max: float | None
     #: largest step of axis acceleration allowed at a curvature jump (3,), or None (see solvers.lp.LimitSet)
     a_step: FloatArray | None = None
+    #: output sample period Ts, s: the servo error of an acceleration step at a curvature jump is
+    #: verified as seen over one sample (Kj |step| / (2 Ts) on top of e on either side), or None
+    sample_period: float | None = None
 
     @classmethod
     def from_machine(
-        cls, m: Machine, axis_velocity: bool, kinematic: bool, a_step: FloatArray | None = None
+        cls, m: Machine, axis_velocity: bool, kinematic: bool, a_step: FloatArray | None = None,
+        sample_period: float | None = None,
     ) -> NlpLimits:
         dr = m.drive_arrays()
         vmax, amax, jmax = m.limit_arrays()
@@ -190,6 +195,7 @@ class NlpLimits:
             jmax if kinematic else None,
             m.feed_max,
             a_step,
+            sample_period,
         )
 
     def utilisation(self, g: PathSamples, fd: kinematics.FeedDerivs) -> dict[str, FloatArray]:
@@ -636,10 +642,12 @@ class NlpRefiner:
             fd = kinematics.from_f(*bspline.evaluate(pw, fine, d, col0=a, k_lo=a, k_hi=b - 1))
             util = lim.utilisation(g_fine, fd)
             if br.size:
-                at = np.searchsorted(fine, br)
-                ok_at = (at < fine.size) & (fine[np.minimum(at, fine.size - 1)] == br)
+                at = _find(fine, br + BREAK_EPS_MM)
+                ok_at = at >= 0
                 step = np.zeros(fine.size)
                 step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
+                if lim.sample_period is not None:
+                    self._step_servo_error(g_fine, fd, _find(fine, br - BREAK_EPS_MM), at, step)
                 util["step"] = step
             return fd, util
 
@@ -865,12 +873,34 @@ class NlpRefiner:
         br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
         if br.size == 0:
             return br, np.zeros(0)
-        jump = np.abs(geometry(br).d2 - geometry(br - BREAK_EPS_MM).d2)
+        jump = np.abs(geometry(br + BREAK_EPS_MM).d2 - geometry(br - BREAK_EPS_MM).d2)
         with np.errstate(divide="ignore"):
             cap_q = np.min(np.where(jump > AXIS_EPS, self.lim.a_step / np.where(jump > AXIS_EPS, jump, 1.0), np.inf),
                            axis=1)
         keep = np.isfinite(cap_q)
         return br[keep], np.sqrt(cap_q[keep])
+
+    def _step_servo_error(
+        self, g: PathSamples, fd: kinematics.FeedDerivs, left: NDArray[np.int64], right: NDArray[np.int64],
+        step: FloatArray,
+    ) -> None:
+        """At curvature jumps (fine-grid indices of the left and right side of each, -1 if absent): raise
+        ``step`` at the right side to the servo error of the sampled acceleration step there,
+        max(|e_left|, |e_right|) + Kj |a_right - a_left| / (2 Ts), over emax.  A step of the axis
+        acceleration between two samples is seen in the central third difference as at most
+        step / (2 Ts) of jerk, on top of the e either side (a steps by x_ss jump x f^2)."""
+        lim = self.lim
+        Ts = lim.sample_period
+        ok = (left >= 0) & (right >= 0)
+        if Ts is None or not ok.any():
+            return
+        lt, rt = left[ok], right[ok]
+        both = np.concatenate([lt, rt])
+        v, acc, j = kinematics.axis_kinematics(_take(g, both), *(x[both] for x in fd))
+        e = np.abs(lim.Kv * v + lim.Ka * acc + lim.Kj * j).reshape(2, lt.size, 3)
+        jump = np.abs(acc[lt.size :] - acc[: lt.size])
+        ratio = (np.maximum(e[0], e[1]) + lim.Kj * jump / (2.0 * Ts)) / lim.emax
+        np.maximum.at(step, rt, np.max(ratio, axis=1))
 
     def _feed_bound(self, g: PathSamples) -> FloatArray:
         """Upper bound on f at points g: min(Fmax, min_x vmax_x / |x_s|) (inf if neither applies), (K,)."""
@@ -886,7 +916,7 @@ class NlpRefiner:
         n_fine = max(1, round((s1 - s0) / d)) * self.N * VERIFY_SUBDIV
         s = np.linspace(s0, s1, n_fine + 1)
         br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
-        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br]))
+        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br, br + BREAK_EPS_MM]))
 
     def _shrink_to_feasible(
         self,
@@ -1047,6 +1077,12 @@ class _Slots:
         return out
 
 
+def _find(sorted_s: FloatArray, s: FloatArray) -> NDArray[np.int64]:
+    """Index of each s in sorted_s (exact match), -1 where absent."""
+    i = np.minimum(np.searchsorted(sorted_s, s), sorted_s.size - 1)
+    return np.where(sorted_s[i] == s, i, -1).astype(np.int64)
+
+
 def _take(g: PathSamples, idx: NDArray[np.int64]) -> PathSamples:
     fl = None if g.feed_limit is None else g.feed_limit[idx]
     return PathSamples(g.s[idx], g.position[idx], g.d1[idx], g.d2[idx], g.d3[idx], fl)
@@ -1136,7 +1172,7 @@ def _third_derivative_envelope(
     s_lo, s_hi = sub[:, 0], sub[:, -1]
     br = breaks[(breaks > s_lo[0]) & (breaks < s_hi[-1])]
     if br.size:
-        gb = geometry(np.concatenate([br - BREAK_EPS_MM, br]))
+        gb = geometry(np.concatenate([br - BREAK_EPS_MM, br + BREAK_EPS_MM]))
         d3b = gb.d3.reshape(2, br.size, 3)
         # cells containing each break (a break lies in at most a few cells)
         i0 = np.searchsorted(s_hi, br, side="left")

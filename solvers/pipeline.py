@@ -317,7 +317,9 @@ def refine_pieces(
     """The NLP stage (spec §5-6): each piece's LP feed refined under the drive limits.
 
     ``on_chain(s_done)``, if given, is called after each NLP chain with the global arc length (mm) done."""
-    lim = NlpLimits.from_machine(machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lp_lim.a_step)
+    lim = NlpLimits.from_machine(
+        machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lp_lim.a_step, opt.sample_period
+    )
     out = []
     refiners: dict[tuple[int, int], NlpRefiner] = {}
     stats = NlpStats()
