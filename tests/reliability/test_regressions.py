@@ -125,6 +125,23 @@ def test_feature_narrower_than_nlp_checkpoints(seed: int, what: str) -> None:
     assert out.nlp_fallbacks == 0, what
 
 
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize(("seed", "what"), [
+    (135, "a C1 knot (the curvature jumps) evaluated on its left side at both s and s - 1e-6: the NLP saw no "
+          "jump, set no feed cap and passed it at speed: sampled servo error 3.3 x emax"),
+    (41, "a G1 junction: the acceleration step was under its cap but came on top of e = 0.99 emax on one "
+         "side; once checked, tightening only the feed cap (not binding) stalled and the LP feed (1.9 x) "
+         "was kept"),
+])
+def test_curvature_jump_servo_error(seed: int, what: str) -> None:
+    """Bench-profile cases (C1 knots and G1 junctions, where x_ss jumps): see ``what``.  Now both sides
+    of a knot are evaluated at s -+ 1e-6 mm, and the step's servo error as one sample sees it,
+    |e| either side + Kj |step| / (2 Ts), is verified and tightens the e rows and the cap there."""
+    out = harness.run(gen.case(seed, "bench"), "lp+nlp")
+    assert out.ok, f"{what}: {out.describe()}"
+    assert out.nlp_fallbacks == 0, what
+
+
 #: Random cases (``gen.case(seed, "test")``) standing for failure classes not fixed yet.
 UNFIXED = {
     (25, "lp"): "rest-acceleration: the closed cubic's start has a huge curvature; the LP leaves rest with "
