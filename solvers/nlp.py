@@ -646,9 +646,9 @@ class NlpRefiner:
                 ok_at = at >= 0
                 step = np.zeros(fine.size)
                 step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
-                if lim.sample_period is not None:
-                    self._step_servo_error(g_fine, fd, _find(fine, br - BREAK_EPS_MM), at, step)
                 util["step"] = step
+                if lim.sample_period is not None:
+                    self._step_servo_error(g_fine, fd, _find(fine, br - BREAK_EPS_MM), at, util)
             return fd, util
 
         x = x0
@@ -882,13 +882,14 @@ class NlpRefiner:
 
     def _step_servo_error(
         self, g: PathSamples, fd: kinematics.FeedDerivs, left: NDArray[np.int64], right: NDArray[np.int64],
-        step: FloatArray,
+        util: dict[str, FloatArray],
     ) -> None:
-        """At curvature jumps (fine-grid indices of the left and right side of each, -1 if absent): raise
-        ``step`` at the right side to the servo error of the sampled acceleration step there,
-        max(|e_left|, |e_right|) + Kj |a_right - a_left| / (2 Ts), over emax.  A step of the axis
-        acceleration between two samples is seen in the central third difference as at most
-        step / (2 Ts) of jerk, on top of the e either side (a steps by x_ss jump x f^2)."""
+        """Servo error of the sampled acceleration step at curvature jumps (fine-grid indices of the left
+        and right side of each, -1 if absent).  A step of the axis acceleration between two samples
+        (x_ss jump x f^2) is seen in the central third difference as at most |step| / (2 Ts) of jerk on
+        top of the e either side, so each side's servo-error utilisation is raised to
+        (|e_side| + Kj |step| / (2 Ts)) / emax, and ``util["step"]`` to the larger of the two: a violation
+        tightens the e rows next to the jump (or gets a cut slot there) and the feed cap at it."""
         lim = self.lim
         Ts = lim.sample_period
         ok = (left >= 0) & (right >= 0)
@@ -898,9 +899,10 @@ class NlpRefiner:
         both = np.concatenate([lt, rt])
         v, acc, j = kinematics.axis_kinematics(_take(g, both), *(x[both] for x in fd))
         e = np.abs(lim.Kv * v + lim.Ka * acc + lim.Kj * j).reshape(2, lt.size, 3)
-        jump = np.abs(acc[lt.size :] - acc[: lt.size])
-        ratio = (np.maximum(e[0], e[1]) + lim.Kj * jump / (2.0 * Ts)) / lim.emax
-        np.maximum.at(step, rt, np.max(ratio, axis=1))
+        seen = lim.Kj * np.abs(acc[lt.size :] - acc[: lt.size]) / (2.0 * Ts)
+        for side, idx in enumerate((lt, rt)):
+            np.maximum.at(util["servo_error"], idx, (e[side] + seen) / lim.emax)
+        np.maximum.at(util["step"], rt, np.max((np.maximum(e[0], e[1]) + seen) / lim.emax, axis=1))
 
     def _feed_bound(self, g: PathSamples) -> FloatArray:
         """Upper bound on f at points g: min(Fmax, min_x vmax_x / |x_s|) (inf if neither applies), (K,)."""
