@@ -56,3 +56,7 @@ class InfeasibleError(ScheduleError):
 
 class SolverFailure(ScheduleError):
     """The numerical solver failed (status other than optimal)."""
+
+
+class LimitViolationError(ScheduleError):
+    """The sampled output still exceeds a limit after re-verification: nothing is returned."""

@@ -213,17 +213,21 @@ class WindowLP:
     """Builds and solves the two-stage LP of one window, with cutting planes."""
 
     def __init__(
-        self, spec: WindowSpec, lim: LimitSet, geometry: GeometryFn, solver: str, breaks: FloatArray | None = None
+        self, spec: WindowSpec, lim: LimitSet, geometry: GeometryFn, solver: str, breaks: FloatArray | None = None,
+        verify: FloatArray | None = None,
     ) -> None:
         """``breaks``: piece-local s where the geometry's third derivative may jump
-        (NURBS knots); both sides of each are verified."""
+        (NURBS knots); both sides of each are verified.  ``verify``: more piece-local s
+        to verify (sampled points the pipeline found over a limit, ``solvers.verify``)."""
         self.breaks = np.zeros(0) if breaks is None else np.asarray(breaks, dtype=np.float64)
+        self.verify = np.zeros(0) if verify is None else np.asarray(verify, dtype=np.float64)
         self.spec = spec
         self.lim = lim
         self.geometry = geometry
         self.solver = solver
         self.iterations = 0
         self.Q = 1.0
+        self._fine_g: tuple[FloatArray, PathSamples] | None = None
 
     # ----- row blocks ---------------------------------------------------------
     def _mats(self, s: FloatArray) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
@@ -324,7 +328,10 @@ class WindowLP:
         if not np.isfinite(Q) or Q <= 0:
             raise InfeasibleError("window has no positive velocity bound", window=spec.index)
         n = spec.ncols
-        w = bspline.integral_weights(spec.k0, spec.k1, spec.d, spec.k0, n) * Q
+        # objective: maximise integral q = sum w_j c_j; only its direction matters, so it is
+        # normalised (with Q ~ 1e8 the raw weights made HiGHS's dual simplex fail, status NotSet)
+        w = bspline.integral_weights(spec.k0, spec.k1, spec.d, spec.k0, n)
+        w = w / float(np.max(np.abs(w)))
         # q >= 0 everywhere, not only at checkpoints: the B-spline basis is non-negative, so
         # c >= 0 suffices (the rows keep q >= 0 only at checkpoints, and q dipping below 0
         # between them stalls the feed inside the path).  The control point outside a rest end
@@ -357,7 +364,7 @@ class WindowLP:
         # time 1 / sqrt(q) diverges and the feed stalls.  If the floor makes the window
         # infeasible (an inherited start below it), it is dropped.
         floor_lo = col_lo.copy()
-        floor_lo[floor_cols] = min(self._floor(self.geometry(self._fine(s_check))), FLOOR_SHARE * step_cap) / Q
+        floor_lo[floor_cols] = min(self._floor(self._fine_geometry(s_check)), FLOOR_SHARE * step_cap) / Q
         try:
             chat1, c_star, pts1 = self._stage1(base, g, w, floor_lo, col_hi, Q, s_check)
         except InfeasibleError:
@@ -368,18 +375,19 @@ class WindowLP:
 
         # stage 2: + q <= q*, pseudo-jerk
         qstar = self._qstar(c_star, g.s)
-        r2 = base.copy()
-        self._stage1_rows(r2, g, Q, qstar)
-        self._jerk_rows(r2, g, Q, qstar)
-        try:
-            chat2 = self._run(r2, w, floor_lo, col_hi)
-        except InfeasibleError:  # a fresh model (the solver keeps its column bounds)
-            floor_lo = col_lo
-            r2 = base.copy()
+
+        def stage2(lo: FloatArray) -> tuple[FloatArray, tuple[int, int, int]]:
+            r2 = base.copy()  # a fresh model each time (the solver keeps its column bounds)
             self._stage1_rows(r2, g, Q, qstar)
             self._jerk_rows(r2, g, Q, qstar)
-            chat2 = self._run(r2, w, floor_lo, col_hi)
-        chat2, pts2 = self._cuts(chat2, r2, w, floor_lo, col_hi, Q, s_check, c_star)
+            return self._cuts(self._run(r2, w, lo, col_hi), r2, w, lo, col_hi, Q, s_check, c_star)
+
+        try:
+            chat2, pts2 = stage2(floor_lo)
+        except InfeasibleError:  # the floor (or a cut round under it) is infeasible: drop the floor
+            if floor_lo is col_lo:
+                raise
+            chat2, pts2 = stage2(col_lo)
         return WindowResult(chat2 * Q, c_star, self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1], pts2[2])
 
     def _stage1(
@@ -420,7 +428,14 @@ class WindowLP:
         s_fine = (s_check[:-1, None] + np.diff(s_check)[:, None] * frac[None, :]).ravel()
         lo, hi = s_check[0], s_check[-1]
         br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
-        return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br]))
+        extra = self.verify[(self.verify > lo) & (self.verify < hi)]
+        return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br, extra]))
+
+    def _fine_geometry(self, s_check: FloatArray) -> PathSamples:
+        """Geometry on the verification grid of ``s_check``, evaluated once per window."""
+        if self._fine_g is None or self._fine_g[0] is not s_check:
+            self._fine_g = (s_check, self.geometry(self._fine(s_check)))
+        return self._fine_g[1]
 
     def _floor(self, g: PathSamples) -> float:
         """FLOOR_SHARE x the largest constant q that meets every limit at the points g (verification grid):
@@ -450,7 +465,7 @@ class WindowLP:
         c_star: FloatArray | None,
     ) -> tuple[FloatArray, tuple[int, int, int]]:
         """Verify on a finer grid; add violated points as rows and re-solve."""
-        g = self.geometry(self._fine(s_check))
+        g = self._fine_geometry(s_check)
         rounds = added = 0
         for i in range(MAX_CUT_ROUNDS + 1):
             viol = self._violations(chat * Q, g, c_star)

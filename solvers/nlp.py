@@ -399,6 +399,8 @@ class NlpRefiner:
         self.fault = fault
         self.shapes: dict[tuple[int, tuple[int, ...], bool], _Shape] = {}
         self.stats = stats if stats is not None else NlpStats()
+        #: piece-local s verified besides the fine grid (set per piece by ``refine``)
+        self.verify: FloatArray = np.zeros(0)
 
     def _shape(self, n: int, axes: tuple[int, ...], slotted: bool = False) -> _Shape:
         key = (n, axes, slotted)
@@ -417,6 +419,7 @@ class NlpRefiner:
         breaks: FloatArray,
         on_chain: Callable[[float], None] | None = None,
         workers: int = 1,
+        verify: FloatArray | None = None,
     ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """f control points (n_int + 2,) and the mask of knot intervals that use them.
 
@@ -425,7 +428,9 @@ class NlpRefiner:
         geometry knots; ``on_chain(s)`` is called after each chain with the piece-local
         arc length done (it may raise to cancel).  Chains are independent given the
         LP: with ``workers`` > 1 they are solved in that many forked processes.
+        ``verify``: more piece-local s to verify (sampled points found over a limit).
         """
+        self.verify = np.zeros(0) if verify is None else np.asarray(verify, dtype=np.float64)
         n_int = c.size - 2
         p = np.zeros(n_int + 2)
         mask = np.zeros(n_int, dtype=bool)
@@ -918,7 +923,8 @@ class NlpRefiner:
         n_fine = max(1, round((s1 - s0) / d)) * self.N * VERIFY_SUBDIV
         s = np.linspace(s0, s1, n_fine + 1)
         br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
-        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br, br + BREAK_EPS_MM]))
+        extra = self.verify[(self.verify > s0) & (self.verify < s1)]
+        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br, br + BREAK_EPS_MM, extra]))
 
     def _shrink_to_feasible(
         self,

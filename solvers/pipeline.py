@@ -21,12 +21,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.toolpath import PathSamples, Piece, Toolpath
-from solvers import kinematics
-from solvers.errors import InvalidMachineError, InvalidOptionsError
+from solvers import kinematics, verify
+from solvers.errors import InvalidMachineError, InvalidOptionsError, LimitViolationError
 from solvers.lp import LimitSet, WindowLP, WindowSpec, velocity_bound
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.nlp import NlpLimits, NlpRefiner, NlpStats
-from solvers.timing import PieceProfile, PieceTiming
+from solvers.timing import PieceProfile, PieceTiming, stuck
 
 FloatArray = NDArray[np.float64]
 
@@ -46,6 +46,10 @@ NLP_WINDOW_PER_OVERLAP = 3
 LP_PROGRESS_SHARE = 0.1
 #: Utilisation at or above which a constraint is reported as binding.
 BINDING_UTILISATION = 0.98
+#: Times a piece whose feed stalls is solved again with twice the knots.
+KNOT_REFINEMENTS = 3
+#: Rounds of re-solving pieces whose samples exceed a limit (``solvers.verify``) before giving up.
+SAMPLE_REPAIR_ROUNDS = 2
 #: Samples computed per chunk (bounds memory in the reconstruction).
 SAMPLE_CHUNK = 100_000
 
@@ -185,10 +189,12 @@ class WindowPlan:
     nlp_overlap: int
 
 
-def plan_piece(piece: Piece, machine: Machine, opt: Options) -> WindowPlan:
+def plan_piece(piece: Piece, machine: Machine, opt: Options, n_int: int | None = None) -> WindowPlan:
+    """Knots and window sizes of one piece; ``n_int`` overrides the knot count (a refined piece)."""
     D = machine.stopping_distance()
     d_target = opt.knot_spacing if opt.knot_spacing is not None else KNOT_SPACING_PER_STOP * D
-    n_int = max(MIN_INTERVALS, math.ceil(piece.length / d_target - 1e-9))
+    if n_int is None:
+        n_int = max(MIN_INTERVALS, math.ceil(piece.length / d_target - 1e-9))
     d = piece.length / n_int
     overlap = opt.lp_overlap if opt.lp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
     window = max(opt.lp_window, 3 * overlap)
@@ -207,14 +213,39 @@ def _local(toolpath: Toolpath, piece: Piece) -> Any:
 
 def solve_piece(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any],
-    on_window: Callable[[float], None] | None = None,
+    on_window: Callable[[float], None] | None = None, verify: FloatArray | None = None,
 ) -> tuple[PieceProfile, list[int]]:
     """Walk LP windows over one piece and assemble its control points.
 
     Returns the profile and the knots where consecutive LP windows meet.
     ``on_window(s_done)``, if given, is called after each window with the piece-local arc length (mm) fixed so far.
+    ``verify``: piece-local s verified besides each window's fine grid (samples found over a limit).
+
+    Where the feed cannot move (it stalls inside the piece, or cannot leave or reach a rest end: a
+    turn or a start curvature sharper than the knots resolve), the piece is solved again with
+    twice the knots, up to KNOT_REFINEMENTS times; ``PieceTiming`` rejects what is still stuck.
     """
-    plan = plan_piece(piece, machine, opt)
+    n_int: int | None = None
+    for attempt in range(KNOT_REFINEMENTS + 1):
+        plan = plan_piece(piece, machine, opt, n_int)
+        prof, joins = _solve_windows(
+            toolpath, piece, plan, opt, lim, stats, on_window if attempt == 0 else None, verify
+        )
+        if not stuck(prof):
+            break
+        n_int = 2 * plan.n_int
+        stats["knot_refinements"] = stats.get("knot_refinements", 0) + 1
+    stats["control_points"] += prof.c.size
+    stats["checkpoints"] += plan.n_int * opt.checkpoints_per_interval + 1
+    stats["knot_spacing"].append(plan.d)
+    return prof, joins
+
+
+def _solve_windows(
+    toolpath: Toolpath, piece: Piece, plan: WindowPlan, opt: Options, lim: LimitSet, stats: dict[str, Any],
+    on_window: Callable[[float], None] | None, verify: FloatArray | None,
+) -> tuple[PieceProfile, list[int]]:
+    """The LP windows of ``solve_piece`` on one knot plan."""
     geometry = _local(toolpath, piece)
     breaks = _breaks(toolpath, piece)
     joins: list[int] = []
@@ -224,7 +255,7 @@ def solve_piece(
     prev_qstar: tuple[int, FloatArray] | None = None
     prev_c: tuple[int, FloatArray] | None = None
     N = opt.checkpoints_per_interval
-    shared = opt.method == "lp+nlp" and machine.has_drives
+    shared = opt.method == "lp+nlp"  # (which needs drives: a_rest from the servo-error budget)
     a_rest_start = _corner_rest(toolpath, piece, lim, at_end=False) if shared else None
     a_rest_end = _corner_rest(toolpath, piece, lim, at_end=True) if shared else None
     while True:
@@ -236,7 +267,7 @@ def solve_piece(
                           a_rest_start, a_rest_end)
         s_check = np.linspace(k0 * plan.d, k1 * plan.d, (k1 - k0) * N + 1)
         t0 = time.perf_counter()
-        res = WindowLP(spec, lim, geometry, opt.solver, breaks).solve(s_check)
+        res = WindowLP(spec, lim, geometry, opt.solver, breaks, verify).solve(s_check)
         stats["window_times"].append(time.perf_counter() - t0)
         stats["windows"] += 1
         stats["iterations"] += res.iterations
@@ -260,9 +291,6 @@ def solve_piece(
     # rest at both piece ends holds exactly (the LP meets it to solver tolerance)
     c[0] = -c[1]
     c[-1] = -c[-2]
-    stats["control_points"] += c.size
-    stats["checkpoints"] += plan.n_int * N + 1
-    stats["knot_spacing"].append(plan.d)
     return PieceProfile(s_start=piece.s_start, length=piece.length, d=plan.d, c=c), joins
 
 
@@ -313,18 +341,24 @@ def refine_pieces(
     toolpath: Toolpath, machine: Machine, opt: Options, lp_profiles: list[PieceProfile], joins: list[list[int]],
     lp_lim: LimitSet,
     on_chain: Callable[[float], None] | None = None,
+    pieces: list[Piece] | None = None,
+    verify: dict[int, FloatArray] | None = None,
+    stats: NlpStats | None = None,
 ) -> tuple[list[PieceProfile], NlpStats]:
     """The NLP stage (spec §5-6): each piece's LP feed refined under the drive limits.
 
-    ``on_chain(s_done)``, if given, is called after each NLP chain with the global arc length (mm) done."""
+    ``on_chain(s_done)``, if given, is called after each NLP chain with the global arc length (mm) done.
+    ``pieces`` (default: all of the toolpath's) pair with ``lp_profiles`` and ``joins``; ``verify`` maps a
+    piece index to piece-local s verified besides the fine grid; ``stats`` accumulates over calls."""
     lim = NlpLimits.from_machine(
         machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lp_lim.a_step, opt.sample_period
     )
     out = []
     refiners: dict[tuple[int, int], NlpRefiner] = {}
-    stats = NlpStats()
-    for piece, prof, jn in zip(toolpath.pieces, lp_profiles, joins, strict=True):
-        plan = plan_piece(piece, machine, opt)
+    stats = stats if stats is not None else NlpStats()
+    verify = verify or {}
+    for piece, prof, jn in zip(pieces if pieces is not None else toolpath.pieces, lp_profiles, joins, strict=True):
+        plan = plan_piece(piece, machine, opt, prof.n_int)
         key = (plan.nlp_window, plan.nlp_overlap)
         if key not in refiners:
             refiners[key] = NlpRefiner(lim, opt.nlp_checkpoints_per_interval, *key, fault=opt.nlp_fault, stats=stats)
@@ -337,10 +371,74 @@ def refine_pieces(
                 report(s0 + s_loc)
 
         p, mask = refiners[key].refine(
-            _local(toolpath, piece), prof.c, prof.d, jn, _breaks(toolpath, piece), chain_done, opt.nlp_workers
+            _local(toolpath, piece), prof.c, prof.d, jn, _breaks(toolpath, piece), chain_done, opt.nlp_workers,
+            verify.get(piece.index),
         )
         out.append(replace(prof, p=p, f_mask=mask))
     return out, stats
+
+
+def _sample(
+    toolpath: Toolpath, profiles: list[PieceProfile], Ts: float, machine: Machine
+) -> tuple[TimeSamples, float]:
+    """Time reconstruction (spec §7) at t_k = k Ts over all pieces, and the motion time, s."""
+    timings = [PieceTiming.build(p) for p in profiles]
+    durations = np.array([tm.duration for tm in timings])
+    t_offsets = np.concatenate([[0.0], np.cumsum(durations)])
+    motion_time = float(t_offsets[-1])
+    n_samples = math.ceil(motion_time / Ts - 1e-9) + 1
+    t_all = np.arange(n_samples, dtype=np.float64) * Ts
+    cols: dict[str, list[FloatArray]] = {k: [] for k in ("s", "feed", "pos", "v", "a", "j")}
+    for piece, prof, tm, t0 in zip(toolpath.pieces, profiles, timings, t_offsets[:-1], strict=True):
+        lo = np.searchsorted(t_all, t0, side="left")
+        hi = np.searchsorted(t_all, t0 + tm.duration, side="left") if piece.index < len(profiles) - 1 else n_samples
+        for a in range(lo, hi, SAMPLE_CHUNK):
+            b = min(hi, a + SAMPLE_CHUNK)
+            s_local = np.clip(tm.s_at(t_all[a:b] - t0), 0.0, piece.length)
+            g, f, v, acc, jerk = _kinematics(toolpath, piece, prof, s_local)
+            cols["s"].append(s_local + piece.s_start)
+            cols["feed"].append(f)
+            cols["pos"].append(g.position)
+            cols["v"].append(v)
+            cols["a"].append(acc)
+            cols["j"].append(jerk)
+    samples = TimeSamples(
+        t=t_all,
+        s=np.concatenate(cols["s"]),
+        feed=np.concatenate(cols["feed"]),
+        position=np.concatenate(cols["pos"]),
+        velocity=np.concatenate(cols["v"]),
+        acceleration=np.concatenate(cols["a"]),
+        jerk=np.concatenate(cols["j"]),
+    )
+    # the last sample sits exactly on the path end, at rest
+    samples.feed[-1] = 0.0
+    samples.velocity[-1] = 0.0
+    if machine.has_drives:
+        u, e = drive_outputs(machine.drive_arrays(), samples.velocity, samples.acceleration, samples.jerk)
+        samples = replace(samples, control_signal=u, servo_error=e)
+    return samples, motion_time
+
+
+def _promised(lim: LimitSet, opt: Options, machine: Machine) -> verify.Limits:
+    """The limits the schedule holds (what ``diagnostics.binding`` reports): lp -> v, a, j (j with
+    the jerk stage); lp+nlp -> u, e, the drive's vmax (and the LP's v, a, j where the NLP keeps them)."""
+    if opt.method == "lp" or not machine.has_drives:
+        return verify.Limits(lim.vmax, lim.amax, lim.jmax if opt.jerk else None, None, None)
+    dr = machine.drive_arrays()
+    vmax: FloatArray | None = dr["vmax"] if np.isfinite(dr["vmax"]).any() else None
+    if opt.nlp_axis_velocity or opt.nlp_kinematic:
+        vmax = np.minimum(lim.vmax, dr["vmax"])
+    kin = opt.nlp_kinematic
+    return verify.Limits(vmax, lim.amax if kin else None, lim.jmax if kin else None, dr, None)
+
+
+def _feed_cap(lim: LimitSet, toolpath: Toolpath, s: FloatArray) -> FloatArray | None:
+    """Tangential feed cap (mm/s) at global s: Fmax and the programmed feed limits; None if neither."""
+    cap = toolpath.feed_limit(s)
+    if lim.feed_max is not None:
+        cap = np.full(s.size, lim.feed_max) if cap is None else np.minimum(cap, lim.feed_max)
+    return cap
 
 
 def _kinematics(
@@ -387,52 +485,59 @@ def schedule(
 
         solved.append(solve_piece(toolpath, p, machine, opt, lim, stats, on_window))
         report(lp_share * p.s_end / toolpath.length)
-    profiles = [sp for sp, _ in solved]
+    lp_profiles = [sp for sp, _ in solved]
+    joins = [j for _, j in solved]
     t_lp = time.perf_counter() - t_start
-    lp_motion_time = float(sum(PieceTiming.build(p).duration for p in profiles))
+    profiles = lp_profiles
     nlp_stats: NlpStats | None = None
     if opt.method == "lp+nlp":
-        profiles, nlp_stats = refine_pieces(
-            toolpath, machine, opt, profiles, [j for _, j in solved], lim,
-            lambda s_done: report(lp_share + (1.0 - lp_share) * s_done / toolpath.length),
+        nlp_stats = NlpStats()
+        profiles, _ = refine_pieces(
+            toolpath, machine, opt, lp_profiles, joins, lim,
+            lambda s_done: report(lp_share + (1.0 - lp_share) * s_done / toolpath.length), stats=nlp_stats,
         )
     t_nlp = time.perf_counter() - t_start - t_lp
-    timings = [PieceTiming.build(p) for p in profiles]
-    durations = np.array([tm.duration for tm in timings])
-    t_offsets = np.concatenate([[0.0], np.cumsum(durations)])
-    motion_time = float(t_offsets[-1])
-    Ts = opt.sample_period
-    n_samples = math.ceil(motion_time / Ts - 1e-9) + 1
-    t_all = np.arange(n_samples, dtype=np.float64) * Ts
-    cols: dict[str, list[FloatArray]] = {k: [] for k in ("s", "feed", "pos", "v", "a", "j")}
-    for piece, prof, tm, t0 in zip(toolpath.pieces, profiles, timings, t_offsets[:-1], strict=True):
-        lo = np.searchsorted(t_all, t0, side="left")
-        hi = np.searchsorted(t_all, t0 + tm.duration, side="left") if piece.index < len(profiles) - 1 else n_samples
-        for a in range(lo, hi, SAMPLE_CHUNK):
-            b = min(hi, a + SAMPLE_CHUNK)
-            s_local = np.clip(tm.s_at(t_all[a:b] - t0), 0.0, piece.length)
-            g, f, v, acc, jerk = _kinematics(toolpath, piece, prof, s_local)
-            cols["s"].append(s_local + piece.s_start)
-            cols["feed"].append(f)
-            cols["pos"].append(g.position)
-            cols["v"].append(v)
-            cols["a"].append(acc)
-            cols["j"].append(jerk)
-    samples = TimeSamples(
-        t=t_all,
-        s=np.concatenate(cols["s"]),
-        feed=np.concatenate(cols["feed"]),
-        position=np.concatenate(cols["pos"]),
-        velocity=np.concatenate(cols["v"]),
-        acceleration=np.concatenate(cols["a"]),
-        jerk=np.concatenate(cols["j"]),
+    # the sampled output re-checked (solvers.verify); pieces with samples over a limit are solved
+    # again with those points verified, then re-sampled
+    limits = _promised(lim, opt, machine)
+    verify_s: dict[int, FloatArray] = {}
+    stats["sample_repairs"] = 0
+    starts = np.array([p.s_start for p in toolpath.pieces])
+    for rnd in range(SAMPLE_REPAIR_ROUNDS + 1):
+        samples, motion_time = _sample(toolpath, profiles, opt.sample_period, machine)
+        chk = verify.check(
+            opt.sample_period, samples.position, samples.feed, samples.velocity, samples.acceleration, samples.jerk,
+            replace(limits, feed_cap=_feed_cap(lim, toolpath, samples.s)),
+        )
+        if not chk.repair.any() or rnd == SAMPLE_REPAIR_ROUNDS:
+            break
+        stats["sample_repairs"] += 1
+        s_bad = samples.s[chk.repair]
+        owner = np.clip(np.searchsorted(starts, s_bad, side="right") - 1, 0, len(starts) - 1)
+        redo = [toolpath.pieces[i] for i in np.unique(owner)]
+        for piece in redo:
+            s_loc = s_bad[owner == piece.index] - piece.s_start
+            s_loc = s_loc[(s_loc > 0.0) & (s_loc < piece.length)]
+            verify_s[piece.index] = np.union1d(verify_s.get(piece.index, np.zeros(0)), s_loc)
+            prof, jn = solve_piece(toolpath, piece, machine, opt, lim, stats, None, verify_s[piece.index])
+            lp_profiles[piece.index], joins[piece.index] = prof, jn
+            if nlp_stats is not None:
+                prof = refine_pieces(
+                    toolpath, machine, opt, [prof], [jn], lim, None, [piece], verify_s, nlp_stats
+                )[0][0]
+            profiles[piece.index] = prof
+    # (with method lp the LP profiles are the sampled ones: their motion time is known)
+    lp_motion_time = motion_time if nlp_stats is None else float(
+        sum(PieceTiming.build(p).duration for p in lp_profiles)
     )
-    # the last sample sits exactly on the path end, at rest
-    samples.feed[-1] = 0.0
-    samples.velocity[-1] = 0.0
-    if machine.has_drives:
-        u, e = drive_outputs(machine.drive_arrays(), samples.velocity, samples.acceleration, samples.jerk)
-        samples = replace(samples, control_signal=u, servo_error=e)
+    if chk.failed:
+        kind, axis, util, k = chk.worst
+        raise LimitViolationError(
+            f"the sampled {kind.replace('_', ' ')} reaches {util:.4f} x its limit after "
+            f"{stats['sample_repairs']} repair rounds (limits are promised within {1.0 + verify.FAIL_TOL:g} x)",
+            field="toolpath", value={"s": float(samples.s[k]), "t": float(samples.t[k]), "utilisation": util},
+            axis=axis or None,
+        )
     compute_time = time.perf_counter() - t_start
     summary = {
         "method": opt.method,
@@ -448,11 +553,13 @@ def schedule(
         "cut_rounds": stats["cut_rounds"],
         "cut_points": stats["cut_points"],
         "unverified_points": stats["unverified"],
+        # rounds of re-solving pieces whose samples were over a limit (solvers.verify)
+        "sample_repairs": stats["sample_repairs"],
         "control_points": stats["control_points"],
         "checkpoints": stats["checkpoints"],
         "knot_spacing": float(np.min(stats["knot_spacing"])),
-        "samples": int(n_samples),
-        "sample_period": Ts,
+        "samples": int(samples.t.size),
+        "sample_period": opt.sample_period,
         "peak_utilisation": _peak_utilisation(
             samples, lim, machine.drive_arrays() if machine.has_drives else None, toolpath.feed_limit(samples.s)
         ),

@@ -130,7 +130,9 @@ class PieceTiming:
         q1_L = (profile.c[-1] - profile.c[-2]) / profile.d
         if not (q1_0 > 0 and q1_L < 0):
             raise ScheduleError(
-                "feed profile cannot leave or reach a rest point (zero acceleration at rest)",
+                "feed profile cannot leave or reach a rest point (zero acceleration at rest): the path turns "
+                "too sharply next to it for the knots, even after refining them",
+                field="toolpath",
                 value={"s_start": profile.s_start, "dq_start": q1_0, "dq_end": q1_L},
             )
         stalls = _stalls(profile)
@@ -151,6 +153,13 @@ class PieceTiming:
         """Piece-local s at piece-local times (clamped to [0, duration])."""
         x = self.table.inverse(t_local)
         return self.profile.s_of_x(x)[0]
+
+
+def stuck(profile: PieceProfile) -> bool:
+    """True if the feed cannot leave or reach a rest end (q' = 0 there) or stalls inside the piece."""
+    q1_0 = (profile.c[1] - profile.c[0]) / profile.d
+    q1_L = (profile.c[-1] - profile.c[-2]) / profile.d
+    return not (q1_0 > 0 and q1_L < 0) or _stalls(profile).size > 0
 
 
 def _stalls(profile: PieceProfile) -> NDArray[np.int64]:

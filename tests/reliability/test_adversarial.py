@@ -97,7 +97,9 @@ def test_cusp_is_a_typed_error() -> None:
     for method in ("lp", "lp+nlp"):
         with pytest.raises(ScheduleError) as err:
             schedule(Toolpath([seg]), router(), Options(method=method))
-        assert err.value.field == "toolpath" and "stalls" in err.value.rule
+        # the feed stalls at the cusp (lp), or the samples there exceed a limit after the
+        # re-verification rounds (lp+nlp): typed, attributed to the toolpath, never a partial result
+        assert err.value.field == "toolpath" and ("stalls" in err.value.rule or "x its limit" in err.value.rule)
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
@@ -134,10 +136,9 @@ def _uniform(v: float) -> Machine:
     (1e-3, 1e-3),
     (1e8, 1.0),  # HiGHS returned no status here before the LP's q scale was capped by the reachable q
     (1e10, 1.0),
-    pytest.param(1e12, 1.0, marks=pytest.mark.xfail(
-        reason="limits of 1e12: HiGHS returns no status (SolverFailure, no field) although the window is scaled "
-               "by the reachable q; the rows still span ~1e12 (rest rows vs jerk rows)", strict=True)),
-    pytest.param(1e12, 100.0, marks=pytest.mark.xfail(reason="as (1e12, 1.0)", strict=True)),
+    # HiGHS returned no status at 1e12 until the LP objective was normalised (its weights were ~Q ~ 1e12)
+    (1e12, 1.0),
+    (1e12, 100.0),
 ])
 def test_extreme_limits_schedule(limit: float, length: float) -> None:
     """All limits 1e-3 (mm/s, mm/s^2, mm/s^3) or 1e12: the schedule holds them."""
