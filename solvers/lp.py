@@ -16,7 +16,9 @@ velocity bound (mm^2/s^2), so all rows are O(1).
         seen over one sample period, stays inside jmax); when the NLP refines
         the feed (jerk is then limited through the servo error instead),
         a_rest_x = min(amax_x, REST_SHARE emax_x / (Ka_x + Kj_x / (2 Ts))), which
-        keeps the servo error of that step, seen over one sample, inside emax
+        keeps the servo error of that step, seen over one sample, inside emax;
+        at a corner the step is a_out - a_in (both pieces' rest accelerations), so
+        the window may be given a smaller per-axis a_rest there (``WindowSpec.a_rest_start/end``)
       artificial window end: c_{k1} = c_{k1+1} = 0 (q = q' = 0, discarded)
       inherited window start: c_{k0}, c_{k0+1} fixed (q, q' continuous)
 
@@ -92,6 +94,8 @@ class WindowSpec:
             points.  On the first ``INHERITED_INTERVALS`` knot intervals the
             jerk rows use the previous window's q* (the inherited state was
             made feasible against it), so stage 2 stays feasible.
+        a_rest_start, a_rest_end: per-axis rest acceleration (3,) at a rest start / end
+            instead of ``LimitSet.a_rest`` (a corner shares the step with the next piece), or None.
     """
 
     index: int
@@ -103,6 +107,8 @@ class WindowSpec:
     end_rest: bool
     prev_qstar: tuple[int, FloatArray] | None = None
     prev_c: tuple[int, FloatArray] | None = None
+    a_rest_start: FloatArray | None = None
+    a_rest_end: FloatArray | None = None
 
     @property
     def ncols(self) -> int:
@@ -278,12 +284,12 @@ class WindowLP:
             one = np.ones(g.s.size)
             self._add(rows, A, -one, one, g.s)
 
-    def _rest_rows(self, rows: _Rows, s_rest: float, sign: float, Q: float) -> None:
-        """q(s_rest) = 0 and sign * q'(s_rest) * max_x(|x_s|/(2 a_rest_x)) <= 1."""
+    def _rest_rows(self, rows: _Rows, s_rest: float, sign: float, Q: float, a_rest: FloatArray | None) -> None:
+        """q(s_rest) = 0 and sign * q'(s_rest) * max_x(|x_s|/(2 a_rest_x)) <= 1 (a_rest: default lim.a_rest)."""
         g = self.geometry(np.array([s_rest]))
         B0, B1, _ = self._mats(g.s)
         rows.add(B0, np.zeros(1), np.zeros(1))
-        r = float(np.max(np.abs(g.d1[0]) / (2.0 * self.lim.a_rest)))
+        r = float(np.max(np.abs(g.d1[0]) / (2.0 * (self.lim.a_rest if a_rest is None else a_rest))))
         rows.add(B1 * (sign * Q * r), np.array([-np.inf]), np.ones(1))
 
     def _eval(self, c: FloatArray, s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -347,9 +353,9 @@ class WindowLP:
 
         base = _Rows(n)
         if spec.start_fixed is None:
-            self._rest_rows(base, spec.k0 * spec.d, 1.0, Q)
+            self._rest_rows(base, spec.k0 * spec.d, 1.0, Q, spec.a_rest_start)
         if spec.end_rest:
-            self._rest_rows(base, spec.k1 * spec.d, -1.0, Q)
+            self._rest_rows(base, spec.k1 * spec.d, -1.0, Q, spec.a_rest_end)
 
         step_cap = self._step_rows(base, Q)
         # Away from the rest ends q is kept above a small floor (a constant feed that meets every

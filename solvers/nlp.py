@@ -35,9 +35,17 @@ coefficients and weights as parameters and the fixed control points and row
 bounds given per call, then re-called window after window.
 
 Between checkpoints the limits are verified on a VERIFY_SUBDIV-times finer
-grid (and both sides of geometry knots); the bounds at the two checkpoints
-around a violated point are tightened by the overshoot and the window is
-re-solved warm (at most MAX_CUT_ROUNDS times).
+grid (and both sides of geometry knots), bisected where the tangent turns
+fast (REFINE_TURN) or a utilisation changes fast (REFINE_UTIL) between its
+points, so features narrower than the grid (sharp turns, curvature peaks) are
+seen.  Then, per round (at most MAX_CUT_ROUNDS, re-solved warm): the worst
+point of a stretch over a limit by more than SLOT_OVERSHOOT, or any stretch
+once the window uses slots, gets a *cut slot*: a checkpoint placed there, one
+per knot interval, with the path's exact derivatives (the window switches to
+its shape with slot rows); a stretch next to a used slot tightens that slot's
+bounds; the other stretches tighten the bounds of the checkpoints around them
+by the overshoot.  (Tightening alone cannot hold a feature the checkpoints do
+not see: a 0.2 mm turn between checkpoints 0.55 mm apart reached 1.7 x emax.)
 
 Dual windows (spec §6): the LP walks the piece in large windows; within each
 LP window's committed span [K_m, K_{m+1}] the NLP windows walk a *chain* that
@@ -62,6 +70,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 from numpy.typing import NDArray
+from scipy.ndimage import maximum_filter1d
 
 from geometry.toolpath import PathSamples
 from solvers import bspline, kinematics
@@ -100,10 +109,26 @@ ENVELOPE_SUBDIV = 2
 LAMBDA_TAIL = 1e-2
 #: Offset added to f in 1/f of the time objective (scaled units).
 DELTA_F = 1e-3
-#: Offset (mm) used to evaluate the left side of a geometry knot.
+#: Offset (mm) used to evaluate either side of a geometry knot (at the knot's own s the path may be
+#: evaluated on either side: bench seed 6 gave the left side at s and the right side at s + 1e-12).
 BREAK_EPS_MM = 1e-6
 #: An axis whose path derivatives are all below this in a window has no rows there.
 AXIS_EPS = 1e-12
+#: Adaptive verification: a fine-grid cell is bisected (at most REFINE_LEVELS times) where the
+#: tangent turns by more than REFINE_TURN (rad) or a utilisation changes by more than REFINE_UTIL
+#: across it (features narrower than the uniform grid: sharp turns, curvature peaks).
+REFINE_LEVELS = 6
+REFINE_TURN = 0.05
+REFINE_UTIL = 0.05
+REFINE_MAX_POINTS = 20_000
+#: Sampled check (``NlpRefiner._sampled``): time steps per sample period of its uniform grid, and the
+#: largest grid (a window slower than that per sample is not checked: its e changes little per sample).
+SAMPLED_SUBDIV = 8
+SAMPLED_MAX_POINTS = 400_000
+#: A window starts using cut slots when a violated stretch's worst point is over a limit by more than
+#: this factor (a feature the checkpoints do not see); smaller overshoots tighten the checkpoints
+#: around them.  Once it uses slots, every violated stretch gets one while its interval's is free.
+SLOT_OVERSHOOT = 1.05
 #: Scale-down steps of the LP hand-over until it meets the NLP's limits.
 HANDOVER_SHRINK = 0.97
 HANDOVER_MAX_STEPS = 30
@@ -155,10 +180,14 @@ class NlpLimits:
     feed_max: float | None
     #: largest step of axis acceleration allowed at a curvature jump (3,), or None (see solvers.lp.LimitSet)
     a_step: FloatArray | None = None
+    #: output sample period Ts, s: the servo error of an acceleration step at a curvature jump is
+    #: verified as seen over one sample (Kj |step| / (2 Ts) on top of e on either side), or None
+    sample_period: float | None = None
 
     @classmethod
     def from_machine(
-        cls, m: Machine, axis_velocity: bool, kinematic: bool, a_step: FloatArray | None = None
+        cls, m: Machine, axis_velocity: bool, kinematic: bool, a_step: FloatArray | None = None,
+        sample_period: float | None = None,
     ) -> NlpLimits:
         dr = m.drive_arrays()
         vmax, amax, jmax = m.limit_arrays()
@@ -171,6 +200,7 @@ class NlpLimits:
             jmax if kinematic else None,
             m.feed_max,
             a_step,
+            sample_period,
         )
 
     def utilisation(self, g: PathSamples, fd: kinematics.FeedDerivs) -> dict[str, FloatArray]:
@@ -235,10 +265,12 @@ class _Shape:
     third derivative jumps near a checkpoint (NURBS knots).
     Rows, per moving axis: u, e_hi (upper bound only), e_lo (lower only), [a, j_hi, j_lo]; then f,
     whose upper bound min(Fmax, min_x vmax_x / |x_s|) carries the feed and axis velocity limits.
+    With ``slotted``: n cut slots (``_Slots``), parameters tau (n), then x_s, x_ss, x_sss (n each)
+    per moving axis; rows as above (x_sss exact, so e_hi = e_lo) and f, per slot.
     """
 
-    def __init__(self, n: int, N: int, axes: tuple[int, ...], with_aj: bool) -> None:
-        self.n, self.N, self.axes, self.with_aj = n, N, axes, with_aj
+    def __init__(self, n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool = False) -> None:
+        self.n, self.N, self.axes, self.with_aj, self.slotted = n, N, axes, with_aj, slotted
         k, tau = checkpoint_layout(n, N)
         K = k.size
         self.K = K
@@ -246,7 +278,7 @@ class _Shape:
         self.B0, B1, B2 = _interval_basis(k, tau, ncols)
         na = len(axes)
         x = ca.SX.sym("p", ncols)
-        P = ca.SX.sym("P", 2 + 4 * na * K + 2 * K + 8 * na)
+        P = ca.SX.sym("P", 2 + 4 * na * K + 2 * K + 8 * na + (n * (1 + 3 * na) if slotted else 0))
         Fs, inv_d = P[0], P[1]
         off = 2
 
@@ -267,10 +299,42 @@ class _Shape:
         f = Fs * fh
         f1 = Fs * inv_d * ca.mtimes(ca.DM(B1), x)
         f2 = Fs * inv_d * inv_d * ca.mtimes(ca.DM(B2), x)
+        rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj)
+        rows.append(fh)
+        if slotted:
+            # cut slots, one per knot interval at a tau given per call, with the path's exact derivatives
+            # there (no envelope); unused slots have unbounded rows
+            ts = take(n)
+            sxs = [take(n) for _ in axes]
+            sxss = [take(n) for _ in axes]
+            sxsss = [take(n) for _ in axes]
+            c0, c1, c2 = x[0:n], x[1 : n + 1], x[2 : n + 2]
+            sfh = 0.5 * (c0 + c1) + ts * ((c1 - c0) + 0.5 * (c0 - 2 * c1 + c2) * ts)
+            sf = Fs * sfh
+            sf1 = Fs * inv_d * ((c1 - c0) + (c0 - 2 * c1 + c2) * ts)
+            sf2 = Fs * inv_d * inv_d * (c0 - 2 * c1 + c2)
+            rows += self._axis_rows(sf, sf1, sf2, sxs, sxss, sxsss, sxsss, coef, with_aj)
+            rows.append(sfh)
+        g = ca.vertcat(*rows)
+        obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh)
+        self.solver = ca.nlpsol("feed_nlp", "ipopt", {"x": x, "p": P, "f": obj, "g": g}, IPOPT_OPTIONS)
+        # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
+        Pm = sp.triu(self.B0.T @ self.B0, format="csc")
+        A = sp.vstack([sp.eye(ncols), self.B0], format="csc")
+        self.fit = osqp.OSQP()
+        self.fit.setup(
+            Pm, np.zeros(ncols), A, np.full(ncols + K, -np.inf), np.full(ncols + K, np.inf),
+            verbose=False, eps_abs=1e-6, eps_rel=1e-6, polishing=True,
+        )
+
+    @staticmethod
+    def _axis_rows(f: Any, f1: Any, f2: Any, xs: list[Any], xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any],
+                   coef: list[Any], with_aj: bool) -> list[Any]:
+        """Per moving axis: u, e_hi, e_lo, [a, j_hi, j_lo] at points with feed f, f', f''."""
         f_sq = f * f
         f_cu = f_sq * f
         rows = []
-        for i in range(na):
+        for i in range(len(xs)):
             v = xs[i] * f
             a = xss[i] * f_sq + xs[i] * f * f1
             j_rest = 3.0 * xss[i] * f_sq * f1 + xs[i] * (f * f1 * f1 + f_sq * f2)
@@ -285,18 +349,7 @@ class _Shape:
                 rows.append(cf[6] * a)
                 rows.append(cf[7] * j_hi)
                 rows.append(cf[7] * j_lo)
-        rows.append(fh)
-        g = ca.vertcat(*rows)
-        obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh)
-        self.solver = ca.nlpsol("feed_nlp", "ipopt", {"x": x, "p": P, "f": obj, "g": g}, IPOPT_OPTIONS)
-        # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
-        Pm = sp.triu(self.B0.T @ self.B0, format="csc")
-        A = sp.vstack([sp.eye(ncols), self.B0], format="csc")
-        self.fit = osqp.OSQP()
-        self.fit.setup(
-            Pm, np.zeros(ncols), A, np.full(ncols + K, -np.inf), np.full(ncols + K, np.inf),
-            verbose=False, eps_abs=1e-6, eps_rel=1e-6, polishing=True,
-        )
+        return rows
 
     def handover(self, y: FloatArray, fixed: dict[int, float]) -> FloatArray:
         """Control points (scaled) fitting y (K,) at the checkpoints with f >= 0 and fixed points held."""
@@ -349,16 +402,16 @@ class NlpRefiner:
         self.window = window
         self.overlap = overlap
         self.fault = fault
-        self.shapes: dict[tuple[int, tuple[int, ...]], _Shape] = {}
+        self.shapes: dict[tuple[int, tuple[int, ...], bool], _Shape] = {}
         self.stats = stats if stats is not None else NlpStats()
         #: piece-local s verified besides the fine grid (set per piece by ``refine``)
         self.verify: FloatArray = np.zeros(0)
 
-    def _shape(self, n: int, axes: tuple[int, ...]) -> _Shape:
-        key = (n, axes)
+    def _shape(self, n: int, axes: tuple[int, ...], slotted: bool = False) -> _Shape:
+        key = (n, axes, slotted)
         if key not in self.shapes:
             lim = self.lim
-            self.shapes[key] = _Shape(n, self.N, axes, lim.amax is not None)
+            self.shapes[key] = _Shape(n, self.N, axes, lim.amax is not None, slotted)
         return self.shapes[key]
 
     # ----- a piece -------------------------------------------------------------------
@@ -590,19 +643,41 @@ class NlpRefiner:
                 np.minimum.at(feed_ub, kc + off, np.where(near_lp[kc + off], np.inf, f_cap))
         fine = self._fine_points(a * d, min(b, commit + VERIFY_PAST_COMMIT) * d, d, breaks)
         floor_u, floor_e = self._inherited_floor(prev, g, xsss_hi, xsss_lo, k_loc, tau, d, moving)
-        g_fine = geometry(fine)
+        fine, g_fine = _refine_turns(geometry, fine, geometry(fine))
+        # cut slots may sit where a free control point acts, off the fixed states at the window ends
+        slot_lo = (a + (1 if len(start) == 3 else 0)) * d
+        slots = _Slots(n, a, d, moving, slot_lo + BREAK_EPS_MM, b * d - BREAK_EPS_MM, 0.5 * d / N)
+
+        def verify(pw: FloatArray) -> tuple[kinematics.FeedDerivs, dict[str, FloatArray]]:
+            fd = kinematics.from_f(*bspline.evaluate(pw, fine, d, col0=a, k_lo=a, k_hi=b - 1))
+            util = lim.utilisation(g_fine, fd)
+            if br.size:
+                at = _find(fine, br + BREAK_EPS_MM)
+                ok_at = at >= 0
+                step = np.zeros(fine.size)
+                step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
+                util["step"] = step
+                if lim.sample_period is not None:
+                    self._step_servo_error(g_fine, fd, _find(fine, br - BREAK_EPS_MM), at, util)
+            self._sampled(fine, g_fine, fd, util)
+            return fd, util
+
         x = x0
         lam_g = None
         worst = math.inf
         best: tuple[float, FloatArray] | None = None
-        prev_fac: tuple[FloatArray, FloatArray, FloatArray] | None = None
+        prev_fac: tuple[FloatArray, ...] | None = None
         retries = 0
         rnd = 0
         while rnd <= MAX_CUT_ROUNDS:
             lbg, ubg = self._row_bounds(moving, fac_u, fac_e, fac_k, sig_hi, sig_lo, feed_ub, Fs, free_rows, keep)
+            if slots.any:
+                s_lo, s_hi = slots.bounds(self, prev)
+                lbg, ubg = np.concatenate([lbg, s_lo]), np.concatenate([ubg, s_hi])
             if self.fault is not None:
                 self.fault(index)
-            args: dict[str, Any] = {"x0": x, "p": pvec, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
+            p_all = np.concatenate([pvec, slots.params()]) if slots.any else pvec
+            args: dict[str, Any] = {"x0": x, "p": p_all, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
             if lam_g is not None:
                 args["lam_g0"] = lam_g
             res = shape.solver(**args)
@@ -616,7 +691,7 @@ class NlpRefiner:
                     # tightening made the window infeasible: retry with half of it (geometric mean)
                     retries += 1
                     self.stats.softer_retries += 1
-                    for cur, old in zip((fac_u, fac_e, fac_k), prev_fac, strict=True):
+                    for cur, old in zip((fac_u, fac_e, fac_k, slots.fac), prev_fac, strict=True):
                         cur[...] = np.sqrt(cur * old)
                     x = best[1] / Fs if best is not None else x0
                     lam_g = None
@@ -628,19 +703,18 @@ class NlpRefiner:
             if not np.all(np.isfinite(x)):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("Ipopt returned a non-finite point", index, status)
-            # verify on the fine grid
+            # verify on the fine grid, refined where a utilisation changes fast between its points
             pw = x * Fs
-            fd = kinematics.from_f(*bspline.evaluate(pw, fine, d, col0=a, k_lo=a, k_hi=b - 1))
+            fd, util = verify(pw)
+            for _ in range(REFINE_LEVELS):
+                mids = _fast_cells(fine, util)
+                if mids.size == 0 or fine.size + mids.size > REFINE_MAX_POINTS:
+                    break
+                fine, g_fine = _merge(fine, g_fine, mids, geometry(mids))
+                fd, util = verify(pw)
             if np.any(fd[0] <= 0.0):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("feed reaches zero inside the window", index, "nonpositive feed")
-            util = lim.utilisation(g_fine, fd)
-            if br.size:
-                at = np.searchsorted(fine, br)
-                ok_at = (at < fine.size) & (fine[np.minimum(at, fine.size - 1)] == br)
-                step = np.zeros(fine.size)
-                step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
-                util["step"] = step
             worst = max(float(np.max(u)) for u in util.values())
             if best is None or worst < best[0]:
                 best = (worst, pw)
@@ -650,7 +724,14 @@ class NlpRefiner:
                 break
             rnd += 1
             self.stats.cut_rounds += 1
-            prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy())
+            # the worst point of each violated stretch gets a cut slot while slots last; the rest
+            # tighten the bounds of the checkpoints around them
+            prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy(), slots.fac.copy())
+            had_slots = slots.any
+            util = slots.place(fine, g_fine, util)
+            if slots.any and not had_slots:  # the window's shape with slot rows (warm start from x only)
+                shape = self._shape(n, moving, slotted=True)
+                lam_g = None
             self._tighten(util, fine, a * d, d, moving, fac_u, fac_e, fac_k)
             # bounds of constant rows stay as they are (tightening them could only make the window infeasible)
             fac_u[~keep] = BOUND_FACTOR
@@ -745,8 +826,8 @@ class NlpRefiner:
             return out
 
         for name, arr in util.items():
-            if name in ("control_signal", "servo_error"):
-                fac = fac_u if name == "control_signal" else fac_e
+            if name in ("control_signal", "servo_error", "sampled_control_signal", "sampled_servo_error"):
+                fac = fac_u if name.endswith("control_signal") else fac_e
                 for m, ax in enumerate(moving):
                     fac[:, m] = np.maximum(MIN_BOUND_FACTOR, fac[:, m] * scale_for(arr[:, ax]))
             else:
@@ -810,6 +891,77 @@ class NlpRefiner:
         keep = np.isfinite(cap_q)
         return br[keep], np.sqrt(cap_q[keep])
 
+    def _step_servo_error(
+        self, g: PathSamples, fd: kinematics.FeedDerivs, left: NDArray[np.int64], right: NDArray[np.int64],
+        util: dict[str, FloatArray],
+    ) -> None:
+        """Servo error of the sampled acceleration step at curvature jumps (fine-grid indices of the left
+        and right side of each, -1 if absent).  A step of the axis acceleration between two samples
+        (x_ss jump x f^2) is seen in the central third difference as at most |step| / (2 Ts) of jerk on
+        top of the e either side, so each side's servo-error utilisation is raised to
+        (|e_side| + Kj |step| / (2 Ts)) / emax, and ``util["step"]`` to the larger of the two: a violation
+        tightens the e rows next to the jump (or gets a cut slot there) and the feed cap at it."""
+        lim = self.lim
+        Ts = lim.sample_period
+        ok = (left >= 0) & (right >= 0)
+        if Ts is None or not ok.any():
+            return
+        lt, rt = left[ok], right[ok]
+        both = np.concatenate([lt, rt])
+        v, acc, j = kinematics.axis_kinematics(_take(g, both), *(x[both] for x in fd))
+        e = np.abs(lim.Kv * v + lim.Ka * acc + lim.Kj * j).reshape(2, lt.size, 3)
+        seen = lim.Kj * np.abs(acc[lt.size :] - acc[: lt.size]) / (2.0 * Ts)
+        for side, idx in enumerate((lt, rt)):
+            np.maximum.at(util["servo_error"], idx, (e[side] + seen) / lim.emax)
+        np.maximum.at(util["step"], rt, np.max((np.maximum(e[0], e[1]) + seen) / lim.emax, axis=1))
+
+    def _sampled(
+        self, fine: FloatArray, g: PathSamples, fd: kinematics.FeedDerivs, util: dict[str, FloatArray]
+    ) -> None:
+        """u and e as the finite differences of the positions sampled at Ts see them, at every sample phase.
+
+        The differences are exact kernel averages of the motion: with T = Ts,
+        (x(t+T) - x(t-T)) / 2T is the mean of v over [t-T, t+T]; the second difference is the mean of a
+        under the hat (T - |tau|) / T^2; the central third difference (a(t+T) - a(t-T)) / 2T of those
+        means.  So e_sampled = Kv v_mean + Ka a_mean + Kj j_mean and u_sampled likewise (friction with the
+        sign of v_mean), computed on a uniform time grid (t(s) = integral ds / f over the fine grid, a and
+        v interpolated) for every centre whose differences lie inside the window.  Where the model's e
+        changes within a sample (feed x Ts over a knot interval) these exceed the model's by a few percent
+        (random cases 8, 133: 1.02 x emax with e <= 0.995 at every point).  Each centre's utilisation
+        is spread over the points its differences use (+-2 Ts), so a violation tightens the checkpoints
+        there: ``util["sampled_control_signal"]``, ``util["sampled_servo_error"]`` (F, 3)."""
+        lim = self.lim
+        Ts = lim.sample_period
+        if Ts is None or fine.size < 3:
+            return
+        f = fd[0]
+        t = np.concatenate([[0.0], np.cumsum(np.diff(fine) * 0.5 * (1.0 / f[:-1] + 1.0 / f[1:]))])
+        M = SAMPLED_SUBDIV
+        h = Ts / M
+        n_u = int(t[-1] / h) + 1
+        if n_u < 4 * M + 1 or n_u > SAMPLED_MAX_POINTS:
+            return
+        tu = np.arange(n_u) * h
+        v, acc, _ = kinematics.axis_kinematics(g, *fd)
+        k = np.arange(-M, M + 1)
+        box = np.where(np.abs(k) == M, 0.5, 1.0) / (2 * M)
+        hat = (M - np.abs(k)) / M**2
+        valid = slice(2 * M, n_u - 2 * M)
+        e_s = np.zeros((n_u, 3))
+        u_s = np.zeros((n_u, 3))
+        for i in range(3):
+            vm = np.convolve(np.interp(tu, t, v[:, i]), box, mode="same")
+            am = np.convolve(np.interp(tu, t, acc[:, i]), hat, mode="same")
+            jm = np.zeros(n_u)
+            jm[M:-M] = (am[2 * M :] - am[: -2 * M]) / (2.0 * Ts)
+            e = lim.Kv[i] * vm + lim.Ka[i] * am + lim.Kj[i] * jm
+            u = lim.M[i] * am + lim.b[i] * vm + lim.c[i] + lim.d[i] * np.sign(vm)
+            e_s[valid, i] = np.abs(e[valid]) / lim.emax[i]
+            u_s[valid, i] = np.abs(u[valid]) / lim.umax[i]
+        for name, val in (("sampled_servo_error", e_s), ("sampled_control_signal", u_s)):
+            spread = maximum_filter1d(val, size=4 * M + 1, axis=0)
+            util[name] = np.column_stack([np.interp(t, tu, spread[:, i]) for i in range(3)])
+
     def _feed_bound(self, g: PathSamples) -> FloatArray:
         """Upper bound on f at points g: min(Fmax, min_x vmax_x / |x_s|) (inf if neither applies), (K,)."""
         ub = np.full(g.s.size, np.inf if self.lim.feed_max is None else self.lim.feed_max)
@@ -825,7 +977,7 @@ class NlpRefiner:
         s = np.linspace(s0, s1, n_fine + 1)
         br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
         extra = self.verify[(self.verify > s0) & (self.verify < s1)]
-        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br + BREAK_EPS_MM, extra]))
+        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br, br + BREAK_EPS_MM, extra]))
 
     def _shrink_to_feasible(
         self,
@@ -864,6 +1016,178 @@ def _lp_state(c: FloatArray, d: float, k: int) -> tuple[float, float]:
     f = math.sqrt(q)
     f1 = q1 / (2.0 * f)
     return f - 0.5 * f1 * d, f + 0.5 * f1 * d
+
+
+class _Slots:
+    """The cut slots of one window (``_Shape`` with ``slotted``): one per knot interval.
+
+    A slot at piece-local s (interval k, tau) is a checkpoint placed per call: rows u, e (and a,
+    j when kept) of every moving axis with the path's derivatives at s itself (no envelope),
+    bounded like a checkpoint's, and f >= 0.  The worst point of a stretch of the fine grid over
+    a limit gets its interval's slot (like the LP's cutting planes), if that slot is free and a
+    free control point acts there (s in (s_lo, s_hi)).  Unused slots have unbounded rows.
+    """
+
+    def __init__(
+        self, n: int, a: int, d: float, moving: tuple[int, ...], s_lo: float, s_hi: float, near: float
+    ) -> None:
+        """``near``: a violation this close to a used slot (mm) tightens that slot's bounds."""
+        self.n, self.a, self.d, self.moving, self.near = n, a, d, moving, near
+        self.s_lo, self.s_hi = s_lo, s_hi
+        self.used = np.zeros(n, dtype=bool)
+        #: bound factor of each slot's u, e, a, j rows (tightened when a violation next to the slot remains)
+        self.fac = np.full(n, BOUND_FACTOR)
+        self.tau = np.full(n, 0.5)
+        self.d1 = np.zeros((n, 3))
+        self.d2 = np.zeros((n, 3))
+        self.d3 = np.zeros((n, 3))
+        self.feed_limit = np.full(n, np.inf)
+
+    @property
+    def any(self) -> bool:
+        return bool(self.used.any())
+
+    def params(self) -> FloatArray:
+        """tau (n), then x_s, x_ss, x_sss (n each) per moving axis, in ``_Shape``'s order."""
+        ax = list(self.moving)
+        return np.concatenate([self.tau, *self.d1[:, ax].T, *self.d2[:, ax].T, *self.d3[:, ax].T])
+
+    def _samples(self) -> PathSamples:
+        s = (self.a + np.arange(self.n) + self.tau) * self.d
+        return PathSamples(s, np.zeros((self.n, 3)), self.d1, self.d2, self.d3, self.feed_limit)
+
+    def bounds(self, ref: NlpRefiner, prev: FloatArray | None) -> tuple[FloatArray, FloatArray]:
+        """Row bounds of the slot rows (scaled units), in ``_Shape``'s order."""
+        lim, n, on = ref.lim, self.n, self.used
+        per_axis = 6 if lim.amax is not None else 3
+        lo = np.full((len(self.moving) * per_axis + 1, n), -np.inf)
+        hi = np.full_like(lo, np.inf)
+        if not on.any():
+            return lo.ravel(), hi.ravel()
+        g = self._samples()
+        k = np.arange(n, dtype=np.int64)
+        # on the intervals inherited from the previous window its (verified) solution stays admissible
+        fu, fe = ref._inherited_floor(prev, g, g.d3, g.d3, k, self.tau, self.d, self.moving)
+        for i, ax in enumerate(self.moving):
+            xs = g.d1[:, ax]
+            unsure = np.abs(xs) < SIGN_EPS
+            sg_hi = np.where(unsure, 1.0, np.sign(xs))
+            sg_lo = np.where(unsure, -1.0, np.sign(xs))
+            um, c, dd = lim.umax[ax], lim.c[ax], lim.d[ax]
+            bu = np.maximum(self.fac, fu[:, i])
+            be = np.maximum(self.fac, fe[:, i])
+            bk = np.minimum(1.0, self.fac / BOUND_FACTOR)
+            r = i * per_axis
+            lo[r, on] = ((-um * bu - c - dd * sg_lo) / um)[on]
+            hi[r, on] = ((um * bu - c - dd * sg_hi) / um)[on]
+            hi[r + 1, on] = be[on]
+            lo[r + 2, on] = -be[on]
+            if per_axis == 6:
+                lo[r + 3, on], hi[r + 3, on] = -bk[on], bk[on]
+                hi[r + 4, on] = bk[on]
+                lo[r + 5, on] = -bk[on]
+        lo[-1, on] = 0.0
+        return lo.ravel(), hi.ravel()
+
+    def place(self, fine: FloatArray, g_fine: PathSamples, util: dict[str, FloatArray]) -> dict[str, FloatArray]:
+        """Put free slots on the worst point of each violated stretch of the fine grid (worst stretches
+        first); returns ``util`` with the stretches that got a slot cleared (for the tightening)."""
+        names = [k for k in ("control_signal", "servo_error", "acceleration", "jerk") if k in util]
+        if not names:
+            return util
+        r = np.max(np.column_stack([np.max(util[k], axis=1) for k in names]), axis=1)
+        bad = r > 1.0 + VERIFY_TOL
+        ok = bad & (fine > self.s_lo) & (fine < self.s_hi)
+        if not self.used.any():  # the first slot needs a large overshoot (then the slotted shape is in use)
+            for run in np.split(np.flatnonzero(bad), np.flatnonzero(np.diff(np.flatnonzero(bad)) > 1) + 1):
+                if run.size and np.max(r[run]) <= SLOT_OVERSHOOT:
+                    ok[run] = False
+        if not ok.any():
+            return util
+        kint = np.clip(np.floor(fine / self.d) - self.a, 0, self.n - 1).astype(np.int64)
+        idx = np.flatnonzero(bad)
+        runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+        cand: list[tuple[float, int, NDArray[np.int64]]] = []
+        for run in runs:
+            run_ok = run[ok[run]]
+            if run_ok.size:
+                i = int(run_ok[np.argmax(r[run_ok])])
+                cand.append((float(r[i]), i, run))
+        cand.sort(key=lambda t: -t[0])
+        out = util
+        for worst, i, run in cand:
+            k = int(kint[i])
+            if self.used[k]:
+                # the feature next to this interval's slot is still over: tighten the slot like a checkpoint
+                if abs(fine[i] - (self.a + k + self.tau[k]) * self.d) <= self.near:
+                    self.fac[k] = max(MIN_BOUND_FACTOR, self.fac[k] * (worst**-TIGHTEN_POWER - TIGHTEN_MARGIN))
+                    if out is util:
+                        out = {name: v.copy() for name, v in util.items()}
+                    for name in names:
+                        out[name][run] = 0.0
+                continue
+            if out is util:
+                out = {name: v.copy() for name, v in util.items()}
+            self.used[k] = True
+            self.tau[k] = fine[i] / self.d - self.a - k
+            self.d1[k], self.d2[k], self.d3[k] = g_fine.d1[i], g_fine.d2[i], g_fine.d3[i]
+            if g_fine.feed_limit is not None:
+                self.feed_limit[k] = g_fine.feed_limit[i]
+            for name in names:
+                out[name][run] = 0.0
+        return out
+
+
+def _find(sorted_s: FloatArray, s: FloatArray) -> NDArray[np.int64]:
+    """Index of each s in sorted_s (exact match), -1 where absent."""
+    i = np.minimum(np.searchsorted(sorted_s, s), sorted_s.size - 1)
+    return np.where(sorted_s[i] == s, i, -1).astype(np.int64)
+
+
+def _take(g: PathSamples, idx: NDArray[np.int64]) -> PathSamples:
+    fl = None if g.feed_limit is None else g.feed_limit[idx]
+    return PathSamples(g.s[idx], g.position[idx], g.d1[idx], g.d2[idx], g.d3[idx], fl)
+
+
+def _concat(g1: PathSamples, g2: PathSamples) -> PathSamples:
+    fl = None
+    if g1.feed_limit is not None and g2.feed_limit is not None:
+        fl = np.concatenate([g1.feed_limit, g2.feed_limit])
+    return PathSamples(
+        np.concatenate([g1.s, g2.s]), np.concatenate([g1.position, g2.position]), np.concatenate([g1.d1, g2.d1]),
+        np.concatenate([g1.d2, g2.d2]), np.concatenate([g1.d3, g2.d3]), fl,
+    )
+
+
+def _merge(fine: FloatArray, g: PathSamples, s_new: FloatArray, g_new: PathSamples) -> tuple[FloatArray, PathSamples]:
+    """Verification points and their geometry with new points added, sorted by s."""
+    order = np.argsort(np.concatenate([fine, s_new]), kind="stable")
+    return np.concatenate([fine, s_new])[order], _take(_concat(g, g_new), order)
+
+
+def _refine_turns(geometry: GeometryFn, fine: FloatArray, g: PathSamples) -> tuple[FloatArray, PathSamples]:
+    """Bisect fine-grid cells where the tangent turns by more than REFINE_TURN (REFINE_LEVELS times at most)."""
+    for _ in range(REFINE_LEVELS):
+        width = np.diff(fine)
+        turn = np.linalg.norm(np.diff(g.d1, axis=0), axis=1)
+        cells = (turn > REFINE_TURN) & (width > 4 * BREAK_EPS_MM)
+        if not cells.any() or fine.size + int(cells.sum()) > REFINE_MAX_POINTS:
+            break
+        mids = 0.5 * (fine[:-1] + fine[1:])[cells]
+        fine, g = _merge(fine, g, mids, geometry(mids))
+    return fine, g
+
+
+def _fast_cells(fine: FloatArray, util: dict[str, FloatArray]) -> FloatArray:
+    """Midpoints of fine-grid cells across which some utilisation changes by more than REFINE_UTIL."""
+    jump = np.zeros(fine.size - 1)
+    for name, u in util.items():
+        if name == "step" or name.startswith("sampled_"):
+            continue
+        du = np.abs(np.diff(u, axis=0))
+        np.maximum(jump, du if du.ndim == 1 else np.max(du, axis=1), out=jump)
+    cells = (jump > REFINE_UTIL) & (np.diff(fine) > 4 * BREAK_EPS_MM)
+    return np.asarray(0.5 * (fine[:-1] + fine[1:])[cells], dtype=np.float64)
 
 
 def _friction_signs(d1: FloatArray) -> tuple[FloatArray, FloatArray]:

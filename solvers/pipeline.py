@@ -274,12 +274,16 @@ def _solve_windows(
     prev_qstar: tuple[int, FloatArray] | None = None
     prev_c: tuple[int, FloatArray] | None = None
     N = opt.checkpoints_per_interval
+    shared = opt.method == "lp+nlp"  # (which needs drives: a_rest from the servo-error budget)
+    a_rest_start = _corner_rest(toolpath, piece, lim, at_end=False) if shared else None
+    a_rest_end = _corner_rest(toolpath, piece, lim, at_end=True) if shared else None
     while True:
         k1 = min(k0 + plan.window, plan.n_int)
         # avoid a last window shorter than the overlap: stretch this one instead
         if 0 < plan.n_int - k1 < plan.overlap + 3:
             k1 = plan.n_int
-        spec = WindowSpec(stats["windows"], k0, k1, plan.d, plan.n_int, start, k1 == plan.n_int, prev_qstar, prev_c)
+        spec = WindowSpec(stats["windows"], k0, k1, plan.d, plan.n_int, start, k1 == plan.n_int, prev_qstar, prev_c,
+                          a_rest_start, a_rest_end)
         s_check = np.linspace(k0 * plan.d, k1 * plan.d, (k1 - k0) * N + 1)
         v_in = np.zeros(0) if verify is None else verify[(verify > k0 * plan.d) & (verify < k1 * plan.d)]
         st = np.array(start if start is not None else (np.nan, np.nan))
@@ -322,6 +326,25 @@ def _solve_windows(
     return PieceProfile(s_start=piece.s_start, length=piece.length, d=plan.d, c=c), joins
 
 
+def _corner_rest(toolpath: Toolpath, piece: Piece, lim: LimitSet, at_end: bool) -> FloatArray | None:
+    """Per-axis rest acceleration at the corner at one end of ``piece`` (None at a path end).
+
+    Across a corner the sampled axis acceleration steps from a_in (the piece before, braking) to
+    a_out (the piece after, starting), and the servo error sees the step a_out - a_in (Kj / (2 Ts)
+    per unit, ``LimitSet.a_rest``).  Where the axis moves the same way on both sides the two
+    accelerations have opposite signs and add up, so each side gets half of a_rest; where it
+    reverses (or stands still on one side) they have the same sign and |a_out - a_in| <= max of
+    the two, so each side keeps all of it.  Either way |a_out - a_in| <= a_rest per axis.
+    """
+    pieces = toolpath.pieces
+    nb = piece.index + 1 if at_end else piece.index - 1
+    if not 0 <= nb < len(pieces):
+        return None
+    s = np.array([piece.s_end if at_end else piece.s_start])
+    same_way = toolpath.evaluate(s, piece).d1[0] * toolpath.evaluate(s, pieces[nb]).d1[0] > 0.0
+    return np.asarray(np.where(same_way, 0.5, 1.0) * lim.a_rest, dtype=np.float64)
+
+
 def _join_knot(geometry: Any, c_win: FloatArray, k0: int, k_last: int, plan: WindowPlan, lim: LimitSet) -> int:
     """Where the next LP window starts when the NLP follows: the knot in
     [k_last - overlap, k_last] where the LP feed is closest to the velocity bound.
@@ -359,7 +382,9 @@ def refine_pieces(
     ``on_chain(s_done)``, if given, is called after each NLP chain with the global arc length (mm) done.
     ``pieces`` (default: all of the toolpath's) pair with ``lp_profiles`` and ``joins``; ``verify`` maps a
     piece index to piece-local s verified besides the fine grid; ``stats`` accumulates over calls."""
-    lim = NlpLimits.from_machine(machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lp_lim.a_step)
+    lim = NlpLimits.from_machine(
+        machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lp_lim.a_step, opt.sample_period
+    )
     out = []
     refiners: dict[tuple[int, int], NlpRefiner] = {}
     stats = stats if stats is not None else NlpStats()

@@ -8,15 +8,15 @@ ends and corners, feed continuity (``tests.reliability.checker``, which shares n
 
 KNOWN_FAILURES lists the (seed, method) runs that the checker rejects on this code, each with
 its class (see the README's reliability section); they run as ``xfail`` so a fix shows up as
-XPASS, and every other run must pass.  Class left:
-
-- servo-error: sampled servo error above 1.01 x emax under lp+nlp next to rest points; since the
-  samples are re-checked (``solvers.verify``) this is a LimitViolationError, no longer silent.
+XPASS, and every other run must pass.  None left.
 
 Fixed classes (kept as regression cases in test_regressions.py): lp-overshoot (a curvature peak
 between verification points; the samples are re-checked and the piece re-solved with those points),
 most of rest-acceleration and stall (the piece is re-solved on twice the knots), highs-notset (the
-LP objective is normalised), lp-infeasible (the q floor is dropped when a cut round makes it infeasible).
+LP objective is normalised), lp-infeasible (the q floor is dropped when a cut round makes it infeasible),
+servo-error under lp+nlp (corners: the two pieces' rest accelerations added up in the step, now shared;
+features narrower than the NLP's checkpoints: refined verification and cut slots; the sampled
+differences' u and e checked in the NLP; see ``solvers/nlp.py``).
 """
 
 from __future__ import annotations
@@ -28,34 +28,7 @@ from tests.reliability import gen, harness
 #: Seeds 0 .. RANDOM_CASES - 1 run in ``make test`` (issue: at least 200).
 RANDOM_CASES = 200
 
-KNOWN_FAILURES: dict[int, dict[str, str]] = {
-    0: {'lp+nlp': 'servo-error'},
-    8: {'lp+nlp': 'servo-error'},
-    14: {'lp+nlp': 'servo-error'},
-    24: {'lp+nlp': 'servo-error'},
-    30: {'lp+nlp': 'servo-error'},
-    35: {'lp+nlp': 'servo-error'},
-    48: {'lp+nlp': 'servo-error'},
-    64: {'lp+nlp': 'servo-error'},
-    70: {'lp+nlp': 'servo-error'},
-    71: {'lp+nlp': 'servo-error'},
-    75: {'lp+nlp': 'servo-error'},
-    82: {'lp+nlp': 'servo-error'},
-    85: {'lp+nlp': 'servo-error'},
-    88: {'lp+nlp': 'servo-error'},
-    113: {'lp+nlp': 'servo-error'},
-    118: {'lp+nlp': 'servo-error'},
-    126: {'lp+nlp': 'servo-error'},
-    134: {'lp+nlp': 'servo-error'},
-    142: {'lp+nlp': 'servo-error'},
-    151: {'lp+nlp': 'servo-error'},
-    163: {'lp+nlp': 'servo-error'},
-    166: {'lp+nlp': 'servo-error'},
-    173: {'lp+nlp': 'servo-error'},
-    174: {'lp+nlp': 'servo-error'},
-    175: {'lp+nlp': 'servo-error'},
-    176: {'lp+nlp': 'servo-error'},
-}
+KNOWN_FAILURES: dict[int, dict[str, str]] = {}
 
 
 def _params() -> list[object]:
