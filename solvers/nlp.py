@@ -664,7 +664,6 @@ class NlpRefiner:
                 util["step"] = step
                 if lim.sample_period is not None:
                     self._step_servo_error(g_fine, fd, _find(fine, br - BREAK_EPS_MM), at, util)
-            self._sampled(fine, g_fine, fd, util)
             return fd, util
 
         x = x0
@@ -717,6 +716,7 @@ class NlpRefiner:
                     break
                 fine, g_fine = _merge(fine, g_fine, mids, geometry(mids))
                 fd, util = verify(pw)
+            self._sampled(fine, g_fine, fd, util)  # (after the refinement: its utilisations are spread)
             if np.any(fd[0] <= 0.0):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("feed reaches zero inside the window", index, "nonpositive feed")
