@@ -46,6 +46,11 @@ its shape with slot rows); a stretch next to a used slot tightens that slot's
 bounds; the other stretches tighten the bounds of the checkpoints around them
 by the overshoot.  (Tightening alone cannot hold a feature the checkpoints do
 not see: a 0.2 mm turn between checkpoints 0.55 mm apart reached 1.7 x emax.)
+With the output's sample period Ts known (``NlpLimits.sample_period``), two
+more checks: at curvature jumps the acceleration step's servo error as one
+sample sees it (|e| either side + Kj |step| / (2 Ts)), and u and e as the
+finite differences of the sampled positions see them, at every sample phase
+(``NlpRefiner._sampled``: exact kernel means of v and a over +-2 Ts).
 
 Dual windows (spec §6): the LP walks the piece in large windows; within each
 LP window's committed span [K_m, K_{m+1}] the NLP windows walk a *chain* that
@@ -659,7 +664,6 @@ class NlpRefiner:
                 util["step"] = step
                 if lim.sample_period is not None:
                     self._step_servo_error(g_fine, fd, _find(fine, br - BREAK_EPS_MM), at, util)
-            self._sampled(fine, g_fine, fd, util)
             return fd, util
 
         x = x0
@@ -712,6 +716,7 @@ class NlpRefiner:
                     break
                 fine, g_fine = _merge(fine, g_fine, mids, geometry(mids))
                 fd, util = verify(pw)
+            self._sampled(fine, g_fine, fd, util)  # (after the refinement: its utilisations are spread)
             if np.any(fd[0] <= 0.0):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("feed reaches zero inside the window", index, "nonpositive feed")
