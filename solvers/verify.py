@@ -46,6 +46,8 @@ FD_REPAIR_TOL = 5e-3
 FAIL_TOL = 1e-2
 #: Samples of rest padded before and after the motion for the differences.
 REST_PAD = 2
+#: Samples checked per chunk (bounds the transient arrays: ~20 of (CHUNK, 3) float64).
+CHUNK = 65_536
 
 
 @dataclass(frozen=True)
@@ -76,16 +78,15 @@ class SampleCheck:
         return self.worst[2] > 1.0 + FAIL_TOL
 
 
-def _fd(position: FloatArray, Ts: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """v, a, j at every sample k (K, 3): backward v, central a, the third difference over k-1..k+2."""
-    p = np.concatenate([np.repeat(position[:1], REST_PAD, axis=0), position,
-                        np.repeat(position[-1:], REST_PAD, axis=0)])
-    K = position.shape[0]
-    k = np.arange(K) + REST_PAD  # padded index of sample k
+def _fd(p: FloatArray, k: NDArray[np.int64], Ts: float) -> tuple[FloatArray, ...]:
+    """At padded indices k of the rest-padded positions p: backward v, central a, the third
+    difference over k-1..k+2, and for the drive model the central v and j (each (len(k), 3))."""
     v = (p[k] - p[k - 1]) / Ts
+    v_next = (p[k + 1] - p[k]) / Ts
     a = (p[k + 1] - 2.0 * p[k] + p[k - 1]) / Ts**2
     j = (p[k + 2] - 3.0 * p[k + 1] + 3.0 * p[k] - p[k - 1]) / Ts**3
-    return v, a, j
+    j_prev = (p[k + 1] - 3.0 * p[k] + 3.0 * p[k - 1] - p[k - 2]) / Ts**3
+    return v, a, j, 0.5 * (v + v_next), 0.5 * (j + j_prev)
 
 
 def _drive(dr: dict[str, FloatArray], v: FloatArray, a: FloatArray, j: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -98,35 +99,38 @@ def _drive(dr: dict[str, FloatArray], v: FloatArray, a: FloatArray, j: FloatArra
 def check(
     Ts: float, position: FloatArray, feed: FloatArray, v: FloatArray, a: FloatArray, j: FloatArray, lim: Limits
 ) -> SampleCheck:
-    """Utilisation of every enforced limit at every sample, analytic and by finite differences."""
+    """Utilisation of every enforced limit at every sample, analytic and by finite differences
+    (in chunks of CHUNK samples, so the transient arrays stay bounded on long paths)."""
     K = position.shape[0]
-    v_fd, a_fd, j_fd = _fd(position, Ts)
-    # central velocity and jerk for the drive model (as the checker and a drive see them)
-    v_c = 0.5 * (v_fd + np.concatenate([v_fd[1:], np.zeros((1, 3))]))
-    j_c = 0.5 * (j_fd + np.concatenate([np.zeros((1, 3)), j_fd[:-1]]))
-    per: list[tuple[str, FloatArray, FloatArray, FloatArray]] = []  # kind, analytic, fd, limit
-    if lim.vmax is not None:
-        per.append(("velocity", v, v_fd, lim.vmax))
-    if lim.amax is not None:
-        per.append(("acceleration", a, a_fd, lim.amax))
-    if lim.jmax is not None:
-        per.append(("jerk", j, j_fd, lim.jmax))
-    if lim.drive is not None:
-        dr = lim.drive
-        u_an, e_an = _drive(dr, v, a, j)
-        u_fd, e_fd = _drive(dr, v_c, a_fd, j_c)
-        per.append(("control_signal", u_an, u_fd, dr["umax"]))
-        per.append(("servo_error", e_an, e_fd, dr["emax"]))
+    p = np.concatenate([np.repeat(position[:1], REST_PAD, axis=0), position,
+                        np.repeat(position[-1:], REST_PAD, axis=0)])
     repair = np.zeros(K, dtype=bool)
     worst: tuple[str, str, float, int] = ("none", "", 0.0, 0)
-    for kind, an, fd, limit in per:
-        ua = np.abs(an) / limit
-        uf = np.abs(fd) / limit
-        repair |= np.any(ua > 1.0 + REPAIR_TOL, axis=1) | np.any(uf > 1.0 + FD_REPAIR_TOL, axis=1)
-        both = np.maximum(ua, uf)
-        k2, i2 = np.unravel_index(int(np.argmax(both)), both.shape)
-        if both[k2, i2] > worst[2]:
-            worst = (kind, "xyz"[int(i2)], float(both[k2, i2]), int(k2))
+    for c0 in range(0, K, CHUNK):
+        c1 = min(K, c0 + CHUNK)
+        sl = slice(c0, c1)
+        v_fd, a_fd, j_fd, v_c, j_c = _fd(p, np.arange(c0, c1) + REST_PAD, Ts)
+        per: list[tuple[str, FloatArray, FloatArray, FloatArray]] = []  # kind, analytic, fd, limit
+        if lim.vmax is not None:
+            per.append(("velocity", v[sl], v_fd, lim.vmax))
+        if lim.amax is not None:
+            per.append(("acceleration", a[sl], a_fd, lim.amax))
+        if lim.jmax is not None:
+            per.append(("jerk", j[sl], j_fd, lim.jmax))
+        if lim.drive is not None:
+            dr = lim.drive
+            u_an, e_an = _drive(dr, v[sl], a[sl], j[sl])
+            u_fd, e_fd = _drive(dr, v_c, a_fd, j_c)
+            per.append(("control_signal", u_an, u_fd, dr["umax"]))
+            per.append(("servo_error", e_an, e_fd, dr["emax"]))
+        for kind, an, fd, limit in per:
+            ua = np.abs(an) / limit
+            uf = np.abs(fd) / limit
+            repair[sl] |= np.any(ua > 1.0 + REPAIR_TOL, axis=1) | np.any(uf > 1.0 + FD_REPAIR_TOL, axis=1)
+            both = np.maximum(ua, uf)
+            k2, i2 = np.unravel_index(int(np.argmax(both)), both.shape)
+            if both[k2, i2] > worst[2]:
+                worst = (kind, "xyz"[int(i2)], float(both[k2, i2]), c0 + int(k2))
     if lim.feed_cap is not None:
         with np.errstate(divide="ignore", invalid="ignore"):
             uf_ = np.where(np.isfinite(lim.feed_cap), feed / lim.feed_cap, 0.0)

@@ -86,3 +86,19 @@ def test_long_chained_path_emits_no_analytic_overshoot() -> None:
     _, amax, jmax = m.limit_arrays()
     assert np.max(np.abs(sch.samples.acceleration) / amax) <= 1.0 + verify.REPAIR_TOL
     assert np.max(np.abs(sch.samples.jerk) / jmax) <= 1.0 + verify.REPAIR_TOL
+
+
+def test_recheck_in_chunks_equals_one_pass(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The check runs in chunks of verify.CHUNK samples; chunk edges change nothing (the
+    differences read the padded positions across them)."""
+    m = router()
+    sch = schedule(ex.flower(1), m, Options(method="lp+nlp"))
+    smp = sch.samples
+    _, amax, jmax = m.limit_arrays()
+    lim = verify.Limits(None, amax, jmax, m.drive_arrays(), None)
+    args = (1e-3, smp.position, smp.feed, smp.velocity, smp.acceleration, smp.jerk, lim)
+    whole = verify.check(*args)
+    monkeypatch.setattr(verify, "CHUNK", 97)
+    parts = verify.check(*args)
+    assert whole.worst == parts.worst
+    np.testing.assert_array_equal(whole.repair, parts.repair)
