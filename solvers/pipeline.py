@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from geometry.toolpath import PathSamples, Piece, Toolpath
 from solvers import kinematics, verify
 from solvers.errors import InvalidMachineError, InvalidOptionsError, LimitViolationError
-from solvers.lp import LimitSet, WindowLP, WindowResult, WindowSpec, velocity_bound
+from solvers.lp import INHERITED_INTERVALS, LimitSet, WindowLP, WindowResult, WindowSpec, velocity_bound
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.nlp import NlpLimits, NlpRefiner, NlpStats
 from solvers.timing import PieceProfile, PieceTiming, stuck
@@ -260,12 +260,11 @@ def _solve_windows(
 ) -> tuple[PieceProfile, list[int]]:
     """The LP windows of ``solve_piece`` on one knot plan.
 
-    ``cache`` (kept across calls for one piece) maps (n_int, k0, k1) to the window's start state,
-    the extra verification points inside it and its result: while every earlier window was
-    reused and neither changed, a window is not solved again (a repair round re-solves from the
-    first window that has new verification points on)."""
+    ``cache`` (kept across calls for one piece) maps (n_int, k0, k1) to what the window inherits,
+    the extra verification points inside it and its result: a window whose inputs are bit-equal
+    to a cached one is not solved again (a repair round re-solves the windows with new
+    verification points and those whose inherited state they changed)."""
     geometry = _local(toolpath, piece)
-    chain_same = True
     breaks = _breaks(toolpath, piece)
     joins: list[int] = []
     c = np.zeros(plan.n_int + 2)
@@ -286,13 +285,15 @@ def _solve_windows(
                           a_rest_start, a_rest_end)
         s_check = np.linspace(k0 * plan.d, k1 * plan.d, (k1 - k0) * N + 1)
         v_in = np.zeros(0) if verify is None else verify[(verify > k0 * plan.d) & (verify < k1 * plan.d)]
-        st = np.array(start if start is not None else (np.nan, np.nan))
+        # everything the window inherits: its start state and the previous window's c and q* over
+        # the inherited intervals (bit-equal inputs give the same LP, so its result is reused)
+        st0 = np.array(start if start is not None else (np.nan, np.nan))
+        st = np.concatenate([st0, _inherited(prev_c, k0), _inherited(prev_qstar, k0)])
         key = (plan.n_int, k0, k1)
-        hit = cache.get(key) if cache is not None and chain_same else None
+        hit = cache.get(key) if cache is not None else None
         if hit is not None and np.array_equal(hit[0], st, equal_nan=True) and np.array_equal(hit[1], v_in):
             res = hit[2]
         else:
-            chain_same = False
             t0 = time.perf_counter()
             # only the window's own breaks (WindowLP looks at no others): masking all of a long piece's
             # breaks in every window grew with the square of the path length
@@ -343,6 +344,15 @@ def _corner_rest(toolpath: Toolpath, piece: Piece, lim: LimitSet, at_end: bool) 
     s = np.array([piece.s_end if at_end else piece.s_start])
     same_way = toolpath.evaluate(s, piece).d1[0] * toolpath.evaluate(s, pieces[nb]).d1[0] > 0.0
     return np.asarray(np.where(same_way, 0.5, 1.0) * lim.a_rest, dtype=np.float64)
+
+
+def _inherited(prev: tuple[int, FloatArray] | None, k0: int) -> FloatArray:
+    """The previous window's control points that a window starting at knot k0 reads (its
+    inherited intervals), or nothing."""
+    if prev is None:
+        return np.zeros(0)
+    k_prev, arr = prev
+    return np.asarray(arr[k0 - k_prev : k0 - k_prev + INHERITED_INTERVALS + 3], dtype=np.float64)
 
 
 def _join_knot(geometry: Any, c_win: FloatArray, k0: int, k_last: int, plan: WindowPlan, lim: LimitSet) -> int:
