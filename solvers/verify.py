@@ -32,6 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from solvers.machine import drive_outputs
+
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
@@ -91,13 +93,6 @@ def _fd(p: FloatArray, k: NDArray[np.int64], Ts: float) -> tuple[FloatArray, ...
     return v, a, j, 0.5 * (v + v_next), 0.5 * (j + j_prev)
 
 
-def _drive(dr: dict[str, FloatArray], v: FloatArray, a: FloatArray, j: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """u = M a + b v + c + d sign(v) (V) and e = Kv v + Ka a + Kj j (mm), each (K, 3)."""
-    u = dr["M"] * a + dr["b"] * v + dr["c"] + dr["d"] * np.sign(v)
-    e = dr["Kv"] * v + dr["Ka"] * a + dr["Kj"] * j
-    return u, e
-
-
 def check(
     Ts: float, position: FloatArray, feed: FloatArray, v: FloatArray, a: FloatArray, j: FloatArray, lim: Limits
 ) -> SampleCheck:
@@ -121,8 +116,8 @@ def check(
             per.append(("jerk", j[sl], j_fd, lim.jmax))
         if lim.drive is not None:
             dr = lim.drive
-            u_an, e_an = _drive(dr, v[sl], a[sl], j[sl])
-            u_fd, e_fd = _drive(dr, v_c, a_fd, j_c)
+            u_an, e_an = drive_outputs(dr, v[sl], a[sl], j[sl])
+            u_fd, e_fd = drive_outputs(dr, v_c, a_fd, j_c)
             per.append(("control_signal", u_an, u_fd, dr["umax"]))
             per.append(("servo_error", e_an, e_fd, dr["emax"]))
         for kind, an, fd, limit in per:
