@@ -101,7 +101,7 @@ def run(moves: int, blend_mm: float, method: str) -> dict[str, Any]:
         "motion_s": sch.summary["motion_time"], "samples": sch.summary["samples"],
         "lp_windows": sch.summary["windows"], "lp_cut_rounds": sch.summary["cut_rounds"],
         "lp_cut_points": sch.summary["cut_points"], "lp_unverified_points": sch.summary["unverified_points"],
-        "lp_time_s": sch.summary["lp_time"],
+        "lp_time_s": sch.summary["lp_time"], "sample_repairs": sch.summary.get("sample_repairs"),
         "fd_utilisation": fd, "fd_utilisation_axes": util, "worst_fd_utilisation": max(fd.values()),
         "rss_before_mb": base_mb, "stage_peak_mb": stage_mb, "hwm_reset": can_reset,
         "peak_rss_mb": max(stage_mb.values()) if can_reset else _hwm(),
