@@ -550,7 +550,7 @@ def schedule(
         samples, motion_time = _sample(toolpath, profiles, opt.sample_period, machine)
         chk = verify.check(
             opt.sample_period, samples.position, samples.feed, samples.velocity, samples.acceleration, samples.jerk,
-            replace(limits, feed_cap=_feed_cap(lim, toolpath, samples.s)),
+            replace(limits, feed_cap=(feed_cap := _feed_cap(lim, toolpath, samples.s))),
         )
         if not chk.repair.any() or rnd == SAMPLE_REPAIR_ROUNDS:
             break
@@ -610,7 +610,7 @@ def schedule(
         "samples": int(samples.t.size),
         "sample_period": opt.sample_period,
         "peak_utilisation": _peak_utilisation(
-            samples, lim, machine.drive_arrays() if machine.has_drives else None, toolpath.feed_limit(samples.s)
+            samples, lim, machine.drive_arrays() if machine.has_drives else None, feed_cap
         ),
         "window_times": stats["window_times"],
     }
@@ -651,11 +651,8 @@ def _peak_utilisation(
         for i, ax in enumerate(AXES):
             out[f"control_signal_{ax}"] = float(np.max(np.abs(smp.control_signal[:, i])) / drives["umax"][i])
             out[f"servo_error_{ax}"] = float(np.max(np.abs(smp.servo_error[:, i])) / drives["emax"][i])
-    cap = np.full(smp.feed.size, np.inf if lim.feed_max is None else lim.feed_max)
-    if feed_cap is not None:
-        cap = np.minimum(cap, feed_cap)
-    if np.isfinite(cap).any():
-        out["feed"] = float(np.max(smp.feed / cap))
+    if feed_cap is not None and np.isfinite(feed_cap).any():  # Fmax and programmed feeds (_feed_cap)
+        out["feed"] = float(np.max(smp.feed / feed_cap))
     return out
 
 
