@@ -509,10 +509,18 @@ class Toolpath:
         if gen.any():
             for kk in np.unique(k[gen]):
                 m = k == kk
-                u[m] = self._generic[int(kk)].u_of_s(x[m])
+                u[m] = self._generic[int(kk)].u_of_s(self._table_x(int(kk), s[m], x[m]))
         return k, u
 
-    def _derivatives(self, s: FloatArray, piece: Piece | None) -> tuple[IntArray, FloatArray]:
+    def _table_x(self, kk: int, s: FloatArray, x: FloatArray) -> FloatArray:
+        """Sub-segment-local arc length for sub-segment kk's table: s at or past the sub-segment's end
+        maps to the table's own length (offsets[kk + 1] - offsets[kk] differs from it by rounding,
+        which would leave the end point 1e-15 mm short of the segment's end)."""
+        return np.where(s >= self.offsets[kk + 1], self._generic[kk].length, x)
+
+    def _derivatives(
+        self, s: FloatArray, piece: Piece | None, exact: bool = True
+    ) -> tuple[IntArray, FloatArray]:
         """Sub-segment index (K,) and C, C', C'', C''' (4, K, 3) at arc lengths s."""
         k = self._sub_index(s, piece)
         x = s - self.offsets[k]
@@ -523,7 +531,7 @@ class Toolpath:
                 m = k == kk
                 table = self._generic[int(kk)]
                 seg = table.segment
-                um = table.u_of_s(x[m])
+                um = table.u_of_s(self._table_x(int(kk), s[m], x[m]), exact)
                 Dk = seg.derivatives(um)
                 lo, hi = seg.domain
                 # zero speed, or a rounding residue of it (|C'| ~ 1e-16 at a cusp's knot): no tangent there
@@ -536,14 +544,16 @@ class Toolpath:
                 D[:, m, :] = Dk
         return k, D
 
-    def evaluate(self, s: FloatArray, piece: Piece | None = None) -> PathSamples:
+    def evaluate(self, s: FloatArray, piece: Piece | None = None, exact: bool = True) -> PathSamples:
         """Position and arc-length derivatives at arc lengths s (mm), shape (K,).
 
         With ``piece`` given, points are evaluated on that piece's sub-segments
-        only (so a corner's s is evaluated on the correct side).
+        only (so a corner's s is evaluated on the correct side).  ``exact=False`` maps s to u
+        by the arc-length table's Hermite guess alone (within 1e-10 mm along the curve, see
+        ``geometry.arclength``), for the solvers' checkpoint geometry; samples are exact.
         """
         s = np.asarray(s, dtype=np.float64)
-        k, D = self._derivatives(s, piece)
+        k, D = self._derivatives(s, piece, exact)
         d1, d2, d3 = arc_length_derivatives(D)
         fl = None if self._feed is None else np.asarray(self._feed[self.sub_origin[k]], dtype=np.float64)
         return PathSamples(s=s, position=D[0], d1=d1, d2=d2, d3=d3, feed_limit=fl)
@@ -559,5 +569,5 @@ class Toolpath:
             for kk in np.unique(k[gen]):
                 m = k == kk
                 table = self._generic[int(kk)]
-                out[m] = table.segment.points(table.u_of_s(x[m]))
+                out[m] = table.segment.points(table.u_of_s(self._table_x(int(kk), s[m], x[m])))
         return out

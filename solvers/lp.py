@@ -55,7 +55,7 @@ TINY_SQRT_QSTAR = 1e-6
 #: A point whose recomputed v/a/j exceeds its limit by more than this fraction gets a row.
 VERIFY_TOL = 2e-3
 #: Verification points between consecutive checkpoints.
-VERIFY_SUBDIV = 4
+VERIFY_SUBDIV = 8
 MAX_CUT_ROUNDS = 6
 #: Offset (mm) used to evaluate the left side of a geometry knot.
 BREAK_EPS_MM = 1e-6

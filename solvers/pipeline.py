@@ -213,7 +213,8 @@ def _local(toolpath: Toolpath, piece: Piece) -> Any:
     rounding residues of 0/0 (~1e17 and ~1e37) that would wreck the LP's scaling."""
     def geometry(s_local: FloatArray) -> PathSamples:
         s_local = np.asarray(s_local, dtype=np.float64)
-        g = toolpath.evaluate(s_local + piece.s_start, piece)
+        # u(s) from the arc-length tables' guess (1e-10 mm): the constraint rows need no more
+        g = toolpath.evaluate(s_local + piece.s_start, piece, exact=False)
         rest = (s_local <= 0.0) | (s_local >= piece.length)
         d2, d3 = g.d2, g.d3
         if rest.any():
