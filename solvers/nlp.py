@@ -65,7 +65,9 @@ from __future__ import annotations
 
 import itertools
 import math
+import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -330,6 +332,9 @@ class _Shape:
         self.fit.setup(
             Pm, np.zeros(ncols), A, np.full(ncols + K, -np.inf), np.full(ncols + K, np.inf),
             verbose=False, eps_abs=1e-6, eps_rel=1e-6, polishing=True,
+            # no warm start from the previous fit: shapes are reused across schedules (_cached_shape)
+            # and a result must not depend on what this thread solved before
+            warm_starting=False,
         )
 
     @staticmethod
@@ -389,6 +394,31 @@ class NlpStats:
     worst_verified: float = 0.0
 
 
+#: NLP shapes kept per thread across schedules (each ~0.3-0.6 s of CasADi/Ipopt set-up; a shape
+#: depends only on its key, every limit and geometry value is a parameter of the call)
+SHAPE_CACHE_SIZE = 16
+_SHAPE_CACHE = threading.local()
+
+
+def _cached_shape(n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool) -> _Shape:
+    """The shape for this key from this thread's LRU cache, built on a miss.  Per thread: a CasADi
+    Function's call and the OSQP hand-over fit hold state, so two threads never share one."""
+    cache: OrderedDict[tuple[int, int, tuple[int, ...], bool, bool], _Shape] | None = getattr(
+        _SHAPE_CACHE, "shapes", None
+    )
+    if cache is None:
+        cache = _SHAPE_CACHE.shapes = OrderedDict()
+    key = (n, N, axes, with_aj, slotted)
+    shape = cache.get(key)
+    if shape is None:
+        shape = cache[key] = _Shape(n, N, axes, with_aj, slotted)
+        while len(cache) > SHAPE_CACHE_SIZE:
+            cache.popitem(last=False)
+    else:
+        cache.move_to_end(key)
+    return shape
+
+
 class NlpRefiner:
     """Builds NLP shapes on demand (cached) and refines LP feed profiles piece by piece."""
 
@@ -415,8 +445,7 @@ class NlpRefiner:
     def _shape(self, n: int, axes: tuple[int, ...], slotted: bool = False) -> _Shape:
         key = (n, axes, slotted)
         if key not in self.shapes:
-            lim = self.lim
-            self.shapes[key] = _Shape(n, self.N, axes, lim.amax is not None, slotted)
+            self.shapes[key] = _cached_shape(n, self.N, axes, self.lim.amax is not None, slotted)
         return self.shapes[key]
 
     # ----- a piece -------------------------------------------------------------------

@@ -7,6 +7,8 @@ read straight from the machine's axes, give u and e.
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 import pytest
 
@@ -183,3 +185,19 @@ def test_parallel_chains_give_the_same_schedule() -> None:
     for k in ("nlp_windows", "nlp_iterations", "nlp_cut_rounds", "nlp_failures"):
         assert par.summary[k] == seq.summary[k], k
     _check_drive(m, par)
+
+
+def test_cached_shapes_give_the_same_schedule_as_fresh_ones() -> None:
+    """NLP shapes are reused across schedules (solvers.nlp._cached_shape): a schedule solved with
+    shapes another schedule used first equals one solved with freshly built shapes, bit for bit."""
+    from solvers import nlp
+
+    nlp._SHAPE_CACHE.shapes = OrderedDict()
+    fresh = schedule(ex.flower(1), router(), Options(method="lp+nlp"))
+    built = dict(nlp._SHAPE_CACHE.shapes)
+    assert built
+    schedule(ex.square_corner(50.0), router(), Options(method="lp+nlp"))  # the fits' last state differs
+    again = schedule(ex.flower(1), router(), Options(method="lp+nlp"))
+    assert all(nlp._SHAPE_CACHE.shapes.get(k) is v for k, v in built.items())  # reused, not rebuilt
+    np.testing.assert_array_equal(again.samples.position, fresh.samples.position)
+    assert again.summary["motion_time"] == fresh.summary["motion_time"]
