@@ -68,7 +68,7 @@ from __future__ import annotations
 import math
 from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, NamedTuple
 
 import numpy as np
 from scipy.optimize import root
@@ -109,9 +109,9 @@ ZOOM_SAMPLES: Final = 33
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(32)
 
 
-@dataclass(frozen=True, slots=True)
-class Line:
-    """A straight line from ``start`` to ``end`` (mm)."""
+class Line(NamedTuple):
+    """A straight line from ``start`` to ``end`` (mm). (Immutable like the dataclasses here, and cheaper
+    to build: a dense program makes 10^5 of them.)"""
 
     start: FloatArray
     end: FloatArray
@@ -554,41 +554,57 @@ def blend_path(
         raise GeometryError("corner_tolerance_mm", tolerance_mm, "must be a finite number >= 0")
     n = len(segments)
     nm = list(names) if names is not None else [seg.name for seg in segments]
-    prims = [primitives_of(s) if tolerance_mm > 0.0 else None for s in segments]
+    # plain lines (two control points) need no Line object unless their run has an arc: a dense program has 10^5
+    plain = [isinstance(s, NurbsSegment) and s.degree == 1 and s.control_points.shape[0] == 2 for s in segments]
+    prims = [None if plain[i] or tolerance_mm == 0.0 else primitives_of(s) for i, s in enumerate(segments)]
+    # junction i joins segments i and i + 1 into one run (all at once)
+    nan = np.full(3, np.nan)
+
+    def end_point(i: int, last: bool) -> FloatArray:
+        seg, pr = segments[i], prims[i]
+        if plain[i] and isinstance(seg, NurbsSegment):
+            return np.asarray(seg.control_points[-1 if last else 0], dtype=np.float64)
+        if pr is None:
+            return nan
+        return pr[-1].end if last else pr[0].start
+
+    ends = np.array([end_point(i, True) for i in range(n)]).reshape(-1, 3)
+    starts = np.array([end_point(i, False) for i in range(n)]).reshape(-1, 3)
+    joined = np.linalg.norm(starts[1:] - ends[:-1], axis=1) <= JOINT_TOL_MM  # False where NaN
+    joined &= tolerance_mm > 0.0
+    if keys is not None:
+        joined &= np.array([keys[i + 1] == keys[i] for i in range(n - 1)], dtype=bool)
     out = BlendedPath([], [], [])
     i = 0
-    while i < n:
-        j = i
-        while (j + 1 < n and prims[j] is not None and prims[j + 1] is not None
-               and (keys is None or keys[j + 1] == keys[i])
-               and float(np.linalg.norm(prims[j][-1].end - prims[j + 1][0].start)) <= JOINT_TOL_MM):  # type: ignore[index]
-            j += 1
+    breaks = [*np.flatnonzero(~joined).tolist(), n - 1]
+    for j in breaks:  # a run is i .. j
         if j == i:
             out.segments.append(segments[i])
             out.origin.append(i)
         else:
-            _blend_run(segments, prims, i, j, tolerance_mm, nm, out)
+            _blend_run(segments, plain, prims, i, j, tolerance_mm, nm, out)
         i = j + 1
     return out
 
 
 def _blend_run(
-    segments: Sequence[Segment], prims: list[list[Primitive] | None], i0: int, i1: int, tol: float,
-    names: list[str], out: BlendedPath,
+    segments: Sequence[Segment], plain: list[bool], prims: list[list[Primitive] | None], i0: int, i1: int,
+    tol: float, names: list[str], out: BlendedPath,
 ) -> None:
-    """Blend segments i0 .. i1 (all lines / arcs, joined) into ``out``."""
-    pieces: list[Primitive] = []
-    origin: list[int] = []
-    for i in range(i0, i1 + 1):
-        prs = prims[i]
-        assert prs is not None  # the run holds primitives only (checked by blend_path)
-        pieces.extend(prs)
-        origin.extend([i] * len(prs))
-    if all(isinstance(pr, Line) for pr in pieces):  # the closed-form, vectorised line chain
-        run = blend_polyline(np.array([pieces[0].start] + [pr.end for pr in pieces]), tol, name=names[i0])
+    """Blend segments i0 .. i1 (all lines / arcs, joined; ``plain``: a two-point line) into ``out``."""
+    if all(plain[i0 : i1 + 1]):  # the closed-form, vectorised line chain
+        cps = [s.control_points for s in segments[i0 : i1 + 1] if isinstance(s, NurbsSegment)]
+        run = blend_polyline(np.array([cps[0][0]] + [c[-1] for c in cps]), tol, name=names[i0])
         out.segments.extend(run)
         out.origin.extend([i0] * len(run))  # one key for the whole run
         return
+    pieces: list[Primitive] = []
+    origin: list[int] = []
+    for i in range(i0, i1 + 1):
+        prs = prims[i] if not plain[i] else primitives_of(segments[i])
+        assert prs is not None  # the run holds lines and arcs only (checked by blend_path)
+        pieces.extend(prs)
+        origin.extend([i] * len(prs))
     m = len(pieces)
     trim_start = np.zeros(m)
     trim_end = np.zeros(m)
