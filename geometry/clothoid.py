@@ -43,6 +43,9 @@ to fy L <= delta at M, and the nearest blend point to V is M. Given a tolerance 
 
 where d_max keeps consecutive blends from overlapping (half of each leg; the whole leg
 at the ends of the chain). delta = eps unless the legs are too short.
+
+Corners where a line meets an arc, or two arcs meet, are blended by ``geometry.arcblend``
+(a clothoid pair with non-zero end curvatures, fitted on the line and the circle).
 """
 
 from __future__ import annotations

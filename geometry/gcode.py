@@ -118,10 +118,9 @@ from typing import Final
 
 import numpy as np
 
-from geometry import clothoid, primitives
+from geometry import arcblend, primitives
 from geometry.errors import GeometryError
 from geometry.nurbs import FloatArray, NurbsSegment
-from geometry.segment import Segment
 from geometry.toolpath import CORNER_TOL_DEG, Toolpath
 
 MM_PER_INCH: Final = 25.4
@@ -211,35 +210,20 @@ class Program:
     def toolpath(self, corner_tol_deg: float = CORNER_TOL_DEG, blend_mm: float = 0.0) -> Toolpath:
         """The segments as a Toolpath (corners between them found as usual), each with its programmed feed.
 
-        With ``blend_mm`` > 0, every run of consecutive straight moves with the same feed (G01 at
-        one F, or G00) has its corners replaced by G2 clothoid pairs within ``blend_mm`` of the
-        corner (``geometry.clothoid.blend_polyline``), so the schedule runs through them instead of
-        stopping; corners between runs, and at arcs and splines, stay rest points.
+        With ``blend_mm`` > 0, every run of consecutive lines and arcs with the same feed (G01 /
+        G02 / G03 at one F, or G00) has its corners replaced by G2 clothoid pairs within
+        ``blend_mm`` of the corner (``geometry.arcblend.blend_path``: line-line corners by
+        ``geometry.clothoid.blend_polyline``, corners with an arc by a clothoid pair fitted on the
+        line and the circle), so the schedule runs through them instead of stopping. Corners
+        between runs (a change of F, rapid to cut), at splines, out of the arc's plane, or where
+        no blend fits stay rest points; the last two are listed in ``Toolpath.unblended``.
         """
         if blend_mm == 0.0:
             return Toolpath(list(self.segments), corner_tol_deg=corner_tol_deg, feed_limits=list(self.feed))
-        segs: list[Segment] = []
-        feeds: list[float | None] = []
-        i, n = 0, len(self.segments)
-        while i < n:
-            j = i
-            while (j + 1 < n and _is_line(self.segments[i]) and _is_line(self.segments[j + 1])
-                   and self.feed[j + 1] == self.feed[i] and self.rapid[j + 1] == self.rapid[i]):
-                j += 1
-            if j > i:
-                pts = [self.segments[i].control_points[0]] + [self.segments[k].control_points[-1]
-                                                               for k in range(i, j + 1)]
-                run = clothoid.blend_polyline(np.asarray(pts), blend_mm, name=f"gcode:line {self.line[i]}")
-            else:
-                run = [self.segments[i]]
-            segs.extend(run)
-            feeds.extend([self.feed[i]] * len(run))
-            i = j + 1
-        return Toolpath(segs, corner_tol_deg=corner_tol_deg, feed_limits=feeds)
-
-
-def _is_line(seg: NurbsSegment) -> bool:
-    return seg.degree == 1 and seg.control_points.shape[0] == 2
+        bp = arcblend.blend_path(self.segments, blend_mm, keys=list(zip(self.feed, self.rapid, strict=True)),
+                                 names=[f"gcode:line {ln}" for ln in self.line])
+        return Toolpath(bp.segments, corner_tol_deg=corner_tol_deg, feed_limits=[self.feed[k] for k in bp.origin],
+                        unblended=bp.unblended)
 
 
 # --------------------------------------------------------------------------- tokenizer

@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import fresnel
 
+from geometry.arcblend import Unblended
 from geometry.arclength import ArcLengthTable
 from geometry.clothoid import ClothoidSegment
 from geometry.errors import GeometryError
@@ -302,6 +303,7 @@ class Toolpath:
         junction_jumps: (S - 1, 2) the jumps of C_ss and of C_sss (Euclidean norm, 1/mm and 1/mm^2)
             across each junction between sub-segments (corners included).
         corners: rest points inside the path, in order of s.
+        unblended: corners that a corner blend left as they were, with the reason (``Unblended``).
         pieces: rest-to-rest stretches.
     """
 
@@ -311,14 +313,18 @@ class Toolpath:
         corner_tol_deg: float = CORNER_TOL_DEG,
         gap_tol: float = GAP_TOL_MM,
         feed_limits: Sequence[float | None] | None = None,
+        unblended: Sequence[Unblended] = (),
     ) -> None:
         """``feed_limits``: optional programmed feed limit (mm/s) per segment (None: no limit),
-        e.g. a G-code block's F word; the schedule keeps the tangential feed under it."""
+        e.g. a G-code block's F word; the schedule keeps the tangential feed under it.
+        ``unblended``: corners a corner blend (``geometry.arcblend.blend_path``) left as they were,
+        kept for the report."""
         if len(segments) == 0:
             raise GeometryError("segments", [], "a toolpath needs at least one segment")
         if not (np.isfinite(corner_tol_deg) and 0.0 <= corner_tol_deg < 180.0):
             raise GeometryError("corner_tolerance_deg", corner_tol_deg, "must be in [0, 180)")
         self.segments = list(segments)
+        self.unblended = list(unblended)
         self._feed = self._check_feed_limits(feed_limits, len(self.segments))
         parts: list[Segment] = []
         origin_l: list[int] = []

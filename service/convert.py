@@ -10,7 +10,7 @@ from __future__ import annotations
 import io
 import json
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -19,9 +19,9 @@ import numpy as np
 import orjson
 from numpy.typing import NDArray
 
-from geometry import GeometryError, NurbsSegment, Toolpath, gcode
+from geometry import GeometryError, NurbsSegment, Toolpath, arcblend, gcode, primitives
 from service.errors import too_large
-from service.schemas import MachineIn, ScheduleRequest
+from service.schemas import ArcIn, LineIn, MachineIn, NurbsIn, PolylineIn, ScheduleRequest
 from solvers.machine import AXES, Axis, AxisLimits, DriveModel, Machine, derive_limits, preset
 from solvers.pipeline import Options, Schedule, plan_piece
 
@@ -75,11 +75,13 @@ def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
             raise GeometryError("toolpath.gcode", None, "the program has no motion")
         tp = prog.toolpath(corner_tol, blend_mm=float(req.toolpath.corner_blend_mm))
     else:
-        segs = [
-            NurbsSegment.create(s.degree, s.knots, s.control_points, s.weights, name=f"toolpath.segments[{i}]")
-            for i, s in enumerate(req.toolpath.segments or [])
-        ]
-        tp = Toolpath(segs, corner_tol_deg=corner_tol)
+        segs = to_segments(req.toolpath.segments or [])
+        blend = float(req.toolpath.corner_blend_mm)
+        if blend > 0.0:
+            bp = arcblend.blend_path(segs, blend)
+            tp = Toolpath(bp.segments, corner_tol_deg=corner_tol, unblended=bp.unblended)
+        else:
+            tp = Toolpath(segs, corner_tol_deg=corner_tol)
     machine = to_machine(req.machine)
     o = req.options
     if o.feed_max is not None:
@@ -95,11 +97,44 @@ def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
     return tp, machine, opts
 
 
+def to_segments(items: Sequence[NurbsIn | LineIn | ArcIn | PolylineIn]) -> list[NurbsSegment]:
+    """Exact segments of a JSON chain; a line's or arc's missing start is the previous segment's end."""
+    out: list[NurbsSegment] = []
+    for i, s in enumerate(items):
+        name = f"toolpath.segments[{i}]"
+        if isinstance(s, NurbsIn):
+            out.append(NurbsSegment.create(s.degree, s.knots, s.control_points, s.weights, name=name))
+            continue
+        if isinstance(s, PolylineIn):
+            out.append(primitives.polyline(s.points, name=name))
+            continue
+        start: object = s.start if s.start is not None else (out[-1].control_points[-1] if out else None)
+        if start is None:
+            raise GeometryError(f"{name}.start", None, "the first segment needs a start point", i)
+        if isinstance(s, LineIn):
+            out.append(primitives.line(start, s.end, name=name))
+        else:
+            out.append(primitives.arc(start, s.end, centre=s.centre, radius=s.radius, plane=s.plane,
+                                      direction=s.direction, turns=s.turns, name=name))
+    return out
+
+
 def control_point_count(req: ScheduleRequest) -> int:
-    """Control points of a NURBS request; for G-code, its line count (an upper bound on its motions)."""
+    """Control points of a segment request (a line 2, an arc 9 per turn, a polyline its points);
+    for G-code, its line count (an upper bound on its motions)."""
     if req.toolpath.gcode is not None:
         return req.toolpath.gcode.count("\n") + 1
-    return sum(len(s.control_points) for s in req.toolpath.segments or [])
+    n = 0
+    for s in req.toolpath.segments or []:
+        if isinstance(s, NurbsIn):
+            n += len(s.control_points)
+        elif isinstance(s, PolylineIn):
+            n += len(s.points)
+        elif isinstance(s, ArcIn):
+            n += 9 * (s.turns + 1)
+        else:
+            n += 2
+    return n
 
 
 def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) -> None:

@@ -48,15 +48,70 @@ class NurbsIn(BaseModel):
     weights: list[Annotated[Number, Field(gt=0, le=1e6)]] | None = Field(default=None, max_length=200_000)
 
 
+#: A point in mm: [x, y] (z = 0) or [x, y, z].
+PointIn = Annotated[list[Coord], Field(min_length=2, max_length=3)]
+START_DOC = "mm; default: where the previous segment ends (required on the first segment)"
+
+
+class LineIn(BaseModel):
+    """A straight line (exact: a degree-1 NURBS)."""
+
+    model_config = ConfigDict(extra="forbid")
+    type: Literal["line"]
+    start: PointIn | None = Field(default=None, description=START_DOC)
+    end: PointIn
+
+
+class ArcIn(BaseModel):
+    """A circular arc in the G17 (XY), G18 (ZX) or G19 (YZ) plane (exact rational quadratic pieces).
+
+    Exactly one of ``centre`` (absolute, mm) and ``radius`` (R format: > 0 the arc of at most 180
+    degrees, < 0 the one of at least 180) is given; with ``centre`` and ``end`` = ``start`` the arc
+    is a full circle. Start and end radii must agree within max(0.002 mm, 1e-6 R); helical arcs are
+    rejected."""
+
+    model_config = ConfigDict(extra="forbid")
+    type: Literal["arc"]
+    start: PointIn | None = Field(default=None, description=START_DOC)
+    end: PointIn
+    centre: PointIn | None = None
+    radius: Annotated[Number, Field(ge=-1e6, le=1e6)] | None = None
+    plane: Literal["G17", "G18", "G19"] = "G17"
+    direction: Literal["cw", "ccw"] = Field(default="ccw", description="cw = G02, ccw = G03, seen from the "
+                                            "positive end of the plane normal")
+    turns: StrictInt = Field(default=0, ge=0, le=1000, description="extra full turns")
+
+
+class PolylineIn(BaseModel):
+    """Straight lines through ``points`` (the first is the start; a degree-1 NURBS, u = arc length)."""
+
+    model_config = ConfigDict(extra="forbid")
+    type: Literal["polyline"]
+    points: list[PointIn] = Field(min_length=2, max_length=200_000)
+
+
+def _segment_kind(v: Any) -> str:
+    kind = v.get("type", "nurbs") if isinstance(v, dict) else getattr(v, "type", "nurbs")
+    return kind if kind in ("nurbs", "line", "arc", "polyline") else "nurbs"
+
+
+SegmentIn = Annotated[
+    Annotated[NurbsIn, Tag("nurbs")] | Annotated[LineIn, Tag("line")] | Annotated[ArcIn, Tag("arc")]
+    | Annotated[PolylineIn, Tag("polyline")],
+    Discriminator(_segment_kind),
+]
+
+
 #: Longest G-code program accepted in a request (characters).
 GCODE_MAX_CHARS = 20_000_000
 
 
 class ToolpathIn(BaseModel):
-    """Either NURBS ``segments`` or a G-code program (``gcode``), not both."""
+    """Either ``segments`` (NURBS, lines, arcs, polylines, joined end to end) or a G-code program
+    (``gcode``), not both."""
 
     model_config = ConfigDict(extra="forbid")
-    segments: list[NurbsIn] | None = Field(default=None, min_length=1, max_length=10_000)
+    segments: list[SegmentIn] | None = Field(default=None, min_length=1, max_length=10_000)
     gcode: str | None = Field(
         default=None, min_length=1, max_length=GCODE_MAX_CHARS,
         description="G-code text (G00-G03, G17-G19, G20/G21, G90/G91, Fanuc G06.2, Siemens BSPLINE, LinuxCNC "
@@ -64,8 +119,11 @@ class ToolpathIn(BaseModel):
     )
     corner_tolerance_deg: Annotated[Number, Field(ge=0, le=180)] = 0.5
     corner_blend_mm: Annotated[Number, Field(ge=0, le=100)] = Field(
-        default=0.0, description="G-code only: blend the corners of straight-move runs (same F) with G2 clothoid "
-        "pairs within this distance (mm) of the corner, so the schedule runs through them; 0 stops at each corner",
+        default=0.0, description="blend the tangent breaks of chains of lines and arcs (G-code runs at one F, "
+        "or consecutive JSON line / arc / polyline segments and NURBS that are exact lines or arcs) with G2 "
+        "clothoid pairs within this distance (mm) of the original corner, so the schedule runs through them; "
+        "corners that cannot be blended (not coplanar, no fit) stay rest points and are listed in "
+        "diagnostics.unblended_corners; 0 stops at each corner",
     )
 
     @model_validator(mode="after")
@@ -183,7 +241,7 @@ EXAMPLE: dict[str, Any] = {
 
 
 #: Union-branch tags pydantic puts into error locations (service.errors drops them from field paths).
-UNION_TAGS = ("preset", "custom")
+UNION_TAGS = ("preset", "custom", "nurbs", "line", "arc", "polyline")
 
 
 def _machine_kind(v: Any) -> str:

@@ -632,6 +632,11 @@ def schedule(
             {"s": c.s, "angle_deg": c.angle_deg, "segment": c.segment, "position": list(c.position)}
             for c in toolpath.corners
         ],
+        # corners a blend (corner_blend_mm) left as they were, and why
+        "unblended_corners": [
+            {"segment": u.segment, "position": list(u.position), "angle_deg": u.angle_deg, "reason": u.reason}
+            for u in getattr(toolpath, "unblended", ())
+        ],
         "binding": _binding(toolpath, profiles, lim, opt, machine),
         "rest_acceleration": {ax: float(v) for ax, v in zip(AXES, lim.a_rest, strict=True)},
     }
