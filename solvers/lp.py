@@ -69,6 +69,16 @@ FLOOR_SHARE = 1e-2
 #: At a curvature jump the axis acceleration steps by x_ss jump x q; seen in a sampled third
 #: difference the step adds up to 0.75 step / Ts to the jerk, so it is kept to STEP_SHARE jmax Ts.
 STEP_SHARE = 0.25
+#: Peak of the third-difference kernel (a quadratic B-spline over 3 Ts) times Ts: a step A of the
+#: axis acceleration between samples adds up to STEP_KERNEL A / Ts to a sampled jerk.
+STEP_KERNEL = 0.75
+#: Curvature jumps whose step term would stay below this share of jmax even at q = Q get no
+#: coupled jerk rows (``WindowLP._step_jerk``).
+STEP_JERK_MIN = 1e-3
+#: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
+#: and no column is scaled below this share of the window's Q.
+COL_SCALE_MIN_BASIS = 0.1
+COL_SCALE_FLOOR = 1e-12
 #: An axis whose path-derivative coefficients are all below this is not moving.
 AXIS_EPS = 1e-12
 
@@ -136,6 +146,9 @@ class LimitSet:
     jerk: bool
     #: largest step of axis acceleration allowed at a curvature jump (G1 junction, C1 knot), (3,) or None
     a_step: FloatArray | None = None
+    #: output sample period Ts (s) when the jerk is held as the samples' third differences see it
+    #: next to a curvature jump (method lp with jerk, ``WindowLP._step_jerk``), else None
+    step_jerk_period: float | None = None
 
     @classmethod
     def from_machine(cls, m: Machine, sample_period: float, jerk: bool, rest_from_drive: bool = False) -> LimitSet:
@@ -147,7 +160,8 @@ class LimitSet:
         else:
             a_rest = np.minimum(amax, jmax * sample_period / 2.0) if jerk else amax
             a_step = STEP_SHARE * jmax * sample_period
-        return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk, a_step if jerk else None)
+        return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk, a_step if jerk else None,
+                   sample_period if jerk and not rest_from_drive else None)
 
 
 class _Rows:
@@ -161,6 +175,8 @@ class _Rows:
         #: HiGHS model holding the first ``passed`` blocks (cut rounds add only new rows)
         self.highs: highspy.Highs | None = None
         self.passed = 0
+        #: column scale sigma (ncols,): the solver's variables are y = chat / sigma (``WindowLP._col_scale``)
+        self.col_scale = np.ones(ncols)
 
     def add(self, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray) -> None:
         if A.shape[0]:
@@ -172,16 +188,30 @@ class _Rows:
         """A new row set starting with these rows (no solver state)."""
         out = _Rows(self.ncols)
         out.blocks, out.lo, out.hi = list(self.blocks), list(self.lo), list(self.hi)
+        out.col_scale = self.col_scale
         return out
 
     def build(self, first: int = 0) -> tuple[sp.csr_matrix, FloatArray, FloatArray]:
-        """Rows of blocks[first:] as one cleaned CSR matrix with bounds."""
+        """Rows of blocks[first:] in the solver's variables y (columns times ``col_scale``) as one
+        cleaned CSR matrix with bounds.  Coefficients below TINY_COEF (in units of Q) are dropped
+        first; then each row is divided by the larger of its largest coefficient and its largest
+        finite bound, so a row whose columns and bound are all ~1e-8 (q capped near a tight turn)
+        is O(1), and a row whose coefficients are all tiny against its bound stays as it was (an
+        axis barely moving: normalising it by its coefficients gave bounds of ~5e13 and Clarabel
+        stopped with InsufficientProgress)."""
         if len(self.blocks) <= first:
             return sp.csr_matrix((0, self.ncols)), np.zeros(0), np.zeros(0)
         A = sp.vstack(self.blocks[first:], format="csr")
         A.data[np.abs(A.data) < TINY_COEF] = 0.0
         A.eliminate_zeros()
-        return A, np.concatenate(self.lo[first:]), np.concatenate(self.hi[first:])
+        A = sp.csr_matrix(A @ sp.diags(self.col_scale))
+        lo, hi = np.concatenate(self.lo[first:]), np.concatenate(self.hi[first:])
+        big = np.zeros(A.shape[0])
+        np.maximum.at(big, np.repeat(np.arange(A.shape[0]), np.diff(A.indptr)), np.abs(A.data))
+        big = np.maximum(big, np.where(np.isfinite(lo), np.abs(lo), 0.0))
+        big = np.maximum(big, np.where(np.isfinite(hi), np.abs(hi), 0.0))
+        r = 1.0 / np.where(big > 0.0, big, 1.0)
+        return sp.csr_matrix(sp.diags(r) @ A), lo * r, hi * r
 
 
 def axis_kinematics(
@@ -228,6 +258,7 @@ class WindowLP:
         self.iterations = 0
         self.Q = 1.0
         self._fine_g: tuple[FloatArray, PathSamples] | None = None
+        self._step_cache: tuple[FloatArray, FloatArray] | None = None
 
     # ----- row blocks ---------------------------------------------------------
     def _mats(self, s: FloatArray) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
@@ -283,14 +314,23 @@ class WindowLP:
             A = sp.diags(rq * Q / self.lim.jmax[ax]) @ J
             one = np.ones(g.s.size)
             self._add(rows, A, -one, one, g.s)
+            step = self._step_jerk(g.s, ax)
+            if step is not None:  # |j| + the steps' share <= jmax, as two one-sided rows
+                near, M = step
+                C = sp.csr_matrix(M @ self._mats(self._steps()[0])[0]) * Q
+                free = np.full(int(near.sum()), -np.inf)
+                self._add(rows, A[near] + C, free, one[near], g.s[near])
+                self._add(rows, C - A[near], free, one[near], g.s[near])
 
-    def _rest_rows(self, rows: _Rows, s_rest: float, sign: float, Q: float, a_rest: FloatArray | None) -> None:
-        """q(s_rest) = 0 and sign * q'(s_rest) * max_x(|x_s|/(2 a_rest_x)) <= 1 (a_rest: default lim.a_rest)."""
+    def _rest_rows(self, rows: _Rows, s_rest: float, sign: float, Q: float, a_rest: FloatArray | None) -> float:
+        """q(s_rest) = 0 and sign * q'(s_rest) * max_x(|x_s|/(2 a_rest_x)) <= 1 (a_rest: default lim.a_rest).
+        Returns the largest control point next to the rest end these allow (q' = 2 c / d there), mm^2/s^2."""
         g = self.geometry(np.array([s_rest]))
         B0, B1, _ = self._mats(g.s)
         rows.add(B0, np.zeros(1), np.zeros(1))
         r = float(np.max(np.abs(g.d1[0]) / (2.0 * (self.lim.a_rest if a_rest is None else a_rest))))
         rows.add(B1 * (sign * Q * r), np.array([-np.inf]), np.ones(1))
+        return self.spec.d / (2.0 * r) if r > 0.0 else np.inf
 
     def _eval(self, c: FloatArray, s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """q, q', q'' at piece-local s of a window-local control vector c."""
@@ -352,19 +392,29 @@ class WindowLP:
         floor_cols[-2:] = False
 
         base = _Rows(n)
+        g_fine = self._fine_geometry(s_check)
+        base.col_scale = self._col_scale(g_fine, Q)
+        rest_c: list[tuple[int, float]] = []  # (column next to a rest end, its largest value)
         if spec.start_fixed is None:
-            self._rest_rows(base, spec.k0 * spec.d, 1.0, Q, spec.a_rest_start)
+            rest_c.append((1, self._rest_rows(base, spec.k0 * spec.d, 1.0, Q, spec.a_rest_start)))
         if spec.end_rest:
-            self._rest_rows(base, spec.k1 * spec.d, -1.0, Q, spec.a_rest_end)
+            rest_c.append((n - 2, self._rest_rows(base, spec.k1 * spec.d, -1.0, Q, spec.a_rest_end)))
 
         step_cap = self._step_rows(base, Q)
         # Away from the rest ends q is kept above a small floor (a constant feed that meets every
         # limit at every checkpoint): with knots coarser than a sharp turn, the optimum of
         # integral q otherwise lets q touch 0 at a knot (two zero control points), where the
-        # time 1 / sqrt(q) diverges and the feed stalls.  If the floor makes the window
-        # infeasible (an inherited start below it), it is dropped.
+        # time 1 / sqrt(q) diverges and the feed stalls.  Next to a rest end the slope q' there
+        # (c_1 = d q' / 2) gets the same floor, or FLOOR_SHARE of what a_rest allows if smaller:
+        # a turn inside the first knot interval made integral q larger with c_1 = 0 and c_2 at
+        # the turn's cap (q = c_2 tau^2 / 2), and a feed leaving rest with q' = 0 never leaves
+        # (bench seed 14).  If the floor makes the window infeasible (an inherited start below
+        # it), it is dropped.
+        floor = min(self._floor(g_fine), FLOOR_SHARE * step_cap)
         floor_lo = col_lo.copy()
-        floor_lo[floor_cols] = min(self._floor(self._fine_geometry(s_check)), FLOOR_SHARE * step_cap) / Q
+        floor_lo[floor_cols] = floor / Q
+        for j, c_max in rest_c:
+            floor_lo[j] = max(col_lo[j], min(floor, FLOOR_SHARE * c_max) / Q)
         try:
             chat1, c_star, pts1 = self._stage1(base, g, w, floor_lo, col_hi, Q, s_check)
         except InfeasibleError:
@@ -404,14 +454,11 @@ class WindowLP:
     def _step_rows(self, rows: _Rows, Q: float) -> float:
         """q <= min_x a_step_x / |jump of x_ss| at every geometry break inside the window (the
         acceleration step there, x_ss jump x q, stays within a_step); returns the smallest cap."""
-        spec = self.spec
         if self.lim.a_step is None or self.breaks.size == 0:
             return np.inf
-        lo, hi = spec.k0 * spec.d, spec.k1 * spec.d
-        br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
+        br, jump = self._steps()
         if br.size == 0:
             return np.inf
-        jump = np.abs(self.geometry(br + BREAK_EPS_MM).d2 - self.geometry(br - BREAK_EPS_MM).d2)
         with np.errstate(divide="ignore"):
             cap = np.min(np.where(jump > AXIS_EPS, self.lim.a_step[None, :] / np.where(jump > AXIS_EPS, jump, 1.0),
                                   np.inf), axis=1)
@@ -421,6 +468,42 @@ class WindowLP:
         B0 = self._mats(br[keep])[0]
         rows.add(B0, np.full(int(keep.sum()), -np.inf), cap[keep] / Q)
         return float(np.min(cap[keep]))
+
+    def _steps(self) -> tuple[FloatArray, FloatArray]:
+        """Geometry breaks strictly inside the window and |jump of x_ss| there per axis, ((nb,), (nb, 3))."""
+        if self._step_cache is None:
+            spec = self.spec
+            lo, hi = spec.k0 * spec.d, spec.k1 * spec.d
+            br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
+            jump = (np.abs(self.geometry(br + BREAK_EPS_MM).d2 - self.geometry(br - BREAK_EPS_MM).d2) if br.size
+                    else np.zeros((0, 3)))
+            self._step_cache = (br, np.asarray(jump, dtype=np.float64))
+        return self._step_cache
+
+    def _step_jerk(self, s: FloatArray, ax: int) -> tuple[NDArray[np.bool_], sp.csr_matrix] | None:
+        """The sampled jerk next to a curvature jump (bench seed 47): the axis acceleration steps by
+        |jump_x| q(s_b) at the break s_b, and a third difference of the samples whose span (3 Ts)
+        holds the break sees the jerk around it plus up to STEP_KERNEL |step| / Ts.  So at points
+        within 3 Ts of travel (at the window's largest feed sqrt(Q)) of a break the jerk rows become
+        |j(s)| + sum_b STEP_KERNEL |jump_bx| q(s_b) / Ts <= jmax_x.
+
+        Returns (near (K,) bool: the points s that need it, M (near.sum(), nb): per unit jmax, the
+        weight of q(s_b) in the sum), or None."""
+        Ts = self.lim.step_jerk_period
+        if Ts is None or self.breaks.size == 0:
+            return None
+        br, jump = self._steps()
+        jmax = self.lim.jmax[ax]
+        wgt = STEP_KERNEL * jump[:, ax] / (Ts * jmax)
+        live = wgt * self.Q > STEP_JERK_MIN
+        if not live.any():
+            return None
+        reach = 3.0 * Ts * np.sqrt(self.Q)
+        close = (np.abs(s[:, None] - br[None, :]) <= reach) & live[None, :]
+        near = close.any(axis=1)
+        if not near.any():
+            return None
+        return near, sp.csr_matrix(np.where(close[near], wgt[None, :], 0.0))
 
     def _fine(self, s_check: FloatArray) -> FloatArray:
         """The verification grid: VERIFY_SUBDIV points per checkpoint gap, both sides of geometry
@@ -442,8 +525,8 @@ class WindowLP:
             self._fine_g = (s_check, self.geometry(self._fine(s_check)))
         return self._fine_g[1]
 
-    def _floor(self, g: PathSamples) -> float:
-        """FLOOR_SHARE x the largest constant q that meets every limit at the points g (verification grid):
+    def _cap(self, g: PathSamples) -> FloatArray:
+        """The largest constant q that meets every limit at each point of g (K,), inf where none binds:
         q <= ub (velocity, feed), |x_ss| q <= amax, |x_sss| q sqrt(ub) <= jmax (pseudo-jerk, q* <= ub)."""
         ub = velocity_bound(g, self.lim)
         lim = self.lim
@@ -455,8 +538,35 @@ class WindowLP:
                     np.where(np.abs(g.d3) > AXIS_EPS, lim.jmax[None, :] / np.abs(g.d3), np.inf), axis=1
                 ) / np.sqrt(ub)
                 cap = np.minimum(cap, qj)
+        return np.asarray(cap, dtype=np.float64)
+
+    def _floor(self, g: PathSamples) -> float:
+        """FLOOR_SHARE x the largest constant q that meets every limit at the points g (verification grid)."""
+        cap = self._cap(g)
         finite = cap[np.isfinite(cap)]
         return FLOOR_SHARE * float(np.min(finite)) if finite.size else 0.0
+
+    def _col_scale(self, g: PathSamples, Q: float) -> FloatArray:
+        """Column scale sigma (ncols,) in units of Q: for each control point c_j, the smallest
+        cap(s) / b_j(s) over the verification points where its basis function b_j >= COL_SCALE_MIN_BASIS
+        (``_cap``; c >= 0 and q >= c_j b_j, so this is c_j's reach), clipped to [COL_SCALE_FLOOR, 1].
+
+        With one scale Q for the whole window, q near a turn of ~1 um radius is ~1e-8 of Q: the
+        floor and q >= 0 there were below HiGHS's feasibility tolerance (1e-7), so it returned
+        c = -1.6e-9 Q and the feed stalled.  Scaled per column, every column is O(1) where it binds."""
+        spec = self.spec
+        k, W0, _, _ = bspline.basis(g.s, spec.d, spec.n_int, spec.k0, spec.k1 - 1)
+        cap = np.minimum(self._cap(g), Q)
+        sig = np.full(spec.ncols, Q)
+        for i in range(3):
+            ok = W0[:, i] >= COL_SCALE_MIN_BASIS
+            np.minimum.at(sig, k[ok] - spec.k0 + i, cap[ok] / W0[ok, i])
+        sig = np.clip(sig / Q, COL_SCALE_FLOOR, 1.0)
+        if spec.start_fixed is None:  # c_k0 = -c_k0+1 at a rest start
+            sig[0] = sig[1]
+        if spec.end_rest:
+            sig[-1] = sig[-2]
+        return np.asarray(sig, dtype=np.float64)
 
     def _cuts(
         self,
@@ -494,14 +604,25 @@ class WindowLP:
         bad = f * f > velocity_bound(g, self.lim) * tol**2
         bad |= np.any(np.abs(a) > self.lim.amax[None, :] * tol, axis=1)
         if c_star is not None:
-            bad |= np.any(np.abs(j) > self.lim.jmax[None, :] * tol, axis=1)
+            aj = np.abs(j)
+            for ax in range(3):
+                step = self._step_jerk(g.s, ax)
+                if step is not None:
+                    near, M = step
+                    aj[near, ax] += self.lim.jmax[ax] * (M @ self._eval(c, self._steps()[0])[0])
+            bad |= np.any(aj > self.lim.jmax[None, :] * tol, axis=1)
         return np.asarray(bad)
 
     def _run(self, rows: _Rows, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray) -> FloatArray:
+        """Solve in the scaled variables y = chat / sigma (``_col_scale``); returns chat."""
+        sig = rows.col_scale
+        wy = w * sig
+        wy = wy / float(np.max(np.abs(wy)))
+        lo_y, hi_y = col_lo / sig, col_hi / sig
         if self.solver == "highs":
-            return self._highs(rows, w, col_lo, col_hi)
+            return self._highs(rows, wy, lo_y, hi_y) * sig
         A, lo, hi = rows.build()
-        return self._clarabel(A, lo, hi, w, col_lo, col_hi)
+        return self._clarabel(A, lo, hi, wy, lo_y, hi_y) * sig
 
     def _highs(self, rows: _Rows, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray) -> FloatArray:
         """Solve with HiGHS; after the first call only the new (cut) rows are added and
