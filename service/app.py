@@ -262,7 +262,8 @@ def _routes(app: FastAPI) -> None:
         corner_tolerance_deg: Annotated[float, Query(ge=0, le=180)] = 0.5,
         corner_blend_mm: Annotated[float, Query(ge=0, le=100, description="mm; 0 stops at corners")] = 0.0,
     ) -> Response:
-        """Schedule a G-code program uploaded as `text/x-gcode` (machine preset and options as query parameters)."""
+        """Schedule a G-code program uploaded as `text/x-gcode` (machine preset and options as query parameters).
+        Answers as `POST /v1/schedule` (JSON, CSV, or NDJSON streamed piece by piece with a final summary line)."""
         ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
         if ctype not in (GCODE_MEDIA, "text/plain"):
             raise ServiceError(415, "unsupported-media-type", "Unsupported Media Type",

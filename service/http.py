@@ -60,9 +60,10 @@ async def render(res: Result, media: str, headers: dict[str, str] | None = None,
 
 #: The NDJSON protocol, as the README and the OpenAPI description state it.
 NDJSON_PROTOCOL = (
-    "NDJSON (`Accept: application/x-ndjson`): one JSON object per sample and line (the sample columns as keys), "
-    "sent as soon as the piece (rest to rest, between corners) they belong to has been solved and its samples "
-    "re-checked, then exactly one final line with an `event` key: `{\"event\": \"summary\", \"summary\": "
+    "NDJSON (`Accept: application/x-ndjson`): one JSON object per sample and line (the sample columns as keys; "
+    "from POST /v1/schedule streamed: a piece's rows, rest to rest between corners, are sent once that piece has "
+    "been solved and its samples re-checked, while later pieces are solved), then exactly one final line with "
+    "an `event` key: `{\"event\": \"summary\", \"summary\": "
     "{...}, \"diagnostics\": {...}}` when the schedule is complete, or `{\"event\": \"error\", \"type\": "
     "..., \"title\": ..., \"status\": ..., \"detail\": ..., \"errors\": [...]}` (the problem+json fields) "
     "when it failed after rows were sent (the HTTP status is 200 by then; a failure before the first row is an "

@@ -1,12 +1,29 @@
 """The scheduling pipeline: toolpath -> windows -> feed profile -> time samples.
 
     schedule(toolpath, machine, options) -> Schedule
+    schedule_stream(toolpath, machine, options) -> SampleBlock, ..., SampleBlock, ScheduleEnd
 
 1. Split the path at rest points (ends, corners) into pieces.
-2. Per piece: a uniform knot grid (spacing d), LP windows of ``lp_window``
-   knot intervals overlapping by ``lp_overlap`` (at least twice the stopping
-   distance, spec §6); each window inherits c_k0, c_k0+1 from the previous one.
-3. Time reconstruction at the sample period and axis kinematics at each sample.
+2. Per piece, in path order: a uniform knot grid (spacing d), LP windows of
+   ``lp_window`` knot intervals overlapping by ``lp_overlap`` (at least twice
+   the stopping distance, spec §6); each window inherits c_k0, c_k0+1 from the
+   previous one; then the NLP (method lp+nlp).
+3. Time reconstruction at t_k = k Ts on one grid over the whole path (a piece
+   starts where the previous one ended), axis kinematics at each sample, and
+   the sampled re-check (``solvers.verify``) with repairs of the piece.  The
+   samples of a piece are released (``SampleBlock``) once they have passed it,
+   so a consumer has the first rows while later pieces are being solved.
+
+Within one piece the rows leave when the piece is done: a path without corners
+streams nothing early.  A finer grain is possible and is not built: with method
+lp, the feed up to an LP window's committed knot (``joins``) no longer changes
+once that window is solved, so its samples could be computed then (t(s) on the
+committed intervals is final too); with lp+nlp the same holds per NLP chain
+(chains end at the LP joins).  But a sample repair re-solves the piece from the
+first window with a flagged point, which could lie in rows already sent, so
+repairs would have to be restricted to the windows not yet released (or the
+re-check done per window before release, with the held-sample rule at every
+window seam) - a change of the repair semantics, not only of the plumbing.
 """
 
 from __future__ import annotations

@@ -22,6 +22,13 @@ verification grid of their piece and solves that piece again; whatever is
 still over ``1 + FAIL_TOL`` after the last round is a ``LimitViolationError``:
 the schedule is never returned over its limits silently.
 
+``check_rows`` checks any run of consecutive samples given the REST_PAD
+samples on either side, so the pipeline checks piece by piece with the values
+of a check of the whole schedule.  Rest padding at each piece's own ends would
+not do: the rest instant at a corner falls between two samples, so the
+neighbours across it are moving (on a zigzag, the differences at the samples
+next to a corner changed by up to 0.31 of a limit; ``tests/solvers/test_stream.py``).
+
 Units: mm, s; utilisations are dimensionless (1.0 = at the limit).
 """
 
