@@ -609,18 +609,17 @@ def _recheck(
     samples of seq only serve as the neighbours of the others, and the one before them is not released
     either (its repair flag depends on the next sample's check)."""
     n = seq.t.size
-    if n == 0:
-        return _Recheck(verify.check_rows(Ts, np.zeros((2 * verify.REST_PAD, 3)), seq.feed, seq.velocity,
-                                          seq.acceleration, seq.jerk, limits), np.zeros(0, dtype=bool))
+    n_rows = n if last else max(0, n - verify.REST_PAD)
+    part = _rows(seq, 0, n_rows)
+    if n_rows == 0:  # (a piece shorter than a few samples: everything waits for the next one)
+        empty = verify.check_rows(Ts, np.zeros((2 * verify.REST_PAD, 3)), part.feed, part.velocity,
+                                  part.acceleration, part.jerk, limits)
+        return _Recheck(empty, np.zeros(0, dtype=bool))
     pre = before if before is not None else np.repeat(seq.position[:1], verify.REST_PAD, axis=0)
     if last:
-        n_rows = n
-        post = np.repeat(seq.position[-1:], verify.REST_PAD, axis=0)
-        padded = np.concatenate([pre, seq.position, post])
+        padded = np.concatenate([pre, seq.position, np.repeat(seq.position[-1:], verify.REST_PAD, axis=0)])
     else:
-        n_rows = max(0, n - verify.REST_PAD)
-        padded = np.concatenate([pre, seq.position[: n_rows + verify.REST_PAD]])
-    part = _rows(seq, 0, n_rows)
+        padded = np.concatenate([pre, seq.position])
     rows = verify.check_rows(Ts, padded, part.feed, part.velocity, part.acceleration, part.jerk,
                              replace(limits, feed_cap=_feed_cap(lim, toolpath, part.s)))
     flags = verify.spread(rows.over, left=left_over)

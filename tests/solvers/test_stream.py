@@ -33,6 +33,9 @@ ZIGZAG = "G21 G90\nG01 X0 Y0 F6000\n" + "".join(f"G01 X{10 * (i + 1)} Y{(i % 2) 
 #: Lines, arcs and a Z move with corners between them: 6 pieces.
 MIXED = ("G21 G90\nG00 X0 Y0\nG01 X40 F3000\nG02 X60 Y20 I0 J20\nG01 Y50\nG03 X40 Y70 I-20 J0\nG01 X10 Y60\n"
          "G01 X0 Y30 Z5\nG01 X0 Y0 Z0\n")
+#: Pieces of a few microns between 10 mm moves (at Ts = 20 ms: pieces of 0-2 samples, the first one too).
+TINY = ("G21 G90\nG01 X0 Y0 F6000\nG01 X0.004 Y0.003\nG01 X10 Y0.002\nG01 X10 Y10\nG01 X10.002 Y10.003\n"
+        "G01 X20 Y10\nG01 X20.001 Y10.002\n")
 COLUMNS = ("t", "s", "feed", "position", "velocity", "acceleration", "jerk", "control_signal", "servo_error")
 #: Summary entries that are wall-clock measurements.
 TIMINGS = {"compute_time", "lp_time", "nlp_time", "window_times", "nlp_window_times"}
@@ -128,16 +131,22 @@ def stream(tp: Toolpath, m: Machine, opt: P.Options, **kw: Any) -> tuple[list[P.
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
-@pytest.mark.parametrize(("name", "method"), [("zigzag", "lp"), ("mixed", "lp+nlp"), ("seed157", "lp")])
+@pytest.mark.parametrize(("name", "method"), [("zigzag", "lp"), ("mixed", "lp+nlp"), ("seed157", "lp"),
+                                             ("tiny", "lp"), ("tiny", "lp+nlp")])
 def test_stream_is_the_one_shot_schedule_bit_for_bit(name: str, method: str) -> None:
     """Blocks tile the samples in order; joined they are the one-shot pipeline's samples, bit for bit (seed 157:
-    three pieces, one of them repaired after the re-check); ``schedule`` (which consumes the stream) too."""
+    three pieces, one of them repaired after the re-check; tiny: pieces shorter than the held samples, the
+    first one of 1 sample); ``schedule`` (which consumes the stream) too."""
+    opt = P.Options(method=method)
     if name == "seed157":
         case = gen.case(157, "test")
         tp, m = case.toolpath(), case.lp_machine
+    elif name == "tiny":
+        tp, m = gcode.parse(TINY).toolpath(0.5), router()
+        opt = P.Options(method=method, sample_period=0.02)
+        assert len(tp.pieces) == 6
     else:
         tp, m = (zigzag() if name == "zigzag" else mixed()), router()
-    opt = P.Options(method=method)
     blocks, end = stream(tp, m, opt)
     assert len(blocks) > 1
     assert [b.k0 for b in blocks] == list(np.cumsum([0] + [b.n for b in blocks[:-1]]))
@@ -148,6 +157,8 @@ def test_stream_is_the_one_shot_schedule_bit_for_bit(name: str, method: str) -> 
         assert same_bits(getattr(joined, col), getattr(ref, col)), col
     assert end.summary["samples"] == ref.t.size and end.summary["sample_repairs"] == rounds
     assert rounds == (1 if name == "seed157" else 0)
+    if name == "tiny":  # the first piece's single sample waited for the second piece
+        assert blocks[0].piece == 1
     sch = P.schedule(tp, m, opt)
     for col in COLUMNS:
         assert same_bits(getattr(sch.samples, col), getattr(joined, col)), col
