@@ -71,11 +71,12 @@ def http_case(url: str, toolpath: dict[str, Any], method: str, repeats: int) -> 
         with httpx.stream("POST", url + "/v1/schedule", json=body, headers={"Accept": "application/x-ndjson"},
                           timeout=600) as r:
             r.raise_for_status()
-            for line in r.iter_lines():
+            for line in r.iter_lines():  # (rows are not parsed: the JSON answer's body is not either)
                 if t_first is None:
                     t_first = time.perf_counter() - t0
-                obj = json.loads(line)
-                if "event" in obj:
+                    assert "t" in json.loads(line)
+                if line.startswith('{"event"'):
+                    obj = json.loads(line)
                     assert obj["event"] == "summary", obj
                     summary = obj["summary"]
                     break
