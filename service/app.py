@@ -7,7 +7,7 @@ Settings come from FEEDSCHED_* environment variables (service/config.py).
 from __future__ import annotations
 
 from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+from contextlib import ExitStack, asynccontextmanager
 from dataclasses import asdict
 from typing import Annotated, Any, Literal
 
@@ -24,7 +24,7 @@ from service.config import Settings
 from service.convert import Budget, control_point_count, load_result
 from service.errors import ServiceError, install_handlers, not_found, too_large
 from service.executor import Executor, make_executor
-from service.http import FORMAT_NAMES, BodyLimit, negotiate, render
+from service.http import FORMAT_NAMES, NDJSON_PROTOCOL, BodyLimit, ndjson_stream, negotiate, render
 from service.jobs import JobManager
 from service.limits import Gate
 from service.plots import FORMATS as PLOT_MEDIA
@@ -80,7 +80,9 @@ def _problems(*codes: int, busy: str | None = None) -> dict[int | str, dict[str,
 SAMPLE_FORMATS: dict[str, Any] = {
     MEDIA_JSON: {},
     MEDIA_CSV: {"schema": {"type": "string"}, "example": "t,s,feed,x,y,z,...\n0.0,0.0,0.0,0.0,0.0,0.0,...\n"},
-    MEDIA_NDJSON: {"schema": {"type": "string"}, "example": '{"t":0.0,"s":0.0,...}\n'},
+    MEDIA_NDJSON: {"schema": {"type": "string", "description": NDJSON_PROTOCOL},
+                   "example": '{"t":0.0,"s":0.0,...}\n{"t":0.001,"s":0.0002,...}\n'
+                              '{"event":"summary","summary":{...},"diagnostics":{...}}\n'},
 }
 
 
@@ -220,7 +222,12 @@ def _routes(app: FastAPI) -> None:
                          "by Accept)"}, **_problems(400, 406, 413, 422, busy="schedule")},
     )
     async def post_schedule(body: ScheduleRequest, request: Request) -> Response:
-        """Schedule a toolpath now.  `Accept: text/csv` or `application/x-ndjson` for rows."""
+        """Schedule a toolpath now.  `Accept: text/csv` or `application/x-ndjson` for rows.
+
+        NDJSON streams: the rows of each piece of the path (rest to rest, between corners) leave as soon as
+        that piece is solved and re-checked, while later pieces are still being solved; the last line is
+        `{"event": "summary", ...}` on success or `{"event": "error", ...problem+json}` on a failure after
+        rows were sent.  A stream without the summary line is incomplete."""
         svc = _svc(request)
         media = negotiate(request.headers.get("accept"))
         n = control_point_count(body)
@@ -230,6 +237,8 @@ def _routes(app: FastAPI) -> None:
                             field="toolpath.segments", value=n,
                             rule=f"at most {svc.settings.sync_max_control_points} control points")
         _check_plots(body, media)
+        if media == MEDIA_NDJSON:
+            return await _stream_schedule(svc, body.model_dump(mode="json"), request.url.path)
         with svc.sync_gate.enter():  # 503 at once when FEEDSCHED_MAX_INFLIGHT schedules are in flight
             res = await svc.executor.run(body.model_dump(mode="json"), svc.sync_budget, svc.settings.sync_timeout)
             figs = None
@@ -253,7 +262,8 @@ def _routes(app: FastAPI) -> None:
         corner_tolerance_deg: Annotated[float, Query(ge=0, le=180)] = 0.5,
         corner_blend_mm: Annotated[float, Query(ge=0, le=100, description="mm; 0 stops at corners")] = 0.0,
     ) -> Response:
-        """Schedule a G-code program uploaded as `text/x-gcode` (machine preset and options as query parameters)."""
+        """Schedule a G-code program uploaded as `text/x-gcode` (machine preset and options as query parameters).
+        Answers as `POST /v1/schedule` (JSON, CSV, or NDJSON streamed piece by piece with a final summary line)."""
         ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
         if ctype not in (GCODE_MEDIA, "text/plain"):
             raise ServiceError(415, "unsupported-media-type", "Unsupported Media Type",
@@ -388,6 +398,26 @@ def _routes(app: FastAPI) -> None:
     @app.get("/", response_class=HTMLResponse, include_in_schema=False)
     async def index() -> HTMLResponse:
         return HTMLResponse(index_page(sorted(PRESETS)))
+
+
+async def _stream_schedule(svc: Service, req: dict[str, Any], instance: str) -> Response:
+    """``POST /v1/schedule`` as NDJSON rows while the solver works (NDJSON_PROTOCOL).
+
+    Admission as for the other formats: 503 at once when FEEDSCHED_MAX_INFLIGHT schedules are in flight; the
+    slot is held until the stream has ended (the solver process stopped).  A failure before the first row is an
+    ordinary problem+json response with its own status; after it, an error line ends the 200 stream."""
+    slot = ExitStack()
+    slot.enter_context(svc.sync_gate.enter())
+    events = svc.executor.stream(req, svc.sync_budget, svc.settings.sync_timeout)
+    try:
+        first = await anext(events)
+    except BaseException:
+        try:
+            await events.aclose()
+        finally:
+            slot.close()
+        raise
+    return ndjson_stream(first, events, slot.close, instance)
 
 
 async def _load(path: Any) -> Any:

@@ -23,7 +23,8 @@ from geometry import GeometryError, NurbsSegment, Toolpath, arcblend, gcode, pri
 from service.errors import too_large
 from service.schemas import ArcIn, LineIn, MachineIn, NurbsIn, PolylineIn, ScheduleRequest
 from solvers.machine import AXES, Axis, AxisLimits, DriveModel, Machine, derive_limits, preset
-from solvers.pipeline import Options, Schedule, plan_piece
+from solvers.pipeline import Options, Schedule, TimeSamples, plan_piece
+from solvers.timing import PieceProfile
 
 FloatArray = NDArray[np.float64]
 #: Rows per chunk when streaming CSV/NDJSON.
@@ -160,8 +161,8 @@ def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) 
         )
 
 
-def from_schedule(sch: Schedule) -> Result:
-    smp = sch.samples
+def columns_of(smp: TimeSamples) -> dict[str, FloatArray]:
+    """The sample columns in API order: t, s, feed, x, y, z, then v_*, a_*, j_* and (with a drive model) u_*, e_*."""
     cols: dict[str, FloatArray] = {"t": smp.t, "s": smp.s, "feed": smp.feed}
     for i, ax in enumerate(AXES):
         cols[ax] = smp.position[:, i]
@@ -169,22 +170,33 @@ def from_schedule(sch: Schedule) -> Result:
                       ("u", smp.control_signal), ("e", smp.servo_error)):
         if arr is not None:
             for i, ax in enumerate(AXES):
-                cols[f"{name}_{ax}"] = np.ascontiguousarray(arr[:, i], dtype=np.float64)
-    summary = {k: v for k, v in sch.summary.items() if k != "window_times"}
-    diagnostics = dict(sch.diagnostics)
-    if sch.summary.get("method") == "lp+nlp" and sch.profiles:
-        diagnostics["lp_feed"] = lp_feed(sch)
-    return Result(summary=_plain(summary), diagnostics=_plain(diagnostics),
-                  columns={k: np.ascontiguousarray(v, dtype=np.float64) for k, v in cols.items()})
+                cols[f"{name}_{ax}"] = arr[:, i]
+    return {k: np.ascontiguousarray(v, dtype=np.float64) for k, v in cols.items()}
 
 
-def lp_feed(sch: Schedule, points: int = LP_FEED_POINTS) -> dict[str, list[float]]:
+def meta_of(summary: dict[str, Any], diagnostics: dict[str, Any],
+            profiles: tuple[PieceProfile, ...]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Summary and diagnostics as the API serves them (plain JSON values; the LP feed of an lp+nlp schedule
+    in ``diagnostics.lp_feed``; no per-window timings)."""
+    summ = {k: v for k, v in summary.items() if k != "window_times"}
+    diag = dict(diagnostics)
+    if summary.get("method") == "lp+nlp" and profiles:
+        diag["lp_feed"] = lp_feed(profiles)
+    return _plain(summ), _plain(diag)
+
+
+def from_schedule(sch: Schedule) -> Result:
+    summary, diagnostics = meta_of(sch.summary, sch.diagnostics, sch.profiles)
+    return Result(summary=summary, diagnostics=diagnostics, columns=columns_of(sch.samples))
+
+
+def lp_feed(profiles: tuple[PieceProfile, ...], points: int = LP_FEED_POINTS) -> dict[str, list[float]]:
     """The LP stage's feed (before the NLP refined it) along the path: ``{"s": [...], "feed": [...]}``, mm and mm/s,
     about ``points`` samples (at least 16 per rest-to-rest piece, both ends included)."""
-    total = sum(p.length for p in sch.profiles) or 1.0
+    total = sum(p.length for p in profiles) or 1.0
     s_out: list[FloatArray] = []
     f_out: list[FloatArray] = []
-    for prof in sch.profiles:
+    for prof in profiles:
         s_loc = np.linspace(0.0, prof.length, max(16, round(points * prof.length / total)))
         lp_only = replace(prof, p=None, f_mask=None)
         s_out.append(s_loc + prof.s_start)
@@ -223,12 +235,30 @@ def iter_csv(res: Result) -> Iterator[bytes]:
         yield "".join(",".join(map(repr, row)) + "\n" for row in rows).encode()
 
 
-def iter_ndjson(res: Result) -> Iterator[bytes]:
-    """One JSON object per sample and line."""
-    n = _n(res)
+def ndjson_rows(columns: dict[str, FloatArray]) -> Iterator[bytes]:
+    """One JSON object per sample and line (``{"t": ..., "s": ..., ...}``), CHUNK_ROWS lines per chunk."""
+    names = list(columns)
+    n = len(columns[names[0]]) if names else 0
     for a in range(0, n, CHUNK_ROWS):
-        names, rows = _rows(res, a, a + CHUNK_ROWS)
+        rows = zip(*(columns[k][a : a + CHUNK_ROWS].tolist() for k in names), strict=True)
         yield b"".join(orjson.dumps(dict(zip(names, row, strict=True))) + b"\n" for row in rows)
+
+
+def ndjson_summary(summary: dict[str, Any], diagnostics: dict[str, Any]) -> bytes:
+    """The last line of a complete NDJSON result: ``{"event": "summary", "summary": ..., "diagnostics": ...}``."""
+    return orjson.dumps({"event": "summary", "summary": summary, "diagnostics": diagnostics},
+                        option=orjson.OPT_SERIALIZE_NUMPY) + b"\n"
+
+
+def ndjson_error(problem: dict[str, Any]) -> bytes:
+    """The last line of a failed NDJSON stream: ``{"event": "error", <problem+json fields>}``."""
+    return orjson.dumps({"event": "error", **problem}) + b"\n"
+
+
+def iter_ndjson(res: Result) -> Iterator[bytes]:
+    """One JSON object per sample and line, then the summary line (NDJSON_PROTOCOL)."""
+    yield from ndjson_rows(res.columns)
+    yield ndjson_summary(res.summary, res.diagnostics)
 
 
 # --- storage (never pickle: float64 arrays in .npz, metadata as JSON) ----------------

@@ -10,7 +10,12 @@
   after every LP window and cancels the future.
 
 ``run`` returns a ``Result`` or raises ``WorkFailed`` (problem dict),
-``WorkTimeout``, ``WorkerLost`` or ``asyncio.CancelledError``.
+``WorkTimeout``, ``WorkerLost`` or ``asyncio.CancelledError``.  ``stream``
+yields the result as NDJSON while it is computed: ("rows", bytes) chunks of
+sample lines, then ("end", {"summary", "diagnostics"}); it raises the same
+errors, also after some rows; closing it early (``aclose``) stops the work.
+The local executor streams piece by piece from the solver process; the Dask
+executor runs the whole task and then yields its rows (no streaming there).
 """
 
 from __future__ import annotations
@@ -21,13 +26,13 @@ import ctypes
 import multiprocessing as mp
 import secrets
 import threading
-from collections.abc import Callable
+from collections.abc import AsyncGenerator, Callable
 from concurrent.futures import ThreadPoolExecutor
 from multiprocessing.connection import Connection
 from typing import Any, Protocol
 
 from service import worker
-from service.convert import Budget, Result, result_from_bytes
+from service.convert import Budget, Result, ndjson_rows, result_from_bytes
 from service.errors import WorkerLost, WorkFailed, WorkTimeout
 
 Progress = Callable[[float], None]
@@ -43,7 +48,15 @@ class Executor(Protocol):
     async def run(self, request: dict[str, Any], budget: Budget, timeout: float,
                   progress: Progress | None = None, tag: str = "") -> Result: ...
 
+    def stream(self, request: dict[str, Any], budget: Budget, timeout: float,
+               tag: str = "") -> AsyncGenerator[tuple[str, Any], None]: ...
+
     def running_pids(self) -> dict[str, int]: ...
+
+
+#: Messages (progress, NDJSON chunks of CHUNK_ROWS lines) buffered per stream between the solver process and
+#: the response; when full, the pipe fills and the solver process waits in its send.
+STREAM_QUEUE = 8
 
 
 #: Completed solver tasks between two malloc_trim calls (LocalProcessExecutor).
@@ -68,17 +81,36 @@ def _malloc_trim() -> Callable[[], None]:
     return trim
 
 
-def _reader(conn: Connection, loop: asyncio.AbstractEventLoop, q: asyncio.Queue[tuple[str, Any]]) -> None:
-    """Thread: forward every message from the child to the loop; ("lost", None) on EOF."""
-    def post(msg: tuple[str, Any]) -> None:
-        with contextlib.suppress(RuntimeError):  # loop closed
-            loop.call_soon_threadsafe(q.put_nowait, msg)
+def _reader(conn: Connection, loop: asyncio.AbstractEventLoop, q: asyncio.Queue[tuple[str, Any]],
+            stop: threading.Event | None = None) -> None:
+    """Thread: forward every message from the child to the loop; ("lost", None) on EOF.
+
+    With ``stop`` the queue is bounded: the thread waits for room (so the child waits in its send) until
+    ``stop`` is set."""
+    def post(msg: tuple[str, Any]) -> bool:
+        if stop is None:
+            with contextlib.suppress(RuntimeError):  # loop closed
+                loop.call_soon_threadsafe(q.put_nowait, msg)
+            return True
+        try:
+            fut = asyncio.run_coroutine_threadsafe(q.put(msg), loop)
+        except RuntimeError:  # loop closed
+            return False
+        while True:
+            try:
+                fut.result(timeout=0.25)
+                return True
+            except TimeoutError:
+                if stop.is_set():
+                    fut.cancel()
+                    return False
+            except BaseException:  # cancelled with the loop
+                return False
 
     try:
         while True:
             msg = conn.recv()
-            post(msg)
-            if msg[0] != "progress":
+            if not post(msg) or msg[0] not in ("progress", "rows"):
                 return
     except (EOFError, OSError):
         post(("lost", None))
@@ -89,10 +121,12 @@ def _reader(conn: Connection, loop: asyncio.AbstractEventLoop, q: asyncio.Queue[
 class LocalProcessExecutor:
     name = "local"
 
-    def __init__(self, workers: int) -> None:
+    def __init__(self, workers: int, preload: tuple[str, ...] = ("service.worker",)) -> None:
+        """``preload``: modules the forkserver imports once, so every solver process starts with them (tests
+        add a module that instruments the solver)."""
         self.workers = max(1, workers)
         self._ctx = mp.get_context("forkserver")
-        self._ctx.set_forkserver_preload(["service.worker"])
+        self._ctx.set_forkserver_preload(list(preload))
         self._threads = ThreadPoolExecutor(max_workers=2 * self.workers + 2, thread_name_prefix="feedsched-pipe")
         self._sem: asyncio.Semaphore | None = None
         self._pids: dict[str, int] = {}
@@ -169,6 +203,61 @@ class LocalProcessExecutor:
             self._done += 1
             if self._done % TRIM_EVERY == 0:
                 self._threads.submit(self._trim)
+
+
+    async def stream(self, request: dict[str, Any], budget: Budget, timeout: float,
+                     tag: str = "") -> AsyncGenerator[tuple[str, Any], None]:
+        """NDJSON chunks as the solver process releases them (``worker.child_stream_main``).
+
+        ``timeout`` bounds the whole stream.  The process is killed when the stream ends early: an error,
+        the timeout, or ``aclose`` (the client went away).  Cleanup never awaits (it may run in a
+        cancelled task): the kill is immediate, the process is reaped by a pipe thread."""
+        if self._sem is None:
+            await self.start()
+        assert self._sem is not None
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout
+        tag = tag or secrets.token_hex(8)
+        async with self._sem:
+            recv_end, send_end = self._ctx.Pipe(duplex=False)
+            proc = self._ctx.Process(target=worker.child_stream_main, args=(send_end, request, budget),
+                                     daemon=True, name=f"feedsched-{tag}")
+            await loop.run_in_executor(self._threads, proc.start)
+            send_end.close()
+            with self._lock:
+                self._pids[tag] = proc.pid or -1
+            q: asyncio.Queue[tuple[str, Any]] = asyncio.Queue(maxsize=STREAM_QUEUE)
+            stop = threading.Event()
+            self._threads.submit(_reader, recv_end, loop, q, stop)
+            try:
+                while True:
+                    try:
+                        async with asyncio.timeout_at(deadline):
+                            kind, payload = await q.get()
+                    except TimeoutError:
+                        raise WorkTimeout(f"solver work took longer than {timeout:g} s") from None
+                    if kind == "progress":
+                        continue
+                    if kind == "rows":
+                        yield kind, payload
+                        continue
+                    if kind == "end":
+                        yield kind, payload
+                        return
+                    if kind == "error":
+                        raise WorkFailed(payload)
+                    await loop.run_in_executor(self._threads, proc.join, 5.0)
+                    raise WorkerLost(f"solver process {proc.pid} ended without a result (exit code {proc.exitcode})")
+            finally:
+                stop.set()
+                if proc.is_alive():
+                    proc.kill()
+                self._threads.submit(proc.join, 5.0)
+                with self._lock:
+                    self._pids.pop(tag, None)
+                self._done += 1
+                if self._done % TRIM_EVERY == 0:
+                    self._threads.submit(self._trim)
 
 
 def _noop() -> None:
@@ -252,6 +341,16 @@ class DaskExecutor:
         finally:
             self._progress.pop(key, None)
             self._pids.pop(self._tags.pop(key, ""), None)
+
+
+    async def stream(self, request: dict[str, Any], budget: Budget, timeout: float,
+                     tag: str = "") -> AsyncGenerator[tuple[str, Any], None]:
+        """The whole task on the cluster, then its rows (Dask returns a task's result at its end only)."""
+        res = await self.run(request, budget, timeout, tag=tag)
+        chunks = ndjson_rows(res.columns)
+        while (chunk := await asyncio.to_thread(next, chunks, None)) is not None:
+            yield "rows", chunk
+        yield "end", {"summary": res.summary, "diagnostics": res.diagnostics}
 
 
 def make_executor(workers: int, dask_scheduler: str | None) -> Executor:

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import AsyncGenerator, AsyncIterator, Callable
 from typing import Any
 
+import anyio
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 from starlette.responses import Response, StreamingResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.convert import Result, encode_json, iter_csv, iter_ndjson
-from service.errors import problem_from_exception, problem_response
+from service.convert import Result, encode_json, iter_csv, iter_ndjson, ndjson_error, ndjson_summary
+from service.errors import WorkerLost, problem_from_exception, problem_response
 from service.schemas import MEDIA_CSV, MEDIA_JSON, MEDIA_NDJSON
 
 FORMATS = (MEDIA_JSON, MEDIA_CSV, MEDIA_NDJSON)
@@ -54,6 +56,76 @@ async def render(res: Result, media: str, headers: dict[str, str] | None = None,
         return StreamingResponse(iter_ndjson(res), media_type=MEDIA_NDJSON, headers=hdrs)
     body = await run_in_threadpool(encode_json, res, plots)
     return Response(body, media_type=MEDIA_JSON, headers=hdrs)
+
+
+#: The NDJSON protocol, as the README and the OpenAPI description state it.
+NDJSON_PROTOCOL = (
+    "NDJSON (`Accept: application/x-ndjson`): one JSON object per sample and line (the sample columns as keys; "
+    "from POST /v1/schedule streamed: a piece's rows, rest to rest between corners, are sent once that piece has "
+    "been solved and its samples re-checked, while later pieces are solved), then exactly one final line with "
+    "an `event` key: `{\"event\": \"summary\", \"summary\": "
+    "{...}, \"diagnostics\": {...}}` when the schedule is complete, or `{\"event\": \"error\", \"type\": "
+    "..., \"title\": ..., \"status\": ..., \"detail\": ..., \"errors\": [...]}` (the problem+json fields) "
+    "when it failed after rows were sent (the HTTP status is 200 by then; a failure before the first row is an "
+    "ordinary problem+json response). The rows before an error line are not a schedule: discard them. A stream "
+    "that ends without the summary line (connection lost) is incomplete as well."
+)
+
+
+def ndjson_stream(first: tuple[str, Any], events: AsyncGenerator[tuple[str, Any], None], release: Callable[[], None],
+                  instance: str | None = None) -> StreamingResponse:
+    """A 200 NDJSON response from an executor stream whose ``first`` event has already arrived (so failures
+    before any row can still be answered with their own status).  Rows are forwarded as they come; the
+    stream ends with the summary line, or with an error line (NDJSON_PROTOCOL).  ``release`` (the admission
+    slot) runs once the work has stopped, however the response ends."""
+
+    async def body() -> AsyncIterator[bytes]:
+        try:
+            item = first
+            while True:
+                kind, payload = item
+                if kind != "rows":
+                    yield ndjson_summary(payload["summary"], payload["diagnostics"])
+                    return
+                yield payload
+                item = await anext(events)
+        except StopAsyncIteration:
+            yield ndjson_error({**problem_from_exception(WorkerLost("the solver stream ended without its "
+                                                                    "summary")), "instance": instance})
+        except Exception as exc:  # after rows: the failure goes in-band, as the last line
+            yield ndjson_error({**problem_from_exception(exc), "instance": instance})
+        finally:
+            try:
+                await events.aclose()
+            finally:
+                release()
+
+    return ClosingStream(body(), media_type=MEDIA_NDJSON)
+
+
+class ClosingStream(StreamingResponse):
+    """A streaming response that notices a client going away while it waits for the next chunk (not only
+    when a send fails), and always closes its body iterator (runs its ``finally``: stops the work)."""
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        try:
+            async with anyio.create_task_group() as tg:
+
+                async def watch() -> None:
+                    await self.listen_for_disconnect(receive)
+                    tg.cancel_scope.cancel()
+
+                tg.start_soon(watch)
+                try:
+                    await self.stream_response(send)
+                except OSError:  # the client went away while we were sending
+                    pass
+                tg.cancel_scope.cancel()
+        finally:
+            with anyio.CancelScope(shield=True):
+                aclose = getattr(self.body_iterator, "aclose", None)
+                if aclose is not None:
+                    await aclose()
 
 
 class BodyTooLarge(HTTPException):

@@ -11,14 +11,14 @@ import contextlib
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from multiprocessing.connection import Connection
 from typing import Any
 
-from service.convert import Budget, Result, check_budget, from_schedule, to_problem
+from service.convert import Budget, Result, check_budget, columns_of, from_schedule, meta_of, ndjson_rows, to_problem
 from service.errors import problem_from_exception
 from service.schemas import ScheduleRequest
-from solvers.pipeline import schedule
+from solvers.pipeline import SampleBlock, schedule, schedule_stream
 
 #: Seconds between checks that the parent process is still alive.
 PARENT_POLL_S = 0.25
@@ -33,6 +33,23 @@ def compute(request: dict[str, Any], budget: Budget, progress: Callable[[float],
     tp, machine, opts = to_problem(req)
     check_budget(tp, machine, opts, budget)
     return from_schedule(schedule(tp, machine, opts, progress=progress))
+
+
+def compute_ndjson(
+    request: dict[str, Any], budget: Budget, progress: Callable[[float], None] | None = None
+) -> Iterator[tuple[str, Any]]:
+    """The schedule as NDJSON while it is computed: ("rows", bytes) for each chunk of sample lines as soon as
+    its piece has passed the re-check (``solvers.pipeline.schedule_stream``), then ("end", {"summary",
+    "diagnostics"}), the same values as ``compute``'s.  Raises what ``compute`` raises."""
+    req = ScheduleRequest.model_validate(request)
+    tp, machine, opts = to_problem(req)
+    check_budget(tp, machine, opts, budget)
+    for item in schedule_stream(tp, machine, opts, progress=progress):
+        if isinstance(item, SampleBlock):
+            yield from (("rows", chunk) for chunk in ndjson_rows(columns_of(item.samples)))
+        else:
+            summary, diagnostics = meta_of(item.summary, item.diagnostics, item.profiles)
+            yield "end", {"summary": summary, "diagnostics": diagnostics}
 
 
 def run_captured(
@@ -82,6 +99,30 @@ def child_main(conn: Connection, request: dict[str, Any], budget: Budget) -> Non
         conn.close()
     except OSError:
         os._exit(4)
+
+
+def child_stream_main(conn: Connection, request: dict[str, Any], budget: Budget) -> None:
+    """Entry point of a forked solver process streaming NDJSON: ("rows", bytes) messages as pieces are
+    released, then ("end", summary and diagnostics) or ("error", problem dict) once (no progress messages:
+    the rows are the progress).  A send blocks while the service's bounded queue is full (a slow client
+    slows the solver down instead of filling the service's memory)."""
+    _watch_parent()
+    with contextlib.suppress(OSError, ValueError):
+        os.nice(int(os.environ.get("FEEDSCHED_WORKER_NICE", "5")))
+
+    def send(msg: tuple[str, Any]) -> None:
+        try:
+            conn.send(msg)
+        except OSError:  # the service stopped listening (client gone, cancelled, timed out): stop
+            os._exit(4)
+
+    try:
+        for msg in compute_ndjson(request, budget):
+            send(msg)
+    except BaseException as exc:  # every failure becomes a problem document
+        send(("error", problem_from_exception(exc)))
+    with contextlib.suppress(OSError):
+        conn.close()
 
 
 # --- Dask -----------------------------------------------------------------------

@@ -1,19 +1,36 @@
 """The scheduling pipeline: toolpath -> windows -> feed profile -> time samples.
 
     schedule(toolpath, machine, options) -> Schedule
+    schedule_stream(toolpath, machine, options) -> SampleBlock, ..., SampleBlock, ScheduleEnd
 
 1. Split the path at rest points (ends, corners) into pieces.
-2. Per piece: a uniform knot grid (spacing d), LP windows of ``lp_window``
-   knot intervals overlapping by ``lp_overlap`` (at least twice the stopping
-   distance, spec §6); each window inherits c_k0, c_k0+1 from the previous one.
-3. Time reconstruction at the sample period and axis kinematics at each sample.
+2. Per piece, in path order: a uniform knot grid (spacing d), LP windows of
+   ``lp_window`` knot intervals overlapping by ``lp_overlap`` (at least twice
+   the stopping distance, spec §6); each window inherits c_k0, c_k0+1 from the
+   previous one; then the NLP (method lp+nlp).
+3. Time reconstruction at t_k = k Ts on one grid over the whole path (a piece
+   starts where the previous one ended), axis kinematics at each sample, and
+   the sampled re-check (``solvers.verify``) with repairs of the piece.  The
+   samples of a piece are released (``SampleBlock``) once they have passed it,
+   so a consumer has the first rows while later pieces are being solved.
+
+Within one piece the rows leave when the piece is done: a path without corners
+streams nothing early.  A finer grain is possible and is not built: with method
+lp, the feed up to an LP window's committed knot (``joins``) no longer changes
+once that window is solved, so its samples could be computed then (t(s) on the
+committed intervals is final too); with lp+nlp the same holds per NLP chain
+(chains end at the LP joins).  But a sample repair re-solves the piece from the
+first window with a flagged point, which could lie in rows already sent, so
+repairs would have to be restricted to the windows not yet released (or the
+re-check done per window before release, with the held-sample rule at every
+window seam) - a change of the repair semantics, not only of the plumbing.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -176,6 +193,68 @@ class TimeSamples:
 @dataclass(frozen=True)
 class Schedule:
     samples: TimeSamples
+    summary: dict[str, Any]
+    diagnostics: dict[str, Any]
+    profiles: tuple[PieceProfile, ...] = field(repr=False, default=())
+
+
+def _rows(smp: TimeSamples, a: int, b: int) -> TimeSamples:
+    """Samples [a, b) (views)."""
+    return TimeSamples(
+        smp.t[a:b], smp.s[a:b], smp.feed[a:b], smp.position[a:b], smp.velocity[a:b], smp.acceleration[a:b],
+        smp.jerk[a:b],
+        None if smp.control_signal is None else smp.control_signal[a:b],
+        None if smp.servo_error is None else smp.servo_error[a:b],
+    )
+
+
+def concat_samples(parts: list[TimeSamples]) -> TimeSamples:
+    """Consecutive sample runs joined into one (u and e only if every part has them)."""
+    if not parts:
+        z, z3 = np.zeros(0), np.zeros((0, 3))
+        return TimeSamples(z, z, z, z3, z3, z3, z3)
+    if len(parts) == 1:
+        return parts[0]
+
+    def cat(name: str) -> FloatArray:
+        return np.concatenate([getattr(p, name) for p in parts])
+
+    drive = all(p.control_signal is not None and p.servo_error is not None for p in parts)
+    return TimeSamples(
+        cat("t"), cat("s"), cat("feed"), cat("position"), cat("velocity"), cat("acceleration"), cat("jerk"),
+        cat("control_signal") if drive else None, cat("servo_error") if drive else None,
+    )
+
+
+@dataclass(frozen=True)
+class SampleBlock:
+    """Consecutive samples of a schedule that have passed the sampled re-check (``solvers.verify``).
+
+    ``schedule_stream`` yields these in time order; they tile the samples 0 .. K-1 without gap or
+    overlap, and their rows are bit for bit ``schedule(...).samples[k0 : k0 + n]``.
+
+    Attributes:
+        k0: global index of the first sample (its time is k0 Ts, s).
+        piece: index of the piece whose solve released the block.  It holds that piece's samples
+            except its last ``HELD_SAMPLES`` (whose differences reach into the next piece), preceded by
+            the held samples of the pieces before it.
+        samples: the rows: t, s, feed, position, velocity, acceleration, jerk and, with a drive model,
+            control signal and servo error (``TimeSamples``; units there).
+    """
+
+    k0: int
+    piece: int
+    samples: TimeSamples
+
+    @property
+    def n(self) -> int:
+        return int(self.samples.t.size)
+
+
+@dataclass(frozen=True)
+class ScheduleEnd:
+    """The last item of ``schedule_stream``: what ``Schedule`` carries besides the samples."""
+
     summary: dict[str, Any]
     diagnostics: dict[str, Any]
     profiles: tuple[PieceProfile, ...] = field(repr=False, default=())
@@ -380,73 +459,63 @@ def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
     return np.asarray(ks[lo:hi] - piece.s_start, dtype=np.float64)
 
 
-def refine_pieces(
-    toolpath: Toolpath, machine: Machine, opt: Options, lp_profiles: list[PieceProfile], joins: list[list[int]],
-    lp_lim: LimitSet,
-    on_chain: Callable[[float], None] | None = None,
-    pieces: list[Piece] | None = None,
-    verify: dict[int, FloatArray] | None = None,
-    stats: NlpStats | None = None,
-) -> tuple[list[PieceProfile], NlpStats]:
-    """The NLP stage (spec §5-6): each piece's LP feed refined under the drive limits.
+def _refine_piece(
+    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lp_prof: PieceProfile, joins: list[int],
+    nlp_lim: NlpLimits, refiners: dict[tuple[int, int], NlpRefiner], stats: NlpStats,
+    on_chain: Callable[[float], None] | None = None, verify_s: FloatArray | None = None,
+) -> PieceProfile:
+    """The NLP stage (spec §5-6) on one piece: its LP feed refined under the drive limits.
 
-    ``on_chain(s_done)``, if given, is called after each NLP chain with the global arc length (mm) done.
-    ``pieces`` (default: all of the toolpath's) pair with ``lp_profiles`` and ``joins``; ``verify`` maps a
-    piece index to piece-local s verified besides the fine grid; ``stats`` accumulates over calls."""
-    lim = NlpLimits.from_machine(
-        machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lp_lim.a_step, opt.sample_period
+    ``refiners`` maps an NLP window shape to its refiner (compiled NLPs and the hand-over QP, whose
+    warm start carries over from one piece to the next: share it along the path in order);
+    ``on_chain(s_done)``, if given, is called after each NLP chain with the piece-local arc length
+    (mm) done; ``verify_s``: piece-local s verified besides the fine grid."""
+    plan = plan_piece(piece, machine, opt, lp_prof.n_int)
+    key = (plan.nlp_window, plan.nlp_overlap)
+    if key not in refiners:
+        refiners[key] = NlpRefiner(nlp_lim, opt.nlp_checkpoints_per_interval, *key, fault=opt.nlp_fault, stats=stats)
+    p, mask = refiners[key].refine(
+        _local(toolpath, piece), lp_prof.c, lp_prof.d, joins, _breaks(toolpath, piece), on_chain, opt.nlp_workers,
+        verify_s,
     )
-    out = []
-    refiners: dict[tuple[int, int], NlpRefiner] = {}
-    stats = stats if stats is not None else NlpStats()
-    verify = verify or {}
-    for piece, prof, jn in zip(pieces if pieces is not None else toolpath.pieces, lp_profiles, joins, strict=True):
-        plan = plan_piece(piece, machine, opt, prof.n_int)
-        key = (plan.nlp_window, plan.nlp_overlap)
-        if key not in refiners:
-            refiners[key] = NlpRefiner(lim, opt.nlp_checkpoints_per_interval, *key, fault=opt.nlp_fault, stats=stats)
-        chain_done: Callable[[float], None] | None = None
-        if on_chain is not None:
-
-            def chain_done(
-                s_loc: float, s0: float = piece.s_start, report: Callable[[float], None] = on_chain
-            ) -> None:
-                report(s0 + s_loc)
-
-        p, mask = refiners[key].refine(
-            _local(toolpath, piece), prof.c, prof.d, jn, _breaks(toolpath, piece), chain_done, opt.nlp_workers,
-            verify.get(piece.index),
-        )
-        out.append(replace(prof, p=p, f_mask=mask))
-    return out, stats
+    return replace(lp_prof, p=p, f_mask=mask)
 
 
-def _sample(
-    toolpath: Toolpath, profiles: list[PieceProfile], Ts: float, machine: Machine
-) -> tuple[TimeSamples, float]:
-    """Time reconstruction (spec §7) at t_k = k Ts over all pieces, and the motion time, s."""
-    timings = [PieceTiming.build(p) for p in profiles]
-    durations = np.array([tm.duration for tm in timings])
-    t_offsets = np.concatenate([[0.0], np.cumsum(durations)])
-    motion_time = float(t_offsets[-1])
-    n_samples = math.ceil(motion_time / Ts - 1e-9) + 1
-    t_all = np.arange(n_samples, dtype=np.float64) * Ts
+def first_sample_at(t: float, Ts: float) -> int:
+    """The first k >= 0 with k Ts >= t (k Ts as float64 products, like ``np.arange(K) * Ts``)."""
+    k = max(0, math.ceil(t / Ts))
+    while k > 0 and (k - 1) * Ts >= t:
+        k -= 1
+    while k * Ts < t:
+        k += 1
+    return k
+
+
+def _sample_piece(
+    toolpath: Toolpath, piece: Piece, prof: PieceProfile, tm: PieceTiming, t0: float, k_lo: int, k_hi: int,
+    Ts: float,
+) -> TimeSamples:
+    """Time reconstruction (spec §7) of one piece at t_k = k Ts, k_lo <= k < k_hi, the piece starting at t0 (s).
+
+    The global grid continues across pieces: t_k is k Ts, never re-based per piece.  Without u and e
+    (elementwise in v, a, j: added where the samples are released)."""
+    t = np.arange(k_lo, k_hi, dtype=np.float64) * Ts
     cols: dict[str, list[FloatArray]] = {k: [] for k in ("s", "feed", "pos", "v", "a", "j")}
-    for piece, prof, tm, t0 in zip(toolpath.pieces, profiles, timings, t_offsets[:-1], strict=True):
-        lo = np.searchsorted(t_all, t0, side="left")
-        hi = np.searchsorted(t_all, t0 + tm.duration, side="left") if piece.index < len(profiles) - 1 else n_samples
-        for a in range(lo, hi, SAMPLE_CHUNK):
-            b = min(hi, a + SAMPLE_CHUNK)
-            s_local = np.clip(tm.s_at(t_all[a:b] - t0), 0.0, piece.length)
-            g, f, v, acc, jerk = _kinematics(toolpath, piece, prof, s_local)
-            cols["s"].append(s_local + piece.s_start)
-            cols["feed"].append(f)
-            cols["pos"].append(g.position)
-            cols["v"].append(v)
-            cols["a"].append(acc)
-            cols["j"].append(jerk)
-    samples = TimeSamples(
-        t=t_all,
+    for a in range(0, t.size, SAMPLE_CHUNK):
+        b = min(t.size, a + SAMPLE_CHUNK)
+        s_local = np.clip(tm.s_at(t[a:b] - t0), 0.0, piece.length)
+        g, f, v, acc, jerk = _kinematics(toolpath, piece, prof, s_local)
+        cols["s"].append(s_local + piece.s_start)
+        cols["feed"].append(f)
+        cols["pos"].append(g.position)
+        cols["v"].append(v)
+        cols["a"].append(acc)
+        cols["j"].append(jerk)
+    if not t.size:
+        z3 = np.zeros((0, 3))
+        return TimeSamples(t, np.zeros(0), np.zeros(0), z3, z3, z3, z3)
+    return TimeSamples(
+        t=t,
         s=np.concatenate(cols["s"]),
         feed=np.concatenate(cols["feed"]),
         position=np.concatenate(cols["pos"]),
@@ -454,13 +523,6 @@ def _sample(
         acceleration=np.concatenate(cols["a"]),
         jerk=np.concatenate(cols["j"]),
     )
-    # the last sample sits exactly on the path end, at rest
-    samples.feed[-1] = 0.0
-    samples.velocity[-1] = 0.0
-    if machine.has_drives:
-        u, e = drive_outputs(machine.drive_arrays(), samples.velocity, samples.acceleration, samples.jerk)
-        samples = replace(samples, control_signal=u, servo_error=e)
-    return samples, motion_time
 
 
 def _promised(lim: LimitSet, opt: Options, machine: Machine) -> verify.Limits:
@@ -499,96 +561,251 @@ def schedule(
 ) -> Schedule:
     """Fastest feed along ``toolpath`` within ``machine``'s limits, sampled at Ts.
 
-    ``progress(fraction)``, if given, is called after each LP window with the fraction of the path length done.
+    ``progress(fraction)``, if given, is called after each LP window and NLP chain with the fraction of the
+    path length done.  All of ``schedule_stream`` at once.
+    """
+    parts: list[TimeSamples] = []
+    end: ScheduleEnd | None = None
+    for item in schedule_stream(toolpath, machine, options, progress):
+        if isinstance(item, SampleBlock):
+            parts.append(item.samples)
+        else:
+            end = item
+    assert end is not None
+    return Schedule(samples=concat_samples(parts), summary=end.summary, diagnostics=end.diagnostics,
+                    profiles=end.profiles)
+
+
+#: Samples at the end of a piece that ``schedule_stream`` holds back until the next piece is sampled: the
+#: differences at the last REST_PAD samples read the next piece's first samples, and the sample before
+#: them is sent back for repair when one of them is over a limit (``verify.spread``).
+HELD_SAMPLES = verify.REST_PAD + 1
+
+
+@dataclass(frozen=True)
+class _Recheck:
+    """The re-check of the samples not yet released (``seq``), as far as it is decided.
+
+    ``rows``: utilisations of seq[0 : n_rows] (the samples whose differences are known); ``repair``:
+    (n_released,) flags of seq[0 : n_released] after the neighbour spread (final: both neighbours known)."""
+
+    rows: verify.RowCheck
+    repair: NDArray[np.bool_]
+
+    @property
+    def n_released(self) -> int:
+        return int(self.repair.size)
+
+
+def _recheck(
+    seq: TimeSamples, before: FloatArray | None, left_over: bool, last: bool, limits: verify.Limits,
+    lim: LimitSet, toolpath: Toolpath, Ts: float,
+) -> _Recheck:
+    """Re-check the samples ``seq`` (every one not yet released, in time order) with their true neighbours.
+
+    ``before``: (REST_PAD, 3) positions of the samples released just before seq (None at the path start:
+    rest at seq's first position, as the one-shot check pads); ``left_over``: whether the sample just
+    before seq was over a limit.  Unless ``last`` (seq ends the path: rest after it), the last REST_PAD
+    samples of seq only serve as the neighbours of the others, and the one before them is not released
+    either (its repair flag depends on the next sample's check)."""
+    n = seq.t.size
+    n_rows = n if last else max(0, n - verify.REST_PAD)
+    part = _rows(seq, 0, n_rows)
+    if n_rows == 0:  # (a piece shorter than a few samples: everything waits for the next one)
+        empty = verify.check_rows(Ts, np.zeros((2 * verify.REST_PAD, 3)), part.feed, part.velocity,
+                                  part.acceleration, part.jerk, limits)
+        return _Recheck(empty, np.zeros(0, dtype=bool))
+    pre = before if before is not None else np.repeat(seq.position[:1], verify.REST_PAD, axis=0)
+    if last:
+        padded = np.concatenate([pre, seq.position, np.repeat(seq.position[-1:], verify.REST_PAD, axis=0)])
+    else:
+        padded = np.concatenate([pre, seq.position])
+    rows = verify.check_rows(Ts, padded, part.feed, part.velocity, part.acceleration, part.jerk,
+                             replace(limits, feed_cap=_feed_cap(lim, toolpath, part.s)))
+    flags = verify.spread(rows.over, left=left_over)
+    n_rel = n_rows if last else max(0, n_rows - 1)
+    return _Recheck(rows, flags[:n_rel])
+
+
+def _repair_points(seq: TimeSamples, repair: NDArray[np.bool_], last: bool) -> FloatArray:
+    """Global s to verify next to the flagged samples: each flagged sample and REPAIR_SUBDIV points in the
+    gap after it (a peak between two samples is what a difference over neighbouring samples sees); the
+    path's last sample has no gap after it."""
+    k_bad = np.flatnonzero(repair[:-1] if last else repair)
+    gap = seq.s[k_bad + 1] - seq.s[k_bad]
+    return np.asarray((seq.s[k_bad, None] + gap[:, None] * (np.arange(REPAIR_SUBDIV) / REPAIR_SUBDIV)).ravel(),
+                      dtype=np.float64)
+
+
+def schedule_stream(
+    toolpath: Toolpath, machine: Machine, options: Options | None = None,
+    progress: Callable[[float], None] | None = None,
+    events: Callable[[str, int], None] | None = None,
+) -> Iterator[SampleBlock | ScheduleEnd]:
+    """The schedule piece by piece: ``SampleBlock``s as soon as they are final, then one ``ScheduleEnd``.
+
+    Pieces (rest to rest, split at corners) are solved in path order: LP windows, the NLP with method
+    lp+nlp, time samples at t_k = k Ts on the global grid (piece i starts where piece i-1 ended), then
+    the sampled re-check (``solvers.verify``) of its samples against every promised limit, with the
+    finite differences reading the true neighbouring samples (the previous piece's last ones; the next
+    piece's first ones for this piece's last HELD_SAMPLES, which are therefore released with the next
+    piece).  Samples over a limit send their arc lengths back: the piece is solved again with them
+    verified (at most SAMPLE_REPAIR_ROUNDS times) and re-sampled; a sample still over 1 + FAIL_TOL is a
+    ``LimitViolationError`` raised before that piece's samples are released.  So a block is yielded only
+    once it has passed the re-check, and the concatenated blocks, summary and diagnostics are those
+    ``schedule`` returns (it consumes this generator).
+
+    Against checking the whole schedule at once (before streaming): the values checked are bit-identical
+    (same neighbours), and the flags too; what differs is only when a repair can happen.  A piece is
+    repaired before the next one is sampled, so (a) a flag at a piece's held last samples, known only with
+    the next piece, can repair only the next piece (points in the released piece are not verified again),
+    and (b) each piece gets its own SAMPLE_REPAIR_ROUNDS with its final start time, where the one-shot
+    rounds re-solved every flagged piece together and re-sampled the later ones with shifted times.
+    Without repairs, or with repairs inside one piece, the output is the one-shot one bit for bit.
+
+    Latency: the first block leaves once the first piece is solved and re-checked; a path without corners is
+    one piece, so its rows leave at the end.  ``progress(fraction)`` as for ``schedule``; ``events(name,
+    piece)``, if given, is called with "piece_start" and "piece_solved" (LP and NLP done, before sampling)
+    and "block" (just before a block with samples of that piece is yielded).
     """
     opt = options or Options()
     t_start = time.perf_counter()
+    paused = 0.0  # time spent suspended at a yield (the consumer's), not compute
     lim = LimitSet.from_machine(
         machine, opt.sample_period, opt.jerk, rest_from_drive=opt.method == "lp+nlp" and machine.has_drives
     )
     stats: dict[str, Any] = {
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
-        "unverified": 0, "window_times": [],
+        "unverified": 0, "window_times": [], "sample_repairs": 0,
     }
     if opt.method == "lp+nlp" and not machine.has_drives:
         raise InvalidMachineError(
             "method lp+nlp needs a drive model on every axis (use method lp otherwise)", field="machine.axes"
         )
-    # progress: the LP stage is LP_PROGRESS_SHARE of the work when the NLP follows
-    lp_share = LP_PROGRESS_SHARE if opt.method == "lp+nlp" else 1.0
+    nlp = opt.method == "lp+nlp"
+    nlp_stats = NlpStats() if nlp else None
+    nlp_lim = NlpLimits.from_machine(
+        machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lim.a_step, opt.sample_period
+    ) if nlp else None
+    # shared by the first NLP solve of every piece, in path order (repairs get their own)
+    refiners: dict[tuple[int, int], NlpRefiner] = {}
+    # progress: the LP stage is LP_PROGRESS_SHARE of each piece's work when the NLP follows
+    lp_share = LP_PROGRESS_SHARE if nlp else 1.0
+    total = toolpath.length
 
     def report(fraction: float) -> None:
         if progress is not None:
             progress(min(1.0, fraction))
 
-    solved: list[tuple[PieceProfile, list[int]]] = []
-    caches: list[dict[tuple[int, int, int], tuple[Any, FloatArray, WindowResult]]] = [{} for _ in toolpath.pieces]
-    for p in toolpath.pieces:
-        def on_window(s_done: float, s0: float = p.s_start) -> None:
-            report(lp_share * (s0 + s_done) / toolpath.length)
+    def emit(name: str, index: int) -> None:
+        if events is not None:
+            events(name, index)
 
-        solved.append(solve_piece(toolpath, p, machine, opt, lim, stats, on_window, None, caches[p.index]))
-        report(lp_share * p.s_end / toolpath.length)
-    lp_profiles = [sp for sp, _ in solved]
-    joins = [j for _, j in solved]
-    t_lp = time.perf_counter() - t_start
-    profiles = lp_profiles
-    nlp_stats: NlpStats | None = None
-    if opt.method == "lp+nlp":
-        nlp_stats = NlpStats()
-        profiles, _ = refine_pieces(
-            toolpath, machine, opt, lp_profiles, joins, lim,
-            lambda s_done: report(lp_share + (1.0 - lp_share) * s_done / toolpath.length), stats=nlp_stats,
-        )
-    t_nlp = time.perf_counter() - t_start - t_lp
-    # the sampled output re-checked (solvers.verify); pieces with samples over a limit are solved
-    # again with those points verified, then re-sampled
     limits = _promised(lim, opt, machine)
-    verify_s: dict[int, FloatArray] = {}
-    stats["sample_repairs"] = 0
+    drives = machine.drive_arrays() if machine.has_drives else None
+    Ts = opt.sample_period
     starts = np.array([p.s_start for p in toolpath.pieces])
-    for rnd in range(SAMPLE_REPAIR_ROUNDS + 1):
-        samples, motion_time = _sample(toolpath, profiles, opt.sample_period, machine)
-        chk = verify.check(
-            opt.sample_period, samples.position, samples.feed, samples.velocity, samples.acceleration, samples.jerk,
-            replace(limits, feed_cap=(feed_cap := _feed_cap(lim, toolpath, samples.s))),
-        )
-        if not chk.repair.any() or rnd == SAMPLE_REPAIR_ROUNDS:
-            break
-        stats["sample_repairs"] += 1
-        # the flagged samples and REPAIR_SUBDIV points in each gap after them (a peak between
-        # two samples is what a difference over neighbouring samples sees)
-        k_bad = np.flatnonzero(chk.repair[:-1])
-        gap = samples.s[k_bad + 1] - samples.s[k_bad]
-        s_bad = (samples.s[k_bad, None] + gap[:, None] * (np.arange(REPAIR_SUBDIV) / REPAIR_SUBDIV)).ravel()
-        owner = np.clip(np.searchsorted(starts, s_bad, side="right") - 1, 0, len(starts) - 1)
-        redo = [toolpath.pieces[i] for i in np.unique(owner)]
-        for piece in redo:
-            s_loc = s_bad[owner == piece.index] - piece.s_start
+    n_pieces = len(toolpath.pieces)
+    lp_profiles: list[PieceProfile] = []
+    profiles: list[PieceProfile] = []
+    t_lp = t_nlp = 0.0
+    t_end = 0.0  # where the next piece starts, s (the cumulative sum of the piece durations)
+    lp_motion_time = 0.0
+    k_next = 0  # first sample of the next piece
+    held: TimeSamples | None = None  # samples computed and not yet released
+    before: FloatArray | None = None  # positions of the last REST_PAD released samples
+    left_over = False  # whether the last released sample was over a limit
+    n_released = 0
+    peaks: dict[str, float] = {}
+    for piece in toolpath.pieces:
+        i = piece.index
+        last = i == n_pieces - 1
+        emit("piece_start", i)
+        cache: dict[tuple[int, int, int], tuple[Any, FloatArray, WindowResult]] = {}
+
+        def on_window(s_done: float, s0: float = piece.s_start) -> None:
+            report((s0 + lp_share * s_done) / total)
+
+        t0 = time.perf_counter()
+        lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache)
+        t_lp += time.perf_counter() - t0
+        prof = lp_prof
+        if nlp_stats is not None and nlp_lim is not None:
+            def on_chain(s_done: float, s0: float = piece.s_start, length: float = piece.length) -> None:
+                report((s0 + lp_share * length + (1.0 - lp_share) * s_done) / total)
+
+            t0 = time.perf_counter()
+            prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
+                                 on_chain)
+            t_nlp += time.perf_counter() - t0
+        emit("piece_solved", i)
+        verify_s = np.zeros(0)
+        rounds = 0
+        while True:
+            timing = PieceTiming.build(prof)
+            t_next = t_end + timing.duration
+            k_hi = max(k_next, math.ceil(t_next / Ts - 1e-9) + 1) if last else first_sample_at(t_next, Ts)
+            own = _sample_piece(toolpath, piece, prof, timing, t_end, k_next, k_hi, Ts)
+            seq = own if held is None else concat_samples([held, own])
+            if last and seq.t.size:
+                # the last sample sits exactly on the path end, at rest
+                feed, vel = seq.feed.copy(), seq.velocity.copy()
+                feed[-1] = 0.0
+                vel[-1] = 0.0
+                seq = replace(seq, feed=feed, velocity=vel)
+            chk = _recheck(seq, before, left_over, last, limits, lim, toolpath, Ts)
+            s_bad = _repair_points(seq, chk.repair, last)
+            owner = np.clip(np.searchsorted(starts, s_bad, side="right") - 1, 0, n_pieces - 1)
+            s_loc = s_bad[owner == i] - piece.s_start
             s_loc = s_loc[(s_loc > 0.0) & (s_loc < piece.length)]
-            verify_s[piece.index] = np.union1d(verify_s.get(piece.index, np.zeros(0)), s_loc)
-            prof, jn = solve_piece(
-                toolpath, piece, machine, opt, lim, stats, None, verify_s[piece.index], caches[piece.index]
+            if not s_loc.size or rounds == SAMPLE_REPAIR_ROUNDS:
+                break
+            # the piece again with those points verified (LP windows before the first changed one are
+            # reused), then re-sampled
+            rounds += 1
+            verify_s = np.union1d(verify_s, s_loc)
+            lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, None, verify_s, cache)
+            prof = lp_prof
+            if nlp_stats is not None and nlp_lim is not None:
+                prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, {}, nlp_stats,
+                                     None, verify_s)
+        stats["sample_repairs"] = max(stats["sample_repairs"], rounds)
+        n_rel = chk.n_released
+        kind, axis, util, k = chk.rows.worst(0, n_rel)
+        if util > 1.0 + verify.FAIL_TOL:
+            raise LimitViolationError(
+                f"the sampled {kind.replace('_', ' ')} reaches {util:.4f} x its limit after "
+                f"{rounds} repair rounds (limits are promised within {1.0 + verify.FAIL_TOL:g} x)",
+                field="toolpath", value={"s": float(seq.s[k]), "t": float(seq.t[k]), "utilisation": util},
+                axis=axis or None,
             )
-            lp_profiles[piece.index], joins[piece.index] = prof, jn
-            if nlp_stats is not None:
-                prof = refine_pieces(
-                    toolpath, machine, opt, [prof], [jn], lim, None, [piece], verify_s, nlp_stats
-                )[0][0]
-            profiles[piece.index] = prof
-    # (with method lp the LP profiles are the sampled ones: their motion time is known)
-    lp_motion_time = motion_time if nlp_stats is None else float(
-        sum(PieceTiming.build(p).duration for p in lp_profiles)
-    )
-    if chk.failed:
-        kind, axis, util, k = chk.worst
-        raise LimitViolationError(
-            f"the sampled {kind.replace('_', ' ')} reaches {util:.4f} x its limit after "
-            f"{stats['sample_repairs']} repair rounds (limits are promised within {1.0 + verify.FAIL_TOL:g} x)",
-            field="toolpath", value={"s": float(samples.s[k]), "t": float(samples.t[k]), "utilisation": util},
-            axis=axis or None,
-        )
-    compute_time = time.perf_counter() - t_start
+        lp_profiles.append(lp_prof)
+        profiles.append(prof)
+        if nlp:
+            lp_motion_time += PieceTiming.build(lp_prof).duration
+        t_end, k_next = t_next, k_hi
+        report(piece.s_end / total)
+        out = _rows(seq, 0, n_rel)
+        held = _rows(seq, n_rel, seq.t.size)
+        if not n_rel:
+            continue
+        if drives is not None:
+            u, e = drive_outputs(drives, out.velocity, out.acceleration, out.jerk)
+            out = replace(out, control_signal=u, servo_error=e)
+        pre = before if before is not None else np.repeat(out.position[:1], verify.REST_PAD, axis=0)
+        before = np.concatenate([pre, out.position])[-verify.REST_PAD:]
+        left_over = bool(chk.rows.over[n_rel - 1])
+        _merge_peaks(peaks, _peak_utilisation(out, lim, drives, _feed_cap(lim, toolpath, out.s)))
+        block = SampleBlock(n_released, i, out)
+        n_released += n_rel
+        emit("block", i)
+        t_y = time.perf_counter()
+        yield block
+        paused += time.perf_counter() - t_y
+    motion_time = t_end
+    if not nlp:
+        lp_motion_time = motion_time  # (with method lp the LP profiles are the sampled ones)
+    compute_time = time.perf_counter() - t_start - paused
     summary = {
         "method": opt.method,
         "solver": opt.solver,
@@ -603,16 +820,14 @@ def schedule(
         "cut_rounds": stats["cut_rounds"],
         "cut_points": stats["cut_points"],
         "unverified_points": stats["unverified"],
-        # rounds of re-solving pieces whose samples were over a limit (solvers.verify)
+        # most rounds of re-solving a piece whose samples were over a limit (solvers.verify)
         "sample_repairs": stats["sample_repairs"],
         "control_points": int(sum(p.c.size for p in profiles)),
         "checkpoints": int(sum(p.n_int * opt.checkpoints_per_interval + 1 for p in profiles)),
         "knot_spacing": float(min(p.d for p in profiles)),
-        "samples": int(samples.t.size),
+        "samples": n_released,
         "sample_period": opt.sample_period,
-        "peak_utilisation": _peak_utilisation(
-            samples, lim, machine.drive_arrays() if machine.has_drives else None, feed_cap
-        ),
+        "peak_utilisation": peaks,
         "window_times": stats["window_times"],
     }
     if nlp_stats is not None:
@@ -642,7 +857,14 @@ def schedule(
     }
     if nlp_stats is not None:
         diagnostics["nlp_fallbacks"] = nlp_stats.failures
-    return Schedule(samples=samples, summary=summary, diagnostics=diagnostics, profiles=tuple(profiles))
+    yield ScheduleEnd(summary=summary, diagnostics=diagnostics, profiles=tuple(profiles))
+
+
+def _merge_peaks(into: dict[str, float], part: dict[str, float]) -> None:
+    """Running maxima of ``_peak_utilisation`` over consecutive sample blocks (a max of maxima: the same
+    bits as over all samples at once, since dividing by a positive limit keeps the order)."""
+    for key, v in part.items():
+        into[key] = max(into[key], v) if key in into else v
 
 
 def _peak_utilisation(

@@ -22,6 +22,13 @@ verification grid of their piece and solves that piece again; whatever is
 still over ``1 + FAIL_TOL`` after the last round is a ``LimitViolationError``:
 the schedule is never returned over its limits silently.
 
+``check_rows`` checks any run of consecutive samples given the REST_PAD
+samples on either side, so the pipeline checks piece by piece with the values
+of a check of the whole schedule.  Rest padding at each piece's own ends would
+not do: the rest instant at a corner falls between two samples, so the
+neighbours across it are moving (on a zigzag, the differences at the samples
+next to a corner changed by up to 0.31 of a limit; ``tests/solvers/test_stream.py``).
+
 Units: mm, s; utilisations are dimensionless (1.0 = at the limit).
 """
 
@@ -69,6 +76,10 @@ class Limits:
     feed_cap: FloatArray | None
 
 
+#: What a re-check can find over its limit, in the order it is evaluated (``RowCheck.kind`` indexes it).
+KINDS = ("velocity", "acceleration", "jerk", "control_signal", "servo_error", "feed")
+
+
 @dataclass(frozen=True)
 class SampleCheck:
     """``repair``: (K,) samples whose s should be verified by the solvers;
@@ -82,6 +93,33 @@ class SampleCheck:
         return self.worst[2] > 1.0 + FAIL_TOL
 
 
+@dataclass(frozen=True)
+class RowCheck:
+    """The re-check of K consecutive samples, per sample (before the neighbour spread of ``spread``).
+
+    Attributes:
+        over: (K,) bool, some enforced quantity is over 1 + its repair tolerance at the sample.
+        util: (K,) the largest utilisation at the sample (analytic or by differences, any kind and axis).
+        kind: (K,) int8 index into ``KINDS`` of that largest utilisation, -1 where nothing is enforced.
+        axis: (K,) int8 axis (0 x, 1 y, 2 z) of it, -1 for the feed or nothing.
+    """
+
+    over: BoolArray
+    util: FloatArray
+    kind: NDArray[np.int8]
+    axis: NDArray[np.int8]
+
+    def worst(self, lo: int = 0, hi: int | None = None) -> tuple[str, str, float, int]:
+        """(kind, axis, utilisation, sample index) of the largest utilisation among samples [lo, hi)."""
+        hi = self.util.size if hi is None else hi
+        if hi <= lo:
+            return ("none", "", 0.0, lo)
+        k = lo + int(np.argmax(self.util[lo:hi]))
+        kind = int(self.kind[k])
+        axis = int(self.axis[k])
+        return (KINDS[kind] if kind >= 0 else "none", "xyz"[axis] if axis >= 0 else "", float(self.util[k]), k)
+
+
 def _fd(p: FloatArray, k: NDArray[np.int64], Ts: float) -> tuple[FloatArray, ...]:
     """At padded indices k of the rest-padded positions p: backward v, central a, the third
     difference over k-1..k+2, and for the drive model the central v and j (each (len(k), 3))."""
@@ -93,50 +131,85 @@ def _fd(p: FloatArray, k: NDArray[np.int64], Ts: float) -> tuple[FloatArray, ...
     return v, a, j, 0.5 * (v + v_next), 0.5 * (j + j_prev)
 
 
-def check(
-    Ts: float, position: FloatArray, feed: FloatArray, v: FloatArray, a: FloatArray, j: FloatArray, lim: Limits
-) -> SampleCheck:
-    """Utilisation of every enforced limit at every sample, analytic and by finite differences
-    (in chunks of CHUNK samples, so the transient arrays stay bounded on long paths)."""
-    K = position.shape[0]
-    p = np.concatenate([np.repeat(position[:1], REST_PAD, axis=0), position,
-                        np.repeat(position[-1:], REST_PAD, axis=0)])
-    repair = np.zeros(K, dtype=bool)
-    worst: tuple[str, str, float, int] = ("none", "", 0.0, 0)
+def rest_padded(position: FloatArray) -> FloatArray:
+    """(K + 2 REST_PAD, 3): the positions held at rest for REST_PAD samples before and after."""
+    return np.concatenate([np.repeat(position[:1], REST_PAD, axis=0), position,
+                           np.repeat(position[-1:], REST_PAD, axis=0)])
+
+
+def check_rows(
+    Ts: float, padded: FloatArray, feed: FloatArray, v: FloatArray, a: FloatArray, j: FloatArray, lim: Limits
+) -> RowCheck:
+    """Utilisation of every enforced limit at each of K samples, analytic and by finite differences.
+
+    ``padded``: (K + 2 REST_PAD, 3) positions, mm: the K samples with the REST_PAD samples before and
+    after them, which the differences read (the neighbouring samples of the schedule, or the rest
+    position at a path end: ``rest_padded``).  ``feed`` (K,), ``v``, ``a``, ``j`` (K, 3) are the
+    emitted values at the K samples; ``lim.feed_cap`` (K,) if given.  Every value at sample k depends
+    only on sample k and ``padded``[k .. k + 2 REST_PAD], so checking a schedule in consecutive parts
+    (each with its true neighbours as context) gives the same bits as checking it whole.  Runs in
+    chunks of CHUNK samples (bounded transient arrays)."""
+    K = feed.shape[0]
+    if padded.shape[0] != K + 2 * REST_PAD:
+        raise ValueError(f"padded has {padded.shape[0]} rows, expected K + {2 * REST_PAD} = {K + 2 * REST_PAD}")
+    over = np.zeros(K, dtype=bool)
+    util = np.zeros(K)
+    kind = np.full(K, -1, dtype=np.int8)
+    axis = np.full(K, -1, dtype=np.int8)
     for c0 in range(0, K, CHUNK):
         c1 = min(K, c0 + CHUNK)
         sl = slice(c0, c1)
-        v_fd, a_fd, j_fd, v_c, j_c = _fd(p, np.arange(c0, c1) + REST_PAD, Ts)
-        per: list[tuple[str, FloatArray, FloatArray, FloatArray]] = []  # kind, analytic, fd, limit
+        v_fd, a_fd, j_fd, v_c, j_c = _fd(padded, np.arange(c0, c1) + REST_PAD, Ts)
+        per: list[tuple[int, FloatArray, FloatArray, FloatArray]] = []  # kind, analytic, fd, limit
         if lim.vmax is not None:
-            per.append(("velocity", v[sl], v_fd, lim.vmax))
+            per.append((0, v[sl], v_fd, lim.vmax))
         if lim.amax is not None:
-            per.append(("acceleration", a[sl], a_fd, lim.amax))
+            per.append((1, a[sl], a_fd, lim.amax))
         if lim.jmax is not None:
-            per.append(("jerk", j[sl], j_fd, lim.jmax))
+            per.append((2, j[sl], j_fd, lim.jmax))
         if lim.drive is not None:
             dr = lim.drive
             u_an, e_an = drive_outputs(dr, v[sl], a[sl], j[sl])
             u_fd, e_fd = drive_outputs(dr, v_c, a_fd, j_c)
-            per.append(("control_signal", u_an, u_fd, dr["umax"]))
-            per.append(("servo_error", e_an, e_fd, dr["emax"]))
-        for kind, an, fd, limit in per:
+            per.append((3, u_an, u_fd, dr["umax"]))
+            per.append((4, e_an, e_fd, dr["emax"]))
+        for kd, an, fd, limit in per:
             ua = np.abs(an) / limit
             uf = np.abs(fd) / limit
-            repair[sl] |= np.any(ua > 1.0 + REPAIR_TOL, axis=1) | np.any(uf > 1.0 + FD_REPAIR_TOL, axis=1)
+            over[sl] |= np.any(ua > 1.0 + REPAIR_TOL, axis=1) | np.any(uf > 1.0 + FD_REPAIR_TOL, axis=1)
             both = np.maximum(ua, uf)
-            k2, i2 = np.unravel_index(int(np.argmax(both)), both.shape)
-            if both[k2, i2] > worst[2]:
-                worst = (kind, "xyz"[int(i2)], float(both[k2, i2]), c0 + int(k2))
+            i2 = np.argmax(both, axis=1)
+            m = both[np.arange(c1 - c0), i2]
+            up = m > util[sl]
+            util[sl] = np.where(up, m, util[sl])
+            kind[sl] = np.where(up, kd, kind[sl])
+            axis[sl] = np.where(up, i2, axis[sl])
     if lim.feed_cap is not None:
         with np.errstate(divide="ignore", invalid="ignore"):
             uf_ = np.where(np.isfinite(lim.feed_cap), feed / lim.feed_cap, 0.0)
-        repair |= uf_ > 1.0 + REPAIR_TOL
-        k = int(np.argmax(uf_))
-        if uf_[k] > worst[2]:
-            worst = ("feed", "", float(uf_[k]), k)
-    # a difference spans neighbouring samples: send those back too
-    out = repair.copy()
-    out[1:] |= repair[:-1]
-    out[:-1] |= repair[1:]
-    return SampleCheck(out, worst)
+        over |= uf_ > 1.0 + REPAIR_TOL
+        up = uf_ > util
+        util = np.where(up, uf_, util)
+        kind[up] = KINDS.index("feed")
+        axis[up] = -1
+    return RowCheck(over, util, kind, axis)
+
+
+def spread(over: BoolArray, left: bool = False, right: bool = False) -> BoolArray:
+    """Samples to send back: those over a limit and their neighbours (a difference spans
+    neighbouring samples).  ``left`` / ``right``: whether the samples just outside are over."""
+    out = over.copy()
+    out[1:] |= over[:-1]
+    out[:-1] |= over[1:]
+    if out.size:
+        out[0] |= left
+        out[-1] |= right
+    return out
+
+
+def check(
+    Ts: float, position: FloatArray, feed: FloatArray, v: FloatArray, a: FloatArray, j: FloatArray, lim: Limits
+) -> SampleCheck:
+    """The whole schedule at once, held at rest before the first and after the last sample."""
+    rows = check_rows(Ts, rest_padded(position), feed, v, a, j, lim)
+    return SampleCheck(spread(rows.over), rows.worst())

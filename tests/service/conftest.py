@@ -71,9 +71,10 @@ def free_port() -> int:
 
 
 class Server:
-    """uvicorn serving service.app:app in a subprocess on 127.0.0.1."""
+    """uvicorn serving ``app`` (default service.app:app) in a subprocess on 127.0.0.1."""
 
-    def __init__(self, data_dir: Path, **env: str) -> None:
+    def __init__(self, data_dir: Path, app: str = "service.app:app", **env: str) -> None:
+        self.app = app
         self.data_dir = data_dir
         self.env = {**os.environ, "FEEDSCHED_DATA_DIR": str(data_dir), **env}
         self.port = free_port()
@@ -86,7 +87,7 @@ class Server:
         self.url = f"http://127.0.0.1:{self.port}"
         with open(self.log, "ab") as log:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "uvicorn", "service.app:app", "--host", "127.0.0.1", "--port", str(self.port)],
+                [sys.executable, "-m", "uvicorn", self.app, "--host", "127.0.0.1", "--port", str(self.port)],
                 cwd=ROOT, env=self.env, stdout=log, stderr=subprocess.STDOUT,
             )
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 from collections.abc import Iterator
@@ -49,6 +50,13 @@ def test_schedule_and_job_through_dask(dask_client: TestClient, cluster: LocalCl
     bad = {"toolpath": {"segments": [{"degree": 1, "knots": [0, 0, 1, 1], "control_points": [[0, 0], [0, 0]]}]}}
     r = dask_client.post("/v1/schedule", json=bad)
     assert r.status_code == 422 and r.json()["errors"][0]["field"].startswith("toolpath.segments[0]")
+    # NDJSON through Dask: the rows after the whole task, same protocol (summary line last)
+    *rows, end = [json.loads(x) for x in dask_client.post(
+        "/v1/schedule", json=EXAMPLE, headers={"Accept": "application/x-ndjson"}).text.splitlines()]
+    assert [row["x"] for row in rows] == sync.json()["samples"]["x"]
+    assert end["event"] == "summary" and end["summary"]["samples"] == len(rows)
+    r = dask_client.post("/v1/schedule", json=bad, headers={"Accept": "application/x-ndjson"})
+    assert r.status_code == 422 and r.headers["content-type"] == "application/problem+json"
 
 
 def test_worker_killed_mid_job_is_rerun(dask_client: TestClient, cluster: LocalCluster) -> None:

@@ -67,9 +67,11 @@ def test_csv_and_ndjson_are_bit_identical_to_json(client: TestClient) -> None:
     r = client.post("/v1/schedule", json=EXAMPLE, headers={"Accept": "application/x-ndjson"})
     assert r.status_code == 200 and r.headers["content-type"].startswith("application/x-ndjson")
     lines = [json.loads(line) for line in r.text.splitlines()]
-    assert len(lines) == len(js["t"])
+    *rows, end = lines  # the rows, then the summary line
+    assert len(rows) == len(js["t"]) and all("event" not in row for row in rows)
     for name in COLUMNS:
-        assert [bits(row[name]) for row in lines] == [bits(v) for v in js[name]], name
+        assert [bits(row[name]) for row in rows] == [bits(v) for v in js[name]], name
+    assert end["event"] == "summary" and end["summary"]["samples"] == len(rows)
 
 
 def test_accept_negotiation(client: TestClient) -> None:

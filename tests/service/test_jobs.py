@@ -44,7 +44,10 @@ def test_submit_poll_result_all_formats(client: TestClient) -> None:
     assert csv_text.splitlines()[1:] == client.post("/v1/schedule", json=EXAMPLE,
                                                    headers={"Accept": "text/csv"}).text.splitlines()[1:]
     nd = client.get(loc + "/result", headers={"Accept": "application/x-ndjson"}).text.splitlines()
-    assert json.loads(nd[-1])["t"] == sync["samples"]["t"][-1]
+    # rows, then the summary line (the NDJSON protocol: a result without it is incomplete)
+    assert json.loads(nd[-2])["t"] == sync["samples"]["t"][-1]
+    end = json.loads(nd[-1])
+    assert end["event"] == "summary" and end["summary"] == done["summary"] and "corners" in end["diagnostics"]
 
 
 def test_failed_job_keeps_the_problem(client: TestClient) -> None:

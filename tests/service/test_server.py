@@ -34,14 +34,20 @@ def test_schedule_json_csv_ndjson(server: Server) -> None:
     assert rows[0] == COLUMNS
     assert [bits(float(row[1])) for row in rows[1:]] == [bits(v) for v in cols["s"]]
     n = 0
+    end = None
     with httpx.stream("POST", u, json=EXAMPLE, headers={"Accept": "application/x-ndjson"}, timeout=WAIT_S) as s:
         assert s.headers["content-type"].startswith("application/x-ndjson")
         assert s.headers.get("transfer-encoding") == "chunked"  # streamed, not buffered with a length
         for line in s.iter_lines():
             row = json.loads(line)
+            assert end is None, "nothing after the summary line"
+            if "event" in row:
+                end = row
+                continue
             assert bits(row["x"]) == bits(cols["x"][n])
             n += 1
     assert n == len(cols["t"])
+    assert end is not None and end["event"] == "summary" and end["summary"]["samples"] == n
 
 
 def test_errors_are_problem_json(server: Server) -> None:
@@ -88,4 +94,6 @@ def test_restart_mid_job_loses_nothing(server_factory: Callable[..., Server]) ->
     done = poll_done(srv.url + loc)
     assert done["status"] == "succeeded" and done["attempts"] == 2, done
     res = httpx.get(srv.url + loc + "/result", headers={"Accept": "application/x-ndjson"}, timeout=WAIT_S)
-    assert res.status_code == 200 and json.loads(res.text.splitlines()[-1])["s"] == 8_000.0
+    lines = res.text.splitlines()
+    assert res.status_code == 200 and json.loads(lines[-2])["s"] == 8_000.0
+    assert json.loads(lines[-1])["event"] == "summary"
