@@ -80,7 +80,7 @@ from geometry.clothoid import (
     MIN_CLOTHOID_LENGTH_MM,
     ClothoidSegment,
     blend_factors,
-    blend_polyline,
+    blend_polyline_legs,
 )
 from geometry.errors import GeometryError
 from geometry.nurbs import FloatArray, NurbsSegment
@@ -204,11 +204,18 @@ class ArcCornerBlend:
 
 @dataclass(frozen=True)
 class BlendedPath:
-    """``blend_path``'s output: the segments, the input segment each came from, the corners left as they were."""
+    """``blend_path``'s output: the segments, the input segments each came from, the corners left as they were.
+
+    ``origin[k]`` is the input segment output segment k lies on; for a corner blend's spiral, the
+    one before the corner, and ``after[k]`` the one after it (``after[k] == origin[k]`` elsewhere).
+    A caller that gives the inputs different properties (e.g. feed limits) gives a blend both
+    sides' (e.g. the lower feed).
+    """
 
     segments: list[Segment]
     origin: list[int]
     unblended: list[Unblended]
+    after: list[int]
 
 
 # --------------------------------------------------------------------------- recognising lines and arcs
@@ -546,9 +553,14 @@ def blend_path(
     corners by ``blend_polyline``, corners with an arc by ``solve_corner``; arcs are trimmed
     and stay exact (``arc_nurbs``). Other segments, and junctions between runs, are kept as they are.
 
+    A run may join segments that differ in other ways (e.g. a G-code program passes the rapid flag
+    as the key, so cutting moves at different F form one run): ``BlendedPath.origin`` and
+    ``after`` tell which input segments each output segment lies between.
+
     Returns:
         The segments, the index of the input segment each came from (a blend: the one before its
-        corner) and the corners with an arc that could not be blended, with the reason.
+        corner; ``after``: the one after it) and the corners with an arc that could not be
+        blended, with the reason.
     """
     if not (isinstance(tolerance_mm, (int, float)) and math.isfinite(tolerance_mm) and tolerance_mm >= 0.0):
         raise GeometryError("corner_tolerance_mm", tolerance_mm, "must be a finite number >= 0")
@@ -574,13 +586,14 @@ def blend_path(
     joined &= tolerance_mm > 0.0
     if keys is not None:
         joined &= np.array([keys[i + 1] == keys[i] for i in range(n - 1)], dtype=bool)
-    out = BlendedPath([], [], [])
+    out = BlendedPath([], [], [], [])
     i = 0
     breaks = [*np.flatnonzero(~joined).tolist(), n - 1]
     for j in breaks:  # a run is i .. j
         if j == i:
             out.segments.append(segments[i])
             out.origin.append(i)
+            out.after.append(i)
         else:
             _blend_run(segments, plain, prims, i, j, tolerance_mm, nm, out)
         i = j + 1
@@ -594,9 +607,10 @@ def _blend_run(
     """Blend segments i0 .. i1 (all lines / arcs, joined; ``plain``: a two-point line) into ``out``."""
     if all(plain[i0 : i1 + 1]):  # the closed-form, vectorised line chain
         cps = [s.control_points for s in segments[i0 : i1 + 1] if isinstance(s, NurbsSegment)]
-        run = blend_polyline(np.array([cps[0][0]] + [c[-1] for c in cps]), tol, name=names[i0])
+        run, before, after = blend_polyline_legs(np.array([cps[0][0]] + [c[-1] for c in cps]), tol, name=names[i0])
         out.segments.extend(run)
-        out.origin.extend([i0] * len(run))  # one key for the whole run
+        out.origin.extend((before + i0).tolist())  # leg q of the polyline is input segment i0 + q
+        out.after.extend((after + i0).tolist())
         return
     pieces: list[Primitive] = []
     origin: list[int] = []
@@ -640,13 +654,16 @@ def _blend_run(
             P = np.array(pts)
             segs: list[Segment]
             if k > j:
-                segs = blend_polyline(P, tol, name=names[origin[j]])
+                segs, before, after = blend_polyline_legs(P, tol, name=names[origin[j]])
+                out.origin.extend(origin[j + q] for q in before.tolist())  # leg q is piece j + q
+                out.after.extend(origin[j + q] for q in after.tolist())
             elif float(np.linalg.norm(P[1] - P[0])) > primitives.MIN_LENGTH_MM:
                 segs = [primitives.line(P[0], P[1], name=names[origin[j]])]
+                out.origin.append(origin[j])
+                out.after.append(origin[j])
             else:
                 segs = []
             out.segments.extend(segs)
-            out.origin.extend([origin[j]] * len(segs))
             j = k
         else:
             t0 = trim_start[j] / pr.radius
@@ -656,7 +673,9 @@ def _blend_run(
                 end = pr.end if trim_end[j] == 0.0 else pr.point(t1)
                 out.segments.append(arc_nurbs(pr, t0, t1, start, end, names[origin[j]]))
                 out.origin.append(origin[j])
+                out.after.append(origin[j])
         if j in corners:
             out.segments.extend(corners[j].spirals)
             out.origin.extend([origin[j]] * 2)
+            out.after.extend([origin[j + 1]] * 2)
         j += 1

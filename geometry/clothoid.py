@@ -56,12 +56,15 @@ from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.special import fresnel
 
 from geometry import primitives
 from geometry.errors import GeometryError
 from geometry.nurbs import FloatArray
 from geometry.segment import Segment
+
+IntArray = NDArray[np.int64]
 
 #: Corners turning less than this (rad) are left as they are (no blend needed).
 MIN_BLEND_ANGLE_RAD: Final = 1e-9
@@ -231,6 +234,14 @@ def blend_corner(
 
 
 def blend_polyline(points: object, tolerance_mm: float, name: str = "polyline") -> list[Segment]:
+    """Lines through ``points`` with every corner replaced by a G2 clothoid pair within ``tolerance_mm``
+    (``blend_polyline_legs`` without the legs)."""
+    return blend_polyline_legs(points, tolerance_mm, name)[0]
+
+
+def blend_polyline_legs(
+    points: object, tolerance_mm: float, name: str = "polyline"
+) -> tuple[list[Segment], IntArray, IntArray]:
     """Lines through ``points`` with every corner replaced by a G2 clothoid pair within ``tolerance_mm``.
 
     Each blend keeps its set-back within half of each adjacent leg (the whole leg at the
@@ -243,7 +254,10 @@ def blend_polyline(points: object, tolerance_mm: float, name: str = "polyline") 
     its segment objects.
 
     Returns:
-        Segments in path order: lines (degree-1 NurbsSegment) and ClothoidSegments.
+        Segments in path order: lines (degree-1 NurbsSegment) and ClothoidSegments; and for each
+        segment the legs it lies on (int arrays ``before``, ``after``; leg j runs from points[j] to
+        points[j + 1]): a line is part of one leg (before = after = j), a corner's two spirals sit
+        between legs j and j + 1 (before = j, after = j + 1).
     """
     if not (isinstance(tolerance_mm, (int, float)) and math.isfinite(tolerance_mm) and tolerance_mm >= 0.0):
         raise GeometryError("corner_tolerance_mm", tolerance_mm, "must be a finite number >= 0")
@@ -279,22 +293,27 @@ def blend_polyline(points: object, tolerance_mm: float, name: str = "polyline") 
     line_name: list[str] = []
     # placeholders: a line's index into line_a, or a corner's (j, first or second spiral)
     order: list[tuple[int, int]] = []
+    leg_of: list[int] = []  # the leg before each entry of order (a corner's spirals: the incoming one)
     for jj in range(m - 1):
         i = jj + 1
         if ok[jj]:
             if np.linalg.norm(A[jj] - prev[jj]) > primitives.MIN_LENGTH_MM:
                 order.append((0, len(line_a)))
+                leg_of.append(jj)
                 line_a.append(prev[jj])
                 line_b.append(A[jj])
                 line_name.append(f"{name}.line[{i - 1}]")
             order.extend(((1, jj), (2, jj)))
+            leg_of.extend((jj, jj))
         else:
             order.append((0, len(line_a)))
+            leg_of.append(jj)
             line_a.append(prev[jj])
             line_b.append(V[jj])
             line_name.append(f"{name}.line[{i - 1}]")
     if np.linalg.norm(P[-1] - prev[-1]) > primitives.MIN_LENGTH_MM:
         order.append((0, len(line_a)))
+        leg_of.append(m - 1)
         line_a.append(prev[-1])
         line_b.append(P[-1])
         line_name.append(f"{name}.line[{m - 1}]")
@@ -310,7 +329,9 @@ def blend_polyline(points: object, tolerance_mm: float, name: str = "polyline") 
         else:
             out.append(ClothoidSegment(M[idx], e1, e2, 0.5 * float(th[idx]), float(th[idx] / L[idx]),
                                        -float(c[idx]), float(L[idx]), f"{name}.corner[{idx + 1}].out"))
-    return out
+    before = np.array(leg_of, dtype=np.int64)
+    after = before + np.array([kind != 0 for kind, _ in order], dtype=np.int64)
+    return out, before, after
 
 
 def _normal(t_in: FloatArray, t_out: FloatArray, cos_t: FloatArray) -> FloatArray:

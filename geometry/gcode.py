@@ -210,20 +210,36 @@ class Program:
     def toolpath(self, corner_tol_deg: float = CORNER_TOL_DEG, blend_mm: float = 0.0) -> Toolpath:
         """The segments as a Toolpath (corners between them found as usual), each with its programmed feed.
 
-        With ``blend_mm`` > 0, every run of consecutive lines and arcs with the same feed (G01 /
-        G02 / G03 at one F, or G00) has its corners replaced by G2 clothoid pairs within
-        ``blend_mm`` of the corner (``geometry.arcblend.blend_path``: line-line corners by
-        ``geometry.clothoid.blend_polyline``, corners with an arc by a clothoid pair fitted on the
-        line and the circle), so the schedule runs through them instead of stopping. Corners
-        between runs (a change of F, rapid to cut), at splines, out of the arc's plane, or where
-        no blend fits stay rest points; the last two are listed in ``Toolpath.unblended``.
+        With ``blend_mm`` > 0, every run of consecutive cutting lines and arcs (G01 / G02 / G03, at
+        any F), and every run of consecutive rapids (G00), has its corners replaced by G2 clothoid
+        pairs within ``blend_mm`` of the corner (``geometry.arcblend.blend_path``: line-line
+        corners by ``geometry.clothoid.blend_polyline``, corners with an arc by a clothoid pair
+        fitted on the line and the circle), so the schedule runs through them instead of
+        stopping. A blend between two moves of different F gets the lower of the two feeds as its
+        feed limit (it lies in the tolerance zone of both moves); every other segment keeps its
+        own F. Rapid-to-cut and cut-to-rapid transitions stay rest points: the rapid ends exactly
+        at its programmed point, at rest, before cutting starts (and cutting ends there before a
+        rapid leaves). Corners at splines, out of the arc's plane, or where no blend fits stay
+        rest points too; the last two are listed in ``Toolpath.unblended``.
         """
         if blend_mm == 0.0:
             return Toolpath(list(self.segments), corner_tol_deg=corner_tol_deg, feed_limits=list(self.feed))
-        bp = arcblend.blend_path(self.segments, blend_mm, keys=list(zip(self.feed, self.rapid, strict=True)),
+        # runs are split only where a rapid meets a cutting move (the F of a cutting move may change)
+        bp = arcblend.blend_path(self.segments, blend_mm, keys=list(self.rapid),
                                  names=[f"gcode:line {ln}" for ln in self.line])
-        return Toolpath(bp.segments, corner_tol_deg=corner_tol_deg, feed_limits=[self.feed[k] for k in bp.origin],
+        feed = self.feed
+        limits = [feed[a] if a == b else _lower(feed[a], feed[b]) for a, b in zip(bp.origin, bp.after, strict=True)]
+        return Toolpath(bp.segments, corner_tol_deg=corner_tol_deg, feed_limits=limits,
                         unblended=bp.unblended)
+
+
+def _lower(a: float | None, b: float | None) -> float | None:
+    """The lower of two feed limits (None: no limit, a rapid; rapids and cuts are never blended together)."""
+    if a is None:
+        return b
+    if b is None:
+        return a
+    return min(a, b)
 
 
 # --------------------------------------------------------------------------- tokenizer

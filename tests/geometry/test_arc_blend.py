@@ -10,6 +10,7 @@ trimmed arcs against their circle. Corners that cannot be blended must come back
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -312,3 +313,151 @@ def test_gcode_plunge_into_arc_stays_a_rest_point_and_is_reported() -> None:
     tp = prog.toolpath(0.5, blend_mm=BLEND_MM)
     assert [u.reason for u in tp.unblended] == ["not coplanar: the line leaves the arc's plane"]
     assert len(tp.corners) == 1  # plunge -> arc; the 3-D line-line corner before it is blended
+
+
+# --------------------------------------------------------------------------- corners between different F
+
+#: Alternating programmed feeds (mm/min) of the zig-zag legs.
+FEEDS = (1200.0, 3000.0)
+
+
+def alternating_zigzag(legs: int = 8) -> tuple[str, np.ndarray, np.ndarray]:
+    """A zig-zag of ``legs`` G01 moves whose F alternates between FEEDS; its vertices (legs + 1, 3)
+    and each leg's feed (mm/s)."""
+    pts = np.array([[15.0 * i, 8.0 * (i % 2), 0.0] for i in range(legs + 1)])
+    text = ["G21 G90 G17"]
+    feed = []
+    for i in range(1, legs + 1):
+        f = FEEDS[(i - 1) % 2]
+        text.append(f"G01 X{pts[i, 0]:g} Y{pts[i, 1]:g} F{f:g}")
+        feed.append(f / 60.0)
+    return "\n".join(text) + "\n", pts, np.array(feed)
+
+
+def _leg_distance(q: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Distance (K, legs) of points q (K, 3) to each leg of the polyline pts."""
+    a, b = pts[:-1], pts[1:]
+    d = b - a
+    t = np.clip(np.einsum("kij,ij->ki", q[:, None, :] - a[None], d) / np.einsum("ij,ij->i", d, d), 0.0, 1.0)
+    return np.asarray(np.linalg.norm(q[:, None, :] - (a[None] + t[..., None] * d[None]), axis=2))
+
+
+def _segment_ranges(tp: Toolpath) -> np.ndarray:
+    """Arc-length range (n, 2) of each of tp's segments."""
+    n = len(tp.segments)
+    lo = np.full(n, np.inf)
+    hi = np.full(n, -np.inf)
+    np.minimum.at(lo, tp.sub_origin, tp.offsets[:-1])
+    np.maximum.at(hi, tp.sub_origin, tp.offsets[1:])
+    return np.stack([lo, hi], axis=1)
+
+
+def test_corners_between_different_feeds_are_blended_with_the_lower_feed() -> None:
+    text, pts, leg_feed = alternating_zigzag()
+    prog = gcode.parse(text)
+    m = router()
+    stop = prog.toolpath(0.5)
+    assert len(stop.corners) == len(pts) - 2
+    tp = prog.toolpath(0.5, blend_mm=BLEND_MM)
+    assert tp.corners == [] and tp.unblended == [] and len(tp.pieces) == 1
+    spirals = [i for i, s in enumerate(tp.segments) if isinstance(s, ClothoidSegment)]
+    assert len(spirals) == 2 * (len(pts) - 2)
+    # each segment's feed limit, at its own arc lengths: a line its leg's F, a blend the lower of its two legs'
+    rng = _segment_ranges(tp)
+    for i in range(len(tp.segments)):
+        s = np.linspace(rng[i, 0], rng[i, 1], 7)[1:-1]
+        near = np.argsort(_leg_distance(tp.positions(s), pts).min(axis=0))
+        fl = tp.feed_limit(s)
+        assert fl is not None
+        if i in spirals:
+            vertex = int(np.argmin(np.linalg.norm(pts[1:-1] - tp.positions(s[2:3]), axis=1)))  # between legs v, v + 1
+            want = min(leg_feed[vertex], leg_feed[vertex + 1])
+        else:
+            want = leg_feed[near[0]]
+        np.testing.assert_array_equal(fl, want)
+    # the schedule runs through every corner
+    t0 = time.perf_counter()
+    sch_stop = schedule(stop, m, Options(method="lp"))
+    t1 = time.perf_counter()
+    sch = schedule(tp, m, Options(method="lp"))
+    t2 = time.perf_counter()
+    print(f"alternating-F zig-zag: stop {sch_stop.summary['motion_time']:.4f} s motion ({t1 - t0:.2f} s wall), "
+          f"blended {sch.summary['motion_time']:.4f} s motion ({t2 - t1:.2f} s wall)")
+    assert len(sch_stop.diagnostics["corners"]) == len(pts) - 2
+    assert sch.diagnostics["corners"] == [] and sch.diagnostics["unblended_corners"] == []
+    assert sch.summary["motion_time"] < sch_stop.summary["motion_time"]
+    # independent FD check of v, a, j (1.01x), rest at both ends, every point verified
+    _check(tp, m, sch)
+    smp = sch.samples
+    # no stop inside the path: the feed stays up between the first and the last leg's middle
+    mid = (smp.s > 0.5 * rng[0, 1]) & (smp.s < tp.length - 0.5 * (rng[-1, 1] - rng[-1, 0]))
+    assert float(np.min(smp.feed[mid])) > 0.5 * FEEDS[0] / 60.0
+    # every sample within the tolerance of the programmed polyline, at no more than the F of the leg it
+    # is nearest (in a blend's arc-length range: the lower F of the legs either side)
+    dist = _leg_distance(smp.position, pts)
+    assert float(dist.min(axis=1).max()) <= BLEND_MM * (1 + 1e-6)
+    allowed = leg_feed[np.argmin(dist, axis=1)]
+    for i in spirals:
+        inside = (smp.s >= rng[i, 0]) & (smp.s <= rng[i, 1])
+        vertex = int(np.argmin(np.linalg.norm(pts[1:-1] - tp.positions(np.array([rng[i].mean()])), axis=1)))
+        allowed[inside] = min(leg_feed[vertex], leg_feed[vertex + 1])
+    assert np.all(smp.feed <= allowed * (1 + 2e-3)), float(np.max(smp.feed / allowed))
+    # and the fast legs are really run faster than the slow ones
+    assert float(np.max(smp.feed)) > FEEDS[0] / 60.0 * 1.5
+
+
+def test_rapid_to_cut_stays_a_rest_point() -> None:
+    prog = gcode.parse("G21 G90 G17\nG00 X10 Y0\nG01 X10 Y10 F1200\nG01 X20 Y12 F3000\nG01 X30 Y10 F1200\n"
+                       "G00 X30 Y0\nG00 X0 Y5\n")
+    tp = prog.toolpath(0.5, blend_mm=BLEND_MM)
+    # G00 -> G01 at (10, 0) and G01 -> G00 at (30, 10) stay corners; the cutting corners between F1200
+    # and F3000 and the rapid-rapid corner at (30, 0) are blended
+    pos = [tuple(np.round(c.position, 9)) for c in tp.corners]
+    assert pos == [(10.0, 0.0, 0.0), (30.0, 10.0, 0.0)]
+    assert tp.unblended == []
+    assert sum(isinstance(s, ClothoidSegment) for s in tp.segments) == 6
+    m = router()
+    sch = schedule(tp, m, Options(method="lp"))
+    assert len(sch.diagnostics["corners"]) == 2
+    _check(tp, m, sch)
+    # the rapids end exactly at their programmed points, at rest (the 1 kHz samples straddle the
+    # instant of rest: the nearest one is within a few um of the point, nearly stopped)
+    for c in tp.corners:
+        k = int(np.argmin(np.abs(sch.samples.s - c.s)))
+        np.testing.assert_allclose(sch.samples.position[k], c.position, atol=1e-5)
+        assert sch.samples.feed[k] <= 0.05
+
+
+def test_line_arc_corners_between_different_feeds_take_the_lower_feed() -> None:
+    """The pocket of lines and arcs with a new F on every move (and a line-line corner inside the arc run)."""
+    lines = pocket(3).splitlines()
+    feeds = (6000.0, 2400.0, 4200.0)
+    text = [lines[0], "G01 X10 Y-4 F3000"]
+    text += [f"{ln.split(' F')[0]} F{feeds[k % 3]:g}" for k, ln in enumerate(lines[1:])]
+    prog = gcode.parse("\n".join(text) + "\n")
+    assert len(set(prog.feed)) == 4
+    tp = prog.toolpath(0.5, blend_mm=BLEND_MM)
+    assert tp.corners == [] and tp.unblended == []
+    orig = [(primitives_of(seg), f) for seg, f in zip(prog.segments, prog.feed, strict=True)]
+    corners = np.array([seg.control_points[-1] for seg in prog.segments[:-1]])
+    spirals = 0
+    rng = _segment_ranges(tp)
+    for i, seg in enumerate(tp.segments):
+        s = np.array([rng[i].mean()])
+        q = tp.positions(s)
+        fl = tp.feed_limit(s)
+        assert fl is not None
+        d = np.array([min(float(_dist_to_original(q, pr)[0]) for pr in prs or []) for prs, _ in orig])
+        f = np.array([f for _, f in orig])
+        if isinstance(seg, ClothoidSegment):  # in the tolerance zone of the corner nearest it: of both moves
+            spirals += 1
+            k = int(np.argmin(np.linalg.norm(corners - q[0], axis=1)))  # between moves k and k + 1
+            assert float(np.linalg.norm(corners[k] - q[0])) < 1.0
+            assert fl[0] == min(f[k], f[k + 1])
+        else:
+            assert fl[0] == f[int(np.argmin(d))]
+    assert spirals == 2 * 7
+    m = router()
+    sch = schedule(tp, m, Options(method="lp"))
+    assert sch.diagnostics["corners"] == []
+    _check(tp, m, sch)

@@ -18,6 +18,7 @@ from geometry.clothoid import (
     blend_corner,
     blend_factors,
     blend_polyline,
+    blend_polyline_legs,
 )
 from geometry.errors import GeometryError
 from geometry.nurbs import NurbsSegment
@@ -294,3 +295,28 @@ def test_blend_rejects_repeated_points() -> None:
     with pytest.raises(GeometryError) as info:
         blend_polyline([[0, 0], [1, 0], [1, 0], [1, 1]], 0.1, name="p")
     assert info.value.field == "p.points[2]"
+
+
+def test_blend_polyline_legs_names_the_legs_of_every_segment() -> None:
+    """Lines lie on one leg (before = after), a corner's spirals between legs j and j + 1; a reversal
+    stays unblended (lines on both legs), a 0.2 mm leg used up by its two blends leaves no line."""
+    pts = np.array([[0, 0, 0], [10, 0, 0], [10, 0.2, 0], [20, 0.2, 0], [10, 0.2, 0], [20, 0.2 + 1e-12, 0], [30, 5, 0]],
+                   dtype=float)
+    segs, before, after = blend_polyline_legs(pts, 0.05)
+    assert [type(s) for s in segs] == [type(s) for s in blend_polyline(pts, 0.05)]
+    assert len(before) == len(after) == len(segs)
+    assert np.all(np.diff(before) >= 0) and before[0] == 0 and after[-1] == len(pts) - 2
+    for s, b, a in zip(segs, before, after, strict=True):
+        if isinstance(s, ClothoidSegment):
+            assert a == b + 1
+            # the first spiral of a pair leaves leg b, the second lands on leg a
+            first = s.name.endswith(".in")
+            p, leg = s.points(np.array([0.0 if first else s.length]))[0], b if first else a
+            d = pts[leg + 1] - pts[leg]
+            t = np.clip((p - pts[leg]) @ d / (d @ d), 0, 1)
+            assert np.linalg.norm(p - (pts[leg] + t * d)) < 1e-9
+        else:
+            assert a == b
+            cp = s.control_points
+            d = pts[b + 1] - pts[b]
+            assert np.linalg.norm(np.cross(cp[1] - cp[0], d)) <= 1e-9 * np.linalg.norm(d) ** 2
