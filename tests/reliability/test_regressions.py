@@ -217,3 +217,33 @@ def test_jerk_next_to_a_curvature_jump_as_the_samples_see_it(method: str) -> Non
     travel of a curvature jump hold |j| + 0.75 |jump of x_ss| q(s_b) / Ts <= jmax."""
     out = harness.run(gen.case(47, "bench"), method)
     assert out.ok, out.describe()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize(("seed", "method", "what"), [
+    (163, "lp", "q held at the floor (7.6e-10 of its peak) next to a 1.8 um radius turn at a junction: the "
+                "monomial form of q cancelled to ~1e-7 relative noise there, and the time quadrature "
+                "bisected the noise into 1.85 M intervals (MemoryError under the bench's 4 GB)"),
+    (226, "lp", "the same, next to an 11.5 um radius turn at a junction"),
+    (226, "lp+nlp", "the same, in the LP profile the NLP starts from"),
+])
+def test_time_table_of_a_feed_dipping_near_zero(seed: int, method: str, what: str) -> None:
+    """Bench seeds 163 and 226: see ``what``.  Now ``bspline.evaluate`` forms q with the basis's
+    non-negative weights (accurate relative to q itself): ~160 time-table nodes instead of 1.85 M."""
+    out = harness.run(gen.case(seed, "bench"), method)
+    assert out.ok, f"{what}: {out.describe()}"
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_one_tight_turn_does_not_set_the_floor_of_the_whole_window() -> None:
+    """Bench seed 224 (lp): a 3.4 mm path with a 0.046 um radius turn 0.09 um before a junction.
+    The q floor (keeping the feed off 0 between knots) was 1 % of the tightest constant q of the
+    window, ~1e-9 of Q once a repair round verified points at the turn, and the LP parked control
+    points 0.2 mm away from it at that floor: 1,124 s of motion (428 s before the repair round),
+    and the bench case timed out checking 1.1 M samples.  Now each control point first gets its
+    own floor (1 % of its reach), then the window-wide one, then none: 7.0 s."""
+    case = gen.case(224, "bench")
+    sch = schedule(case.toolpath(), case.lp_machine, Options(method="lp", sample_period=TS))
+    assert sch.summary["motion_time"] < 60.0, sch.summary["motion_time"]
+    out = harness.run(case, "lp")
+    assert out.ok, out.describe()
