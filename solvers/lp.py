@@ -66,6 +66,10 @@ REST_SHARE = 0.9
 #: Floor of q away from rest ends, as a share of the largest constant q that meets every limit
 #: in the window (keeps the feed from stalling at a knot; see ``WindowLP.solve``).
 FLOOR_SHARE = 1e-2
+#: Each control point's own floor, as a share of its reach (``WindowLP._col_scale``).
+LOCAL_FLOOR_SHARE = 1e-2
+#: A control point within this share above its floor counts as held there (``WindowResult.floored``).
+FLOORED_TOL = 1e-3
 #: At a curvature jump the axis acceleration steps by x_ss jump x q; seen in a sampled third
 #: difference the step adds up to 0.75 step / Ts to the jerk, so it is kept to STEP_SHARE jmax Ts.
 STEP_SHARE = 0.25
@@ -119,6 +123,9 @@ class WindowSpec:
     prev_c: tuple[int, FloatArray] | None = None
     a_rest_start: FloatArray | None = None
     a_rest_end: FloatArray | None = None
+    #: keep the control point next to a rest end above a floor too (q' > 0 there); the pipeline
+    #: asks for it only once refining the knots has not made the feed leave rest
+    rest_floor: bool = False
 
     @property
     def ncols(self) -> int:
@@ -134,6 +141,8 @@ class WindowResult:
     added_points: int
     #: verification points still over a limit (by > VERIFY_TOL) after the last cut round
     unverified: int = 0
+    #: control points held at their q floor (the knots are too coarse for the path there)
+    floored: int = 0
 
 
 @dataclass(frozen=True)
@@ -408,11 +417,13 @@ class WindowLP:
         # (c_1 = d q' / 2) gets the same floor, or FLOOR_SHARE of what a_rest allows if smaller:
         # a turn inside the first knot interval made integral q larger with c_1 = 0 and c_2 at
         # the turn's cap (q = c_2 tau^2 / 2), and a feed leaving rest with q' = 0 never leaves
-        # (bench seed 14).  If the floor makes the window infeasible (an inherited start below
-        # it), it is dropped.
+        # (bench seed 14; only with ``spec.rest_floor``).  If the floor makes the window
+        # infeasible (an inherited start below it), it is dropped.
         floor = min(self._floor(g_fine), FLOOR_SHARE * step_cap)
         floor_lo = col_lo.copy()
         floor_lo[floor_cols] = floor / Q
+        if not spec.rest_floor:
+            rest_c = []
         for j, c_max in rest_c:
             floor_lo[j] = max(col_lo[j], min(floor, FLOOR_SHARE * c_max) / Q)
         # First each control point's own floor, FLOOR_SHARE of its reach (``_col_scale``): the one
@@ -420,9 +431,9 @@ class WindowLP:
         # put it at ~1e-9 of Q, where the LP parked control points far from the turn (a 3.4 mm path
         # took 1,124 s, bench seed 224).  Then the window-wide floor, then none.
         local_lo = floor_lo.copy()
-        local_lo[floor_cols] = np.maximum(floor_lo[floor_cols], FLOOR_SHARE * base.col_scale[floor_cols])
+        local_lo[floor_cols] = np.maximum(floor_lo[floor_cols], LOCAL_FLOOR_SHARE * base.col_scale[floor_cols])
         for j, c_max in rest_c:
-            local_lo[j] = max(floor_lo[j], min(FLOOR_SHARE * base.col_scale[j], FLOOR_SHARE * c_max / Q))
+            local_lo[j] = max(floor_lo[j], LOCAL_FLOOR_SHARE * min(base.col_scale[j], c_max / Q))
         floors = [local_lo, floor_lo, col_lo]
         for i, lo_i in enumerate(floors):
             try:
@@ -433,8 +444,18 @@ class WindowLP:
                 continue
             floors = floors[i:]
             break
+        # control points the LP holds at a floor (not next to an artificial window end, where the
+        # feed comes to rest and the next window takes over)
+        at_floor = floor_cols.copy()
+        if not spec.end_rest:
+            at_floor[-4:] = False
+
+        def floored(chat: FloatArray, lo: FloatArray) -> int:
+            return int(np.sum(at_floor & (lo > 0.0) & (chat <= lo * (1.0 + FLOORED_TOL))))
+
         if not self.lim.jerk:
-            return WindowResult(chat1 * Q, c_star, self.iterations, pts1[0], pts1[1], pts1[2])
+            return WindowResult(chat1 * Q, c_star, self.iterations, pts1[0], pts1[1], pts1[2],
+                                floored(chat1, floors[0]))
 
         # stage 2: + q <= q*, pseudo-jerk
         qstar = self._qstar(c_star, g.s)
@@ -453,7 +474,8 @@ class WindowLP:
                     raise
                 continue
             break
-        return WindowResult(chat2 * Q, c_star, self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1], pts2[2])
+        return WindowResult(chat2 * Q, c_star, self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1], pts2[2],
+                            floored(chat2, lo_i))
 
     def _stage1(
         self, base: _Rows, g: PathSamples, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray, Q: float,
