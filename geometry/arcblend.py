@@ -281,22 +281,10 @@ def _as_arc(seg: NurbsSegment) -> Arc | None:
 
 
 def arc_nurbs(arc: Arc, t0: float, t1: float, start: FloatArray, end: FloatArray, name: str) -> NurbsSegment:
-    """The part t in [t0, t1] of ``arc`` as an exact NURBS: N = ceil((t1 - t0) / (pi / 2)) rational
-    quadratic pieces (``geometry.primitives``' form in the arc's own frame), first and last control
-    points ``start`` and ``end`` exactly (the points where the neighbours attach)."""
-    sweep = t1 - t0
-    n = max(1, math.ceil(sweep / (0.5 * math.pi) - 1e-12))
-    phi = sweep / n
-    angles = t0 + 0.5 * phi * np.arange(2 * n + 1)
-    rad = np.full(2 * n + 1, arc.radius)
-    rad[1::2] = arc.radius / math.cos(0.5 * phi)
-    P = arc.centre + rad[:, None] * (np.cos(angles)[:, None] * arc.e1 + np.sin(angles)[:, None] * arc.e2)
-    P[0] = start
-    P[-1] = end
-    w = np.ones(2 * n + 1)
-    w[1::2] = math.cos(0.5 * phi)
-    knots = np.concatenate([[0.0], np.repeat(np.arange(n + 1, dtype=np.float64), 2), [float(n)]])
-    return NurbsSegment.create(2, knots, P, w, name=name)
+    """The part t in [t0, t1] of ``arc`` as an exact NURBS (``geometry.primitives.arc_frame_nurbs`` in
+    the arc's own frame), first and last control points ``start`` and ``end`` exactly (the points
+    where the neighbours attach)."""
+    return primitives.arc_frame_nurbs(start, end, arc.centre, arc.e1, arc.e2, arc.radius, t0, t1 - t0, name)
 
 
 # --------------------------------------------------------------------------- the corner in its plane

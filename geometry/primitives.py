@@ -268,6 +268,40 @@ def radius_tolerance(radius_mm: float) -> float:
     return max(ARC_RADIUS_ABS_TOL_MM, ARC_RADIUS_REL_TOL * radius_mm)
 
 
+def arc_frame_nurbs(
+    S: FloatArray,
+    E: FloatArray,
+    centre: FloatArray,
+    e1: FloatArray,
+    e2: FloatArray,
+    r: float,
+    t0: float,
+    sweep: float,
+    name: str,
+) -> NurbsSegment:
+    """The arc C(t) = centre + r (cos t e1 + sin t e2), t from t0 over ``sweep`` (rad, either sign), as
+    N = ceil(|sweep| / (pi / 2)) rational quadratic pieces: control points at the ends and at the
+    tangent intersections (radius r / cos(phi / 2), weight cos(phi / 2)); first and last control
+    point are ``S`` and ``E`` exactly (the points where the neighbours attach).  ``e1``, ``e2``:
+    orthonormal (3,) vectors spanning the arc's plane; ``centre`` (3,) mm."""
+    n = max(1, math.ceil(abs(sweep) / _QUARTER - 1e-12))
+    phi = sweep / n
+    ends = t0 + phi * np.arange(n + 1)
+    mids = t0 + phi * (np.arange(n) + 0.5)
+    angles = np.empty(2 * n + 1)
+    angles[0::2] = ends
+    angles[1::2] = mids
+    rad = np.full(2 * n + 1, r)
+    rad[1::2] = r / math.cos(0.5 * phi)
+    P = centre + rad[:, None] * (np.cos(angles)[:, None] * e1 + np.sin(angles)[:, None] * e2)
+    P[0] = S
+    P[-1] = E
+    w = np.ones(2 * n + 1)
+    w[1::2] = math.cos(0.5 * phi)
+    knots = np.concatenate([[0.0], np.repeat(np.arange(n + 1, dtype=np.float64), 2), [float(n)]])
+    return NurbsSegment.create(2, knots, P, w, name=name)
+
+
 def _arc_nurbs(
     S: FloatArray,
     E: FloatArray,
@@ -278,27 +312,13 @@ def _arc_nurbs(
     axes: tuple[int, int, int],
     name: str,
 ) -> NurbsSegment:
-    """Rational quadratic pieces of the arc; first and last control point are ``S`` and ``E`` exactly."""
+    """The arc in the coordinate plane ``axes`` = (a, b, normal) around the in-plane centre c2, at
+    the normal coordinate of S (``arc_frame_nurbs`` with e1, e2 the unit vectors of a and b)."""
     a, b, nrm = axes
-    n = max(1, math.ceil(abs(sweep) / _QUARTER - 1e-12))
-    phi = sweep / n
-    ends = t0 + phi * np.arange(n + 1)
-    mids = t0 + phi * (np.arange(n) + 0.5)
-    angles = np.empty(2 * n + 1)
-    angles[0::2] = ends
-    angles[1::2] = mids
-    rad = np.full(2 * n + 1, r)
-    rad[1::2] = r / math.cos(0.5 * phi)
-    P = np.empty((2 * n + 1, 3))
-    P[:, a] = c2[0] + rad * np.cos(angles)
-    P[:, b] = c2[1] + rad * np.sin(angles)
-    P[:, nrm] = S[nrm]
-    P[0] = S
-    P[-1] = E
-    w = np.ones(2 * n + 1)
-    w[1::2] = math.cos(0.5 * phi)
-    knots = np.concatenate([[0.0], np.repeat(np.arange(n + 1, dtype=np.float64), 2), [float(n)]])
-    return NurbsSegment.create(2, knots, P, w, name=name)
+    eye = np.eye(3)
+    centre = np.zeros(3)
+    centre[a], centre[b], centre[nrm] = c2[0], c2[1], S[nrm]
+    return arc_frame_nurbs(S, E, centre, eye[a], eye[b], r, t0, sweep, name)
 
 
 def _finite(value: object, fld: str) -> float:
