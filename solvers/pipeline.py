@@ -331,15 +331,16 @@ def solve_piece(
     ``PieceTiming`` rejects what is still stuck.  Where a window holds control points at their q
     floor (the feed is kept off 0 there only by the floor: the same coarse knots, solved without a
     stall) the knots are refined too, and the fastest profile that moves is kept (test seed 14:
-    1.96 s on the default knots, 0.68 s on twice as many; under lp+nlp, where the NLP works on
-    the LP's knots, 0.275 -> 0.222 s), on the default knot spacing and up to
-    FLOOR_REFINE_MAX_INTERVALS (twice bench seed 47's 897 intervals made its NLP 5-10 x slower).
+    1.96 s on the default knots, 0.68 s on twice as many), on the default knot spacing, up to
+    FLOOR_REFINE_MAX_INTERVALS, and with method lp only: under lp+nlp the NLP works on the LP's
+    knots, and refining them (test seed 14: 0.275 -> 0.222 s) made the NLP up to 3.6 x slower
+    (bench seed 24) and bench seed 145's sampled servo error 1.013 x (a typed 422).
     """
     n_int: int | None = None
     best: tuple[float, PieceProfile, list[int]] | None = None
     for attempt in range(KNOT_REFINEMENTS + 1):
         plan = plan_piece(piece, machine, opt, n_int)
-        floor_refine = (opt.knot_spacing is None
+        floor_refine = (opt.method == "lp" and opt.knot_spacing is None
                         and 2 * plan.n_int <= FLOOR_REFINE_MAX_INTERVALS)
         floored: list[int] = []
         try:

@@ -247,3 +247,12 @@ def test_one_tight_turn_does_not_set_the_floor_of_the_whole_window() -> None:
     assert sch.summary["motion_time"] < 60.0, sch.summary["motion_time"]
     out = harness.run(case, "lp")
     assert out.ok, out.describe()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_lp_nlp_keeps_the_lp_knots_when_the_lp_floor_binds() -> None:
+    """Bench seed 145 (lp+nlp): refining the knots of pieces whose LP holds control points at their
+    q floor (done for method lp) made this case's sampled servo error 1.013 x after 2 repair rounds;
+    under lp+nlp the LP's knots are kept."""
+    out = harness.run(gen.case(145, "bench"), "lp+nlp")
+    assert out.ok, out.describe()
