@@ -79,6 +79,25 @@ STEP_KERNEL = 0.75
 #: Curvature jumps whose step term would stay below this share of jmax even at q = Q get no
 #: coupled jerk rows (``WindowLP._step_jerk``).
 STEP_JERK_MIN = 1e-3
+#: At a tangent break passed at speed (a junction turning by less than the corner tolerance) the
+#: axis velocity steps by f |jump of x_s|.  Sampled at Ts that step is an impulse: it adds up to
+#: V_KERNEL_A |step| / Ts to a second difference (the acceleration), up to V_KERNEL_J |step| / Ts^2
+#: to a plain third difference (the jerk) and V_KERNEL_JC |step| / Ts^2 to the mean of two adjacent
+#: ones (the drive model's central jerk); peaks over the break's phase between two samples.
+V_KERNEL_A = 1.0
+V_KERNEL_J = 1.0
+V_KERNEL_JC = 0.5
+#: Share of the sampled acceleration and jerk budgets the impulse of a velocity step may take under
+#: method lp: the acceleration and jerk rows within reach of the break are coupled to the feed at it
+#: (``WindowLP._vstep_coupling``), so the impulse and the motion around it share the budget.
+V_STEP_SHARE = 0.98
+#: The same for the LP of lp+nlp, of the servo-error and control-signal budgets: its rows hold a and j,
+#: not e and u, so it only caps the feed at the break, leaving room for the motion around it; the
+#: NLP verifies the impulse on top of e and u (``solvers.nlp.V_STEP_SHARE``).
+V_STEP_SHARE_DRIVE = 0.5
+#: Velocity steps whose impulse stays below this share of a limit even at the break's largest feed
+#: get no coupled rows.
+V_STEP_MIN = 1e-3
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.
 COL_SCALE_MIN_BASIS = 0.1
@@ -158,9 +177,19 @@ class LimitSet:
     #: output sample period Ts (s) when the jerk is held as the samples' third differences see it
     #: next to a curvature jump (method lp with jerk, ``WindowLP._step_jerk``), else None
     step_jerk_period: float | None = None
+    #: largest step of axis velocity allowed at a tangent break passed at speed, (3,) mm/s
+    #: (``v_step_limit``), or None (no such rows)
+    v_step: FloatArray | None = None
+    #: output sample period Ts (s) when the acceleration and jerk rows next to a tangent break are
+    #: coupled to the feed there (method lp, ``WindowLP._vstep_coupling``), else None (the cap only)
+    v_step_period: float | None = None
 
     @classmethod
-    def from_machine(cls, m: Machine, sample_period: float, jerk: bool, rest_from_drive: bool = False) -> LimitSet:
+    def from_machine(
+        cls, m: Machine, sample_period: float, jerk: bool, rest_from_drive: bool = False, kinematic: bool = False
+    ) -> LimitSet:
+        """``rest_from_drive``: lp+nlp (rest and step limits from the drive model's e and u);
+        ``kinematic``: with it, the velocity step is held within the kinematic limits too (the NLP keeps them)."""
         vmax, amax, jmax = m.limit_arrays()
         if rest_from_drive:
             dr = m.drive_arrays()
@@ -170,7 +199,35 @@ class LimitSet:
             a_rest = np.minimum(amax, jmax * sample_period / 2.0) if jerk else amax
             a_step = STEP_SHARE * jmax * sample_period
         return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk, a_step if jerk else None,
-                   sample_period if jerk and not rest_from_drive else None)
+                   sample_period if jerk and not rest_from_drive else None,
+                   v_step_limit(m, sample_period, jerk, rest_from_drive, kinematic,
+                                V_STEP_SHARE_DRIVE if rest_from_drive else V_STEP_SHARE),
+                   None if rest_from_drive else sample_period)
+
+
+def v_step_limit(
+    m: Machine, Ts: float, jerk: bool, from_drive: bool, kinematic: bool, share: float
+) -> FloatArray:
+    """Largest axis velocity step Delta v_x (3,) mm/s allowed at a tangent break passed at speed.
+
+    Sampled at Ts, a step Delta v adds an impulse to the differences of the positions (``V_KERNEL_*``):
+    lp holds V_KERNEL_A Delta v / Ts <= share amax and, with jerk, V_KERNEL_J Delta v / Ts^2 <=
+    share jmax; lp+nlp (``from_drive``) holds the drive model's e and u,
+    (Ka V_KERNEL_A / Ts + Kj V_KERNEL_JC / Ts^2) Delta v <= share emax and
+    M V_KERNEL_A Delta v / Ts <= share (umax - |c| - |d|), and with ``kinematic`` both."""
+    _, amax, jmax = m.limit_arrays()
+    dv = amax * Ts / V_KERNEL_A
+    if jerk or kinematic:
+        dv = np.minimum(dv, jmax * Ts**2 / V_KERNEL_J)
+    if from_drive:
+        dr = m.drive_arrays()
+        with np.errstate(divide="ignore"):
+            by_e = dr["emax"] / (dr["Ka"] * V_KERNEL_A / Ts + dr["Kj"] * V_KERNEL_JC / Ts**2)
+            room = np.maximum(dr["umax"] - np.abs(dr["c"]) - np.abs(dr["d"]), 0.0)
+            by_u = np.where(dr["M"] > 0.0, room * Ts / (V_KERNEL_A * np.where(dr["M"] > 0.0, dr["M"], 1.0)), np.inf)
+        drive = np.minimum(by_e, by_u)
+        dv = np.minimum(dv, drive) if kinematic else drive
+    return np.asarray(share * dv, dtype=np.float64)
 
 
 class _Rows:
@@ -231,6 +288,32 @@ def axis_kinematics(
     return (fd[0], *kinematics.axis_kinematics(g, *fd))
 
 
+Coupling = tuple[NDArray[np.bool_], sp.csr_matrix, FloatArray]
+
+
+def _union(K: int, parts: list[Coupling | None]) -> Coupling | None:
+    """Coupled row terms of several sources over K points summed: (near, C, const) on the union of near."""
+    have = [p for p in parts if p is not None]
+    if not have:
+        return None
+    if len(have) == 1:
+        return have[0]
+    near = np.zeros(K, dtype=bool)
+    for p in have:
+        near |= p[0]
+    pos = np.cumsum(near) - 1
+    n = int(near.sum())
+    ncols = have[0][1].shape[1]
+    C = sp.csr_matrix((n, ncols))
+    const = np.zeros(n)
+    for nr, Ci, ci in have:
+        at = pos[nr]
+        P = sp.csr_matrix((np.ones(at.size), (at, np.arange(at.size))), shape=(n, at.size))
+        C = C + P @ Ci
+        const[at] += ci
+    return near, sp.csr_matrix(C), const
+
+
 def _moving(g: PathSamples, ax: int) -> bool:
     """Whether axis ``ax`` moves along these points (else its rows are all zero)."""
     return bool(np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS)
@@ -267,7 +350,7 @@ class WindowLP:
         self.iterations = 0
         self.Q = 1.0
         self._fine_g: tuple[FloatArray, PathSamples] | None = None
-        self._step_cache: tuple[FloatArray, FloatArray] | None = None
+        self._step_cache: tuple[FloatArray, FloatArray, FloatArray] | None = None
 
     # ----- row blocks ---------------------------------------------------------
     def _mats(self, s: FloatArray) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
@@ -308,6 +391,7 @@ class WindowLP:
             A = (sp.diags(g.d2[:, ax]) @ B0 + sp.diags(0.5 * g.d1[:, ax]) @ B1) * (Q / self.lim.amax[ax])
             one = np.ones(g.s.size)
             self._add(rows, A, -one, one, g.s)
+            self._add_coupled(rows, A, g.s, self._vstep_coupling(g.s, ax, self.lim.amax[ax], V_KERNEL_A, 1))
 
     def _jerk_rows(self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray) -> None:
         keep = np.sqrt(np.maximum(qstar, 0.0)) > TINY_SQRT_QSTAR * np.sqrt(Q)
@@ -323,13 +407,14 @@ class WindowLP:
             A = sp.diags(rq * Q / self.lim.jmax[ax]) @ J
             one = np.ones(g.s.size)
             self._add(rows, A, -one, one, g.s)
+            # next to a curvature jump, |j| + the step's share <= jmax (``_step_jerk``); next to a
+            # tangent break, + the velocity step's impulse (``_vstep_coupling``): one row holds both
+            parts = [self._vstep_coupling(g.s, ax, self.lim.jmax[ax], V_KERNEL_J, 2)]
             step = self._step_jerk(g.s, ax)
-            if step is not None:  # |j| + the steps' share <= jmax, as two one-sided rows
+            if step is not None:
                 near, M = step
-                C = sp.csr_matrix(M @ self._mats(self._steps()[0])[0]) * Q
-                free = np.full(int(near.sum()), -np.inf)
-                self._add(rows, A[near] + C, free, one[near], g.s[near])
-                self._add(rows, C - A[near], free, one[near], g.s[near])
+                parts.append((near, sp.csr_matrix(M @ self._mats(self._steps()[0])[0]) * Q, np.zeros(int(near.sum()))))
+            self._add_coupled(rows, A, g.s, _union(g.s.size, parts))
 
     def _rest_rows(self, rows: _Rows, s_rest: float, sign: float, Q: float, a_rest: FloatArray | None) -> float:
         """q(s_rest) = 0 and sign * q'(s_rest) * max_x(|x_s|/(2 a_rest_x)) <= 1 (a_rest: default lim.a_rest).
@@ -490,15 +575,15 @@ class WindowLP:
 
     def _step_rows(self, rows: _Rows, Q: float) -> float:
         """q <= min_x a_step_x / |jump of x_ss| at every geometry break inside the window (the
-        acceleration step there, x_ss jump x q, stays within a_step); returns the smallest cap."""
-        if self.lim.a_step is None or self.breaks.size == 0:
+        acceleration step there, x_ss jump x q, stays within a_step), and q <= min_x (v_step_x /
+        |jump of x_s|)^2 (the velocity step at a tangent break passed at speed, f |jump of x_s|,
+        stays within v_step); returns the smallest cap."""
+        if self.breaks.size == 0:
             return np.inf
-        br, jump = self._steps()
+        br = self._steps()[0]
         if br.size == 0:
             return np.inf
-        with np.errstate(divide="ignore"):
-            cap = np.min(np.where(jump > AXIS_EPS, self.lim.a_step[None, :] / np.where(jump > AXIS_EPS, jump, 1.0),
-                                  np.inf), axis=1)
+        cap = np.minimum(self._step_caps(), self._vstep_caps())
         keep = cap < Q  # q never exceeds Q (the largest velocity bound): larger caps are no rows
         if not keep.any():
             return np.inf
@@ -506,15 +591,102 @@ class WindowLP:
         rows.add(B0, np.full(int(keep.sum()), -np.inf), cap[keep] / Q)
         return float(np.min(cap[keep]))
 
-    def _steps(self) -> tuple[FloatArray, FloatArray]:
-        """Geometry breaks strictly inside the window and |jump of x_ss| there per axis, ((nb,), (nb, 3))."""
+    def _step_caps(self) -> FloatArray:
+        """Cap on q at each break from the acceleration step, min_x a_step_x / |jump of x_ss|, (nb,)."""
+        br, jump, _ = self._steps()
+        if self.lim.a_step is None:
+            return np.full(br.size, np.inf)
+        with np.errstate(divide="ignore"):
+            return np.asarray(np.min(np.where(
+                jump > AXIS_EPS, self.lim.a_step[None, :] / np.where(jump > AXIS_EPS, jump, 1.0), np.inf), axis=1))
+
+    def _vstep_caps(self) -> FloatArray:
+        """Cap on q at each break from the velocity step, min_x (v_step_x / |jump of x_s|)^2, (nb,)."""
+        br, _, jump1 = self._steps()
+        if self.lim.v_step is None:
+            return np.full(br.size, np.inf)
+        with np.errstate(divide="ignore"):
+            return np.asarray(np.min(np.where(
+                jump1 > AXIS_EPS, self.lim.v_step[None, :] / np.where(jump1 > AXIS_EPS, jump1, 1.0), np.inf), axis=1)
+                ** 2)
+
+    def _vstep_terms(
+        self, s: FloatArray, ax: int, limit: float, kernel: float, power: int
+    ) -> tuple[NDArray[np.bool_], FloatArray, FloatArray, FloatArray] | None:
+        """The impulse of the velocity steps at tangent breaks passed at speed, as the sampled
+        acceleration (``power`` 1, ``kernel`` V_KERNEL_A) or jerk (2, V_KERNEL_J) of axis ``ax`` sees it
+        at points s: kernel |jump_bx| f_b / Ts^power per unit ``limit``, for points within 3 Ts of travel
+        (at the window's largest feed sqrt(Q)) of break b, whose differences can span it.
+
+        Returns (near (K,) bool, W (near.sum(), nl) the weight w_b of f_b at each near point (0 where
+        b is not close), the live breaks' s (nl,), q0 (nl,) the largest q each allows: min(cap, Q)),
+        or None where no break's impulse reaches V_STEP_MIN of the limit."""
+        Ts = self.lim.v_step_period
+        if Ts is None or self.lim.v_step is None or self.breaks.size == 0:
+            return None
+        br, _, jump1 = self._steps()
+        q0 = np.minimum(self._vstep_caps(), self.Q)
+        w = kernel * jump1[:, ax] / (Ts**power * limit)
+        live = w * np.sqrt(q0) > V_STEP_MIN
+        if not live.any():
+            return None
+        close = np.abs(s[:, None] - br[live][None, :]) <= 3.0 * Ts * np.sqrt(self.Q) + BREAK_EPS_MM
+        near = close.any(axis=1)
+        if not near.any():
+            return None
+        return near, np.where(close[near], w[live][None, :], 0.0), br[live], q0[live]
+
+    def _vstep_coupling(
+        self, s: FloatArray, ax: int, limit: float, kernel: float, power: int
+    ) -> tuple[NDArray[np.bool_], sp.csr_matrix, FloatArray] | None:
+        """Rows |a_x(s)| (or |j_x(s)|) + sum_b w_b f_b <= limit at points s near tangent breaks
+        (``_vstep_terms``), linear in q: f_b = sqrt(q_b) <= (sqrt(q0_b) + q_b / sqrt(q0_b)) / 2, the
+        tangent of the concave sqrt at q0_b, the largest q_b the break's cap allows (exact there; at
+        q_b = 0 it keeps half the impulse's largest share free).  Returns (near, C (near.sum(), ncols)
+        the coefficients of chat, const (near.sum(),)), per unit limit: rows A[near] +- C <= 1 - const."""
+        t = self._vstep_terms(s, ax, limit, kernel, power)
+        if t is None:
+            return None
+        near, W, br, q0 = t
+        rq0 = np.sqrt(q0)
+        C = sp.csr_matrix((W * (self.Q / (2.0 * rq0))[None, :]) @ self._mats(br)[0])
+        return near, C, np.asarray(W @ (0.5 * rq0), dtype=np.float64)
+
+    def _vstep_seen(self, c: FloatArray, s: FloatArray, ax: int, limit: float, kernel: float,
+                    power: int) -> FloatArray:
+        """sum_b w_b f_b per unit limit at points s (K,) for control points c (``_vstep_terms``)."""
+        out = np.zeros(s.size)
+        t = self._vstep_terms(s, ax, limit, kernel, power)
+        if t is not None:
+            near, W, br, _ = t
+            out[near] = W @ np.sqrt(np.maximum(self._eval(c, br)[0], 0.0))
+        return out
+
+    def _add_coupled(
+        self, rows: _Rows, A: sp.csr_matrix, s: FloatArray,
+        coup: tuple[NDArray[np.bool_], sp.csr_matrix, FloatArray] | None,
+    ) -> None:
+        """Rows A[near] + C <= 1 - const and C - A[near] <= 1 - const (|A chat| + C chat + const <= 1)."""
+        if coup is None:
+            return
+        near, C, const = coup
+        free = np.full(int(near.sum()), -np.inf)
+        self._add(rows, A[near] + C, free, 1.0 - const, s[near])
+        self._add(rows, C - A[near], free, 1.0 - const, s[near])
+
+    def _steps(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Geometry breaks strictly inside the window, |jump of x_ss| and |jump of x_s| there per axis,
+        ((nb,), (nb, 3), (nb, 3))."""
         if self._step_cache is None:
             spec = self.spec
             lo, hi = spec.k0 * spec.d, spec.k1 * spec.d
             br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
-            jump = (np.abs(self.geometry(br + BREAK_EPS_MM).d2 - self.geometry(br - BREAK_EPS_MM).d2) if br.size
-                    else np.zeros((0, 3)))
-            self._step_cache = (br, np.asarray(jump, dtype=np.float64))
+            if br.size:
+                right, left = self.geometry(br + BREAK_EPS_MM), self.geometry(br - BREAK_EPS_MM)
+                jump, jump1 = np.abs(right.d2 - left.d2), np.abs(right.d1 - left.d1)
+            else:
+                jump = jump1 = np.zeros((0, 3))
+            self._step_cache = (br, np.asarray(jump, dtype=np.float64), np.asarray(jump1, dtype=np.float64))
         return self._step_cache
 
     def _step_jerk(self, s: FloatArray, ax: int) -> tuple[NDArray[np.bool_], sp.csr_matrix] | None:
@@ -529,7 +701,7 @@ class WindowLP:
         Ts = self.lim.step_jerk_period
         if Ts is None or self.breaks.size == 0:
             return None
-        br, jump = self._steps()
+        br, jump, _ = self._steps()
         jmax = self.lim.jmax[ax]
         wgt = STEP_KERNEL * jump[:, ax] / (Ts * jmax)
         live = wgt * self.Q > STEP_JERK_MIN
@@ -639,15 +811,20 @@ class WindowLP:
         f, _, a, j = axis_kinematics(g, *self._eval(c, g.s))
         tol = 1.0 + VERIFY_TOL
         bad = f * f > velocity_bound(g, self.lim) * tol**2
-        bad |= np.any(np.abs(a) > self.lim.amax[None, :] * tol, axis=1)
+        lim = self.lim
+        aa = np.abs(a)
+        for ax in range(3):  # + the impulse of velocity steps nearby
+            aa[:, ax] += lim.amax[ax] * self._vstep_seen(c, g.s, ax, lim.amax[ax], V_KERNEL_A, 1)
+        bad |= np.any(aa > lim.amax[None, :] * tol, axis=1)
         if c_star is not None:
             aj = np.abs(j)
             for ax in range(3):
                 step = self._step_jerk(g.s, ax)
                 if step is not None:
                     near, M = step
-                    aj[near, ax] += self.lim.jmax[ax] * (M @ self._eval(c, self._steps()[0])[0])
-            bad |= np.any(aj > self.lim.jmax[None, :] * tol, axis=1)
+                    aj[near, ax] += lim.jmax[ax] * (M @ self._eval(c, self._steps()[0])[0])
+                aj[:, ax] += lim.jmax[ax] * self._vstep_seen(c, g.s, ax, lim.jmax[ax], V_KERNEL_J, 2)
+            bad |= np.any(aj > lim.jmax[None, :] * tol, axis=1)
         return np.asarray(bad)
 
     def _run(self, rows: _Rows, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray) -> FloatArray:

@@ -81,6 +81,7 @@ from scipy.ndimage import maximum_filter1d
 
 from geometry.toolpath import PathSamples
 from solvers import bspline, kinematics
+from solvers.lp import V_KERNEL_A, V_KERNEL_JC
 from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
@@ -88,6 +89,11 @@ GeometryFn = Callable[[FloatArray], PathSamples]
 
 #: |x_s| below which the friction sign is taken both ways.
 SIGN_EPS = 0.02
+#: Share of the sampled e and u budgets the impulse of a velocity step (a tangent break passed at speed)
+#: may take (``solvers.lp.v_step_limit``): the impulse is verified on top of e and u either side and a
+#: violation tightens the rows and the feed cap there (``NlpRefiner._step_servo_error``), so the NLP
+#: takes more than the LP's V_STEP_SHARE, whose rows keep a fixed share free instead.
+V_STEP_SHARE = 0.9
 #: Relative overshoot at a verification point that triggers a tightening round.
 VERIFY_TOL = 2e-3
 VERIFY_SUBDIV = 4
@@ -190,11 +196,15 @@ class NlpLimits:
     #: output sample period Ts, s: the servo error of an acceleration step at a curvature jump is
     #: verified as seen over one sample (Kj |step| / (2 Ts) on top of e on either side), or None
     sample_period: float | None = None
+    #: largest step of axis velocity allowed at a tangent break passed at speed (3,) mm/s, or None
+    #: (``solvers.lp.v_step_limit``; its impulse in the sampled e and u is verified with the
+    #: acceleration step's, ``NlpRefiner._step_servo_error``)
+    v_step: FloatArray | None = None
 
     @classmethod
     def from_machine(
         cls, m: Machine, axis_velocity: bool, kinematic: bool, a_step: FloatArray | None = None,
-        sample_period: float | None = None,
+        sample_period: float | None = None, v_step: FloatArray | None = None,
     ) -> NlpLimits:
         dr = m.drive_arrays()
         vmax, amax, jmax = m.limit_arrays()
@@ -208,6 +218,7 @@ class NlpLimits:
             m.feed_max,
             a_step,
             sample_period,
+            v_step,
         )
 
     def utilisation(self, g: PathSamples, fd: kinematics.FeedDerivs) -> dict[str, FloatArray]:
@@ -911,19 +922,28 @@ class NlpRefiner:
     def _step_caps(
         self, geometry: GeometryFn, s0: float, s1: float, breaks: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
-        """Breaks inside (s0, s1) where x_ss jumps, and the feed cap there: f^2 |jump of x_ss| <= a_step
-        per axis (the sampled acceleration step, seen as jerk and servo error over one period)."""
-        if self.lim.a_step is None:
+        """Breaks inside (s0, s1) where x_ss or x_s jumps, and the feed cap there: f^2 |jump of x_ss| <= a_step
+        per axis (the sampled acceleration step, seen as jerk and servo error over one period), and
+        f |jump of x_s| <= v_step (a tangent break passed at speed: the velocity step, seen as an impulse)."""
+        lim = self.lim
+        if lim.a_step is None and lim.v_step is None:
             return np.zeros(0), np.zeros(0)
         br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
         if br.size == 0:
             return br, np.zeros(0)
-        jump = np.abs(geometry(br + BREAK_EPS_MM).d2 - geometry(br - BREAK_EPS_MM).d2)
+        right, left = geometry(br + BREAK_EPS_MM), geometry(br - BREAK_EPS_MM)
+        cap_f = np.full(br.size, np.inf)
         with np.errstate(divide="ignore"):
-            cap_q = np.min(np.where(jump > AXIS_EPS, self.lim.a_step / np.where(jump > AXIS_EPS, jump, 1.0), np.inf),
-                           axis=1)
-        keep = np.isfinite(cap_q)
-        return br[keep], np.sqrt(cap_q[keep])
+            if lim.a_step is not None:
+                jump = np.abs(right.d2 - left.d2)
+                cap_f = np.sqrt(np.min(np.where(jump > AXIS_EPS, lim.a_step / np.where(jump > AXIS_EPS, jump, 1.0),
+                                                np.inf), axis=1))
+            if lim.v_step is not None:
+                jump1 = np.abs(right.d1 - left.d1)
+                cap_f = np.minimum(cap_f, np.min(np.where(
+                    jump1 > AXIS_EPS, lim.v_step / np.where(jump1 > AXIS_EPS, jump1, 1.0), np.inf), axis=1))
+        keep = np.isfinite(cap_f)
+        return br[keep], cap_f[keep]
 
     def _step_servo_error(
         self, g: PathSamples, fd: kinematics.FeedDerivs, left: NDArray[np.int64], right: NDArray[np.int64],
@@ -945,8 +965,13 @@ class NlpRefiner:
         v, acc, j = kinematics.axis_kinematics(_take(g, both), *(x[both] for x in fd))
         e = np.abs(lim.Kv * v + lim.Ka * acc + lim.Kj * j).reshape(2, lt.size, 3)
         seen = lim.Kj * np.abs(acc[lt.size :] - acc[: lt.size]) / (2.0 * Ts)
+        # a velocity step (tangent break passed at speed) is an impulse in the differences
+        dv = np.abs(v[lt.size :] - v[: lt.size])
+        seen = seen + (lim.Ka * V_KERNEL_A / Ts + lim.Kj * V_KERNEL_JC / Ts**2) * dv
+        u = np.abs(lim.M * acc + lim.b * v + lim.c + lim.d * np.sign(v)).reshape(2, lt.size, 3)
         for side, idx in enumerate((lt, rt)):
             np.maximum.at(util["servo_error"], idx, (e[side] + seen) / lim.emax)
+            np.maximum.at(util["control_signal"], idx, (u[side] + lim.M * V_KERNEL_A * dv / Ts) / lim.umax)
         np.maximum.at(util["step"], rt, np.max((np.maximum(e[0], e[1]) + seen) / lim.emax, axis=1))
 
     def _sampled(

@@ -40,8 +40,9 @@ from numpy.typing import NDArray
 from geometry.toolpath import PathSamples, Piece, Toolpath
 from solvers import kinematics, verify
 from solvers.errors import InfeasibleError, InvalidMachineError, InvalidOptionsError, LimitViolationError, SolverFailure
-from solvers.lp import INHERITED_INTERVALS, LimitSet, WindowLP, WindowResult, WindowSpec, velocity_bound
+from solvers.lp import INHERITED_INTERVALS, LimitSet, WindowLP, WindowResult, WindowSpec, v_step_limit, velocity_bound
 from solvers.machine import AXES, Machine, drive_outputs
+from solvers.nlp import V_STEP_SHARE as NLP_V_STEP_SHARE
 from solvers.nlp import NlpLimits, NlpRefiner, NlpStats
 from solvers.timing import PieceProfile, PieceTiming, stuck
 
@@ -712,7 +713,8 @@ def schedule_stream(
     t_start = time.perf_counter()
     paused = 0.0  # time spent suspended at a yield (the consumer's), not compute
     lim = LimitSet.from_machine(
-        machine, opt.sample_period, opt.jerk, rest_from_drive=opt.method == "lp+nlp" and machine.has_drives
+        machine, opt.sample_period, opt.jerk, rest_from_drive=opt.method == "lp+nlp" and machine.has_drives,
+        kinematic=opt.nlp_kinematic,
     )
     stats: dict[str, Any] = {
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
@@ -725,7 +727,8 @@ def schedule_stream(
     nlp = opt.method == "lp+nlp"
     nlp_stats = NlpStats() if nlp else None
     nlp_lim = NlpLimits.from_machine(
-        machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lim.a_step, opt.sample_period
+        machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lim.a_step, opt.sample_period,
+        v_step_limit(machine, opt.sample_period, opt.jerk, True, opt.nlp_kinematic, share=NLP_V_STEP_SHARE),
     ) if nlp else None
     # shared by the first NLP solve of every piece, in path order (repairs get their own)
     refiners: dict[tuple[int, int], NlpRefiner] = {}

@@ -1,0 +1,68 @@
+"""Junctions that turn by less than the corner tolerance are passed at speed, within every limit.
+
+Passing a tangent break of angle theta at feed f steps each axis velocity by f |jump of x_s|
+(|jump| = 2 sin(theta / 2) in all).  Sampled at Ts that step is an impulse in the differences of the
+positions: up to |step| / Ts in the acceleration and |step| / Ts^2 in the jerk.  Before the
+velocity-step rows (``solvers.lp.v_step_limit``) such a polyline got a typed 422 ("sampled jerk
+2.9 x its limit" at 0.2 degrees).  Checked here independently: finite differences of the returned
+1 kHz positions (``tests/fdcheck.py``), v/a/j for method lp and u/e for lp+nlp.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from geometry import Toolpath, primitives
+from solvers.machine import router
+from solvers.pipeline import Options, schedule
+from tests.fdcheck import fd_drive, utilisation
+
+TS = 1e-3
+#: Allowed overshoot of any limit in the sampled output (issue: 1.01 x).
+LIMIT_FACTOR = 1.01
+LEG_MM = 10.0
+LEGS = 12
+
+
+def _zigzag(turn_deg: float, lift: bool) -> Toolpath:
+    """LEGS legs of LEG_MM, each turning by turn_deg (alternating sides; with ``lift`` the turns
+    alternate between the XY and the XZ plane, so every axis sees velocity steps)."""
+    d = np.array([1.0, 0.0, 0.0])
+    pts = [np.zeros(3)]
+    for i in range(LEGS):
+        th = np.radians(turn_deg) * (1 if i % 4 < 2 else -1)
+        c, s = np.cos(th), np.sin(th)
+        if lift and i % 2:
+            d = np.array([c * d[0] - s * d[2], d[1], s * d[0] + c * d[2]])
+        else:
+            d = np.array([c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]])
+        pts.append(pts[-1] + LEG_MM * d)
+    return Toolpath([primitives.polyline(np.array(pts))])
+
+
+@pytest.mark.parametrize("method", ["lp", "lp+nlp"])
+@pytest.mark.parametrize("turn_deg,lift", [(0.05, False), (0.2, True), (0.45, False), (0.45, True)])
+def test_sub_tolerance_turns_pass_at_speed_within_limits(turn_deg: float, lift: bool, method: str) -> None:
+    tp = _zigzag(turn_deg, lift)
+    assert tp.corners == []  # below the 0.5 degree tolerance: no rest points
+    m = router()
+    sch = schedule(tp, m, Options(method=method))
+    pos = sch.samples.position
+    assert np.all(np.isfinite(pos))
+    if method == "lp":
+        vmax, amax, jmax = m.limit_arrays()
+        util = utilisation(pos, TS, vmax, amax, jmax)
+        assert max(util.values()) <= LIMIT_FACTOR, util
+    else:
+        dr = m.drive_arrays()
+        u, e = fd_drive(pos, TS, dr)
+        assert float(np.max(np.abs(u) / dr["umax"])) <= LIMIT_FACTOR
+        assert float(np.max(np.abs(e) / dr["emax"])) <= LIMIT_FACTOR
+    # passed at speed: the feed at every vertex is well above rest
+    vertex_s = LEG_MM * np.arange(1, LEGS)
+    feed_at = np.interp(vertex_s, sch.samples.s, sch.samples.feed)
+    assert np.all(feed_at > 1.0), feed_at
+    # and faster than stopping at every vertex (the same path with every junction a corner)
+    stop = schedule(Toolpath(tp.segments, corner_tol_deg=0.0), m, Options(method=method))
+    assert sch.summary["motion_time"] < stop.summary["motion_time"]
