@@ -29,7 +29,7 @@ the tables of closed-form sub-segments only when asked for.
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final, overload
 
 import numpy as np
@@ -52,6 +52,9 @@ GAP_TOL_MM = 1e-3
 CORNER_TOL_DEG = 0.5
 #: Shortest segment (mm) accepted; below it the segment has no length to travel.
 MIN_SEGMENT_LENGTH_MM = 1e-9
+#: Gaps between consecutive segments above this (and within the gap tolerance) are closed by moving
+#: the NURBS end control points that meet there (``close_gaps``); smaller ones are rounding.
+GAP_CLOSE_MIN_MM = 1e-9
 #: Where |C'| vanishes (repeated control points) derivatives are taken this far
 #: inside (fraction of the parameter domain): the arc-length derivatives have a
 #: limit there but the u-derivative formulas divide by |C'|.
@@ -64,6 +67,49 @@ JUNCTION_CHUNK: Final = 65_536
 GENERIC: Final = 0
 LINE: Final = 1
 CLOTHOID: Final = 2
+
+
+def _clamped(seg: NurbsSegment) -> tuple[bool, bool]:
+    """Whether the curve starts / ends at its first / last control point (knot of multiplicity p + 1)."""
+    U, p = seg.knots, seg.degree
+    return bool(U[0] == U[p]), bool(U[-1] == U[-1 - p])
+
+
+def close_gaps(segments: Sequence[Segment], gap_tol: float) -> tuple[list[Segment], list[tuple[int, float]]]:
+    """``segments`` with the gaps of GAP_CLOSE_MIN_MM .. gap_tol mm between consecutive ones closed.
+
+    A gap the schedule passed through would be a position step between two samples (a 0.5 um gap
+    made the sampled jerk 12 x jmax).  Where segment i ends at a and segment i + 1 starts at b, the
+    end control points meeting there move to their midpoint, each by |b - a| / 2.  A NURBS's rational
+    basis functions are in [0, 1], so no point of either curve moves by more than that: the path
+    stays within gap_tol / 2 of the input.  Gaps where a side is not a NURBS clamped at that end
+    are left as they are.
+    Returns (segments, [(i + 1, gap mm) for each gap closed])."""
+    out = list(segments)
+    starts = np.full((len(out), 3), np.nan)
+    ends = np.full((len(out), 3), np.nan)
+    for i, seg in enumerate(out):
+        if isinstance(seg, NurbsSegment):
+            cs, ce = _clamped(seg)
+            if cs:
+                starts[i] = seg.control_points[0]
+            if ce:
+                ends[i] = seg.control_points[-1]
+    gap = np.linalg.norm(starts[1:] - ends[:-1], axis=1)  # NaN where a side is not a clamped NURBS
+    closed: list[tuple[int, float]] = []
+    for k in np.flatnonzero((gap > GAP_CLOSE_MIN_MM) & (gap <= gap_tol)).tolist():
+        a, b = out[k], out[k + 1]
+        if not (isinstance(a, NurbsSegment) and isinstance(b, NurbsSegment)):  # (a finite gap has both)
+            continue
+        mid = 0.5 * (ends[k] + starts[k + 1])
+        Pa, Pb = a.control_points.copy(), b.control_points.copy()
+        Pa[-1] = mid
+        Pb[0] = mid
+        out[k] = replace(a, control_points=Pa)
+        out[k + 1] = replace(b, control_points=Pb)
+        ends[k], starts[k + 1] = mid, mid
+        closed.append((k + 1, float(gap[k])))
+    return out, closed
 
 
 def segment_kind(seg: Segment) -> int:
@@ -294,7 +340,8 @@ class Toolpath:
     """Validated chain of segments with arc-length evaluation.
 
     Attributes:
-        segments: the input segments (as given, in order).
+        segments: the input segments in order, as given but for gaps within ``gap_tol`` closed (``close_gaps``).
+        closed_gaps: (index of the segment after the gap, gap in mm) for every gap closed.
         subs: sub-segments after splitting at C0 knots, with their arc-length tables (``SubTables``).
         sub_kind: (S,) GENERIC, LINE or CLOTHOID per sub-segment (how it is evaluated).
         sub_origin: (S,) index of the input segment each sub-segment came from.
@@ -323,7 +370,7 @@ class Toolpath:
             raise GeometryError("segments", [], "a toolpath needs at least one segment")
         if not (np.isfinite(corner_tol_deg) and 0.0 <= corner_tol_deg < 180.0):
             raise GeometryError("corner_tolerance_deg", corner_tol_deg, "must be in [0, 180)")
-        self.segments = list(segments)
+        self.segments, self.closed_gaps = close_gaps(segments, gap_tol)
         self.unblended = list(unblended)
         self._feed = self._check_feed_limits(feed_limits, len(self.segments))
         parts: list[Segment] = []

@@ -895,6 +895,8 @@ def schedule_stream(
             {"segment": u.segment, "position": list(u.position), "angle_deg": u.angle_deg, "reason": u.reason}
             for u in getattr(toolpath, "unblended", ())
         ],
+        # gaps within the gap tolerance closed by moving the end control points to their midpoint
+        "closed_gaps": [{"segment": i, "gap_mm": g} for i, g in getattr(toolpath, "closed_gaps", ())],
         "binding": _binding(toolpath, profiles, lim, opt, machine),
         "rest_acceleration": {ax: float(v) for ax, v in zip(AXES, lim.a_rest, strict=True)},
     }

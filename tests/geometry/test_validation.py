@@ -309,7 +309,9 @@ def test_gap_above_one_micron_names_segment(gap_mm: float) -> None:
 def test_gap_of_half_a_micron_is_accepted() -> None:
     gap = 0.5e-3
     tp = Toolpath([line((0, 0, 0), (10, 0, 0)), line((10, gap, 0), (20, gap, 0))])
-    assert tp.length == pytest.approx(20.0, abs=1e-12)
+    # closed: both lines end at the gap's midpoint (``close_gaps``), each tilted by gap / 2 over 10 mm
+    assert tp.closed_gaps == [(1, pytest.approx(gap, rel=1e-12))]
+    assert tp.length == pytest.approx(2.0 * np.hypot(10.0, 0.5 * gap), abs=1e-12)
     assert tp.corners == []
     assert len(tp.pieces) == 1
 

@@ -62,7 +62,7 @@ SCHEDULE_CASES: dict[str, Builder] = {
     "zero_length_span": lambda: [NurbsSegment.create(
         3, [0, 0, 0, 0, 0.3, 0.6, 1, 1, 1, 1], [[0, 0], [5, 0], [10, 2], [10, 2], [15, 5], [20, 5]])],
     "curvature_radius_below_1um": lambda: _parabola(0.01, TIGHT_RADIUS_MM),
-    # second segment starts 0.5 um off the first one's end (within the 1e-3 mm gap tolerance)
+    # second segment starts 0.5 um off the first one's end (within the 1e-3 mm gap tolerance): closed
     "near_coincident_segments": lambda: [primitives.line([0, 0, 0], [10, 0, 0]),
                                          primitives.line([10, 0, 5e-4], [20, 0, 5e-4])],
     # the second segment runs back over the first (a 180 degree corner)
@@ -74,10 +74,7 @@ SCHEDULE_CASES: dict[str, Builder] = {
 
 
 #: Cases whose outcome today is not the defined one (strict: a fix shows up as XPASS).
-KNOWN_BAD = {
-    "near_coincident_segments": "the 0.5 um gap is accepted (< 1e-3 mm) and jumped at full feed: the sampled z "
-                                "position steps by 0.5 um between two samples, FD jerk z ~12 x jmax",
-}
+KNOWN_BAD: dict[str, str] = {}
 
 
 @pytest.mark.parametrize("name", [
