@@ -8,18 +8,20 @@ Each seed is one case from ``tests.reliability.gen.case(seed, profile)``; each c
 ``tests.reliability.checker`` (no solver code).  Outcomes are appended per seed to
 ``<out>.jsonl`` so an interrupted run resumes where it stopped; the summary (counts, failures,
 worst utilisation per constraint) is written to ``<out>`` (default bench/results/random_cases.json).
-Each run is bounded in memory (RLIMIT_AS) and time (SIGALRM); hitting either counts as a failure.
+Cases run in a worker process, bounded in memory (RLIMIT_AS) and time (the worker is killed and
+replaced after CASE_TIMEOUT_S); hitting either counts as a failure.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing as mp
 import resource
-import signal
 import sys
 import time
 import warnings
+from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
@@ -30,47 +32,82 @@ MEMORY_LIMIT_BYTES = 4 * 2**30
 CASE_TIMEOUT_S = 120
 
 
-class CaseTimeout(BaseException):
-    """Raised by SIGALRM.  A BaseException, like KeyboardInterrupt, so the NLP's per-window failure
-    handling (``except Exception``: keep the LP feed) does not swallow it."""
-
-
-#: Set when the alarm of the running case fired.  CasADi catches a Python exception raised while
-#: Ipopt runs and reports it as an interrupted solve, which the NLP then handles as a failed window
-#: (keeps the LP feed): bench seed 84 (202 s) and seed 68 (327 s) lp+nlp were counted as passed that
-#: way.  So a case whose alarm fired fails whatever it returns, and the alarm re-arms every
-#: REARM_S seconds so the remaining windows are interrupted too and the case ends soon.
-_fired = False
-REARM_S = 1
-
-
-def _alarm(signum: int, frame: Any) -> None:
-    global _fired
-    _fired = True
-    signal.alarm(REARM_S)
-    raise CaseTimeout(f"over {CASE_TIMEOUT_S} s")
-
-
-def run_seed(seed: int, profile: str) -> list[dict[str, Any]]:
-    global _fired
-    out = []
-    c = gen.case(seed, profile)
-    for method in harness.METHODS:
-        t0 = time.perf_counter()
-        _fired = False
-        signal.alarm(CASE_TIMEOUT_S)
+def _serve(conn: Connection, profile: str) -> None:
+    """Worker process: run (seed, method) requests, answer each with its row fields."""
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT_BYTES, MEMORY_LIMIT_BYTES))
+    warnings.simplefilter("ignore")
+    cases: dict[int, gen.Case] = {}
+    while True:
         try:
+            seed, method = conn.recv()
+        except EOFError:
+            return
+        try:
+            c = cases.get(seed) or gen.case(seed, profile)
+            cases = {seed: c}
             o = harness.run(c, method)
-        except (CaseTimeout, MemoryError) as exc:
-            o = harness.Outcome(seed, method, False, error=f"{type(exc).__name__}: {exc}")
-        finally:
-            signal.alarm(0)
-        if _fired and o.ok:
-            o = harness.Outcome(seed, method, False, error=f"CaseTimeout: over {CASE_TIMEOUT_S} s (interrupted "
-                                                           "inside a solver, which returned a fallback)")
-        out.append({"seed": seed, "method": method, "ok": o.ok, "error": o.error, "violations": o.violations,
-                    "utilisation": o.utilisation, "samples": o.samples, "nlp_fallbacks": o.nlp_fallbacks,
-                    "seconds": time.perf_counter() - t0, "tags": {k: v for k, v in c.tags.items()}})
+            row = {"ok": o.ok, "error": o.error, "violations": o.violations, "utilisation": o.utilisation,
+                   "samples": o.samples, "nlp_fallbacks": o.nlp_fallbacks}
+        except BaseException as exc:  # whatever happens is the case's outcome
+            row = {"ok": False, "error": f"{type(exc).__name__}: {exc}", "violations": [], "utilisation": {},
+                   "samples": 0, "nlp_fallbacks": 0}
+        conn.send(row)
+
+
+class Worker:
+    """One forked process that runs cases one after another (its NLP shape caches stay warm) and is
+    killed and replaced when a case runs over the time limit.
+
+    The time limit used to be SIGALRM in this process, raising inside the solvers: the NLP's
+    per-window failure handling caught it (bench seed 84, lp+nlp, 202 s, counted as passed), and
+    CasADi, which turns an exception raised while Ipopt runs into an interrupted solve, made it a
+    failed window that kept the LP feed (bench seed 68, 327 s, passed).  A killed process cannot
+    return a fallback."""
+
+    def __init__(self, profile: str) -> None:
+        self.profile = profile
+        self._start()
+
+    def _start(self) -> None:
+        ctx = mp.get_context("fork")
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_serve, args=(child, self.profile), daemon=True)
+        self.proc.start()
+        child.close()
+
+    def run(self, seed: int, method: str, timeout: float) -> dict[str, Any]:
+        try:
+            self.conn.send((seed, method))
+            if self.conn.poll(timeout):
+                row: dict[str, Any] = self.conn.recv()
+                return row
+            error = f"CaseTimeout: over {timeout:g} s"
+        except (EOFError, OSError):
+            self.proc.join(5)
+            error = f"worker died: exit code {self.proc.exitcode}"
+        self.close()
+        self._start()
+        return {"ok": False, "error": error, "violations": [], "utilisation": {}, "samples": 0, "nlp_fallbacks": 0}
+
+    def close(self) -> None:
+        self.proc.kill()
+        self.proc.join()
+        self.conn.close()
+
+
+def run_seed(seed: int, profile: str, worker: Worker | None = None) -> list[dict[str, Any]]:
+    own = worker is None
+    w = Worker(profile) if worker is None else worker
+    out = []
+    tags = dict(gen.case(seed, profile).tags)
+    try:
+        for method in harness.METHODS:
+            t0 = time.perf_counter()
+            row = w.run(seed, method, CASE_TIMEOUT_S)
+            out.append({"seed": seed, "method": method, **row, "seconds": time.perf_counter() - t0, "tags": tags})
+    finally:
+        if own:
+            w.close()
     return out
 
 
@@ -113,9 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--retry-failed", action="store_true",
                     help="run again the seeds that failed earlier (after a fix), keep the rest")
     args = ap.parse_args(argv)
-    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT_BYTES, MEMORY_LIMIT_BYTES))
-    signal.signal(signal.SIGALRM, _alarm)
     warnings.simplefilter("ignore")
+    worker = Worker(args.profile)
     log = args.out.with_suffix(".jsonl")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
@@ -133,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
         for seed in range(args.start, args.start + args.n):
             if seed in done:
                 continue
-            new = run_seed(seed, args.profile)
+            new = run_seed(seed, args.profile, worker)
             for r in new:
                 fh.write(json.dumps(r) + "\n")
             fh.flush()
