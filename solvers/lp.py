@@ -615,12 +615,16 @@ class WindowLP:
     ) -> tuple[NDArray[np.bool_], FloatArray, FloatArray, FloatArray] | None:
         """The impulse of the velocity steps at tangent breaks passed at speed, as the sampled
         acceleration (``power`` 1, ``kernel`` V_KERNEL_A) or jerk (2, V_KERNEL_J) of axis ``ax`` sees it
-        at points s: kernel |jump_bx| f_b / Ts^power per unit ``limit``, for points within 3 Ts of travel
-        (at the window's largest feed sqrt(Q)) of break b, whose differences can span it.
+        at points s: kernel |jump_bx| f_b / Ts^power per unit ``limit``, for points whose differences can
+        span break b: within 3 Ts of travel of it, at the largest feed its cap allows plus what the
+        acceleration limits add over 3 Ts (a polyline of 0.5 mm legs is dense: at the window's largest
+        feed three breaks were within reach of one point and their rows infeasible).
 
         Returns (near (K,) bool, W (near.sum(), nl) the weight w_b of f_b at each near point (0 where
-        b is not close), the live breaks' s (nl,), q0 (nl,) the largest q each allows: min(cap, Q)),
-        or None where no break's impulse reaches V_STEP_MIN of the limit."""
+        b is not close), the live breaks' s (nl,), q0 (nl,) the q at which f_b is linearised: the
+        largest q the break's cap allows, min(cap, Q), divided by the square of the number of live
+        breaks within twice the reach (so the constant shares of breaks close to one point add up to
+        at most half the limit)), or None where no break's impulse reaches V_STEP_MIN of the limit."""
         Ts = self.lim.v_step_period
         if Ts is None or self.lim.v_step is None or self.breaks.size == 0:
             return None
@@ -630,11 +634,15 @@ class WindowLP:
         live = w * np.sqrt(q0) > V_STEP_MIN
         if not live.any():
             return None
-        close = np.abs(s[:, None] - br[live][None, :]) <= 3.0 * Ts * np.sqrt(self.Q) + BREAK_EPS_MM
-        near = close.any(axis=1)
+        br, q0, w = br[live], q0[live], w[live]
+        reach = 3.0 * Ts * (np.sqrt(q0) + 3.0 * Ts * float(np.linalg.norm(self.lim.amax))) + BREAK_EPS_MM
+        crowd = np.sum(np.abs(br[:, None] - br[None, :]) <= reach[:, None] + reach[None, :], axis=1)
+        close = np.abs(s[:, None] - br[None, :]) <= reach[None, :]
+        near: NDArray[np.bool_] = np.asarray(close.any(axis=1))
         if not near.any():
             return None
-        return near, np.where(close[near], w[live][None, :], 0.0), br[live], q0[live]
+        W = np.asarray(np.where(close[near], w[None, :], 0.0), dtype=np.float64)
+        return near, W, br, np.asarray(q0 / crowd.astype(np.float64) ** 2, dtype=np.float64)
 
     def _vstep_coupling(
         self, s: FloatArray, ax: int, limit: float, kernel: float, power: int

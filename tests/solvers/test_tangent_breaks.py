@@ -66,3 +66,18 @@ def test_sub_tolerance_turns_pass_at_speed_within_limits(turn_deg: float, lift: 
     # and faster than stopping at every vertex (the same path with every junction a corner)
     stop = schedule(Toolpath(tp.segments, corner_tol_deg=0.0), m, Options(method=method))
     assert sch.summary["motion_time"] < stop.summary["motion_time"]
+
+
+def test_dense_polyline_of_small_turns_schedules_within_limits() -> None:
+    """0.3 degrees every 0.5 mm (a tessellated arc of R 95 mm), method lp: several breaks lie within
+    the samples' reach of one point, and their coupled rows once added up to an infeasible LP."""
+    n = 80
+    th = np.radians(40.0 + 0.3 * np.arange(n))  # at 45 degrees both axes run at vmax: Q = 2 vmax^2
+    pts = np.zeros((n + 1, 3))
+    pts[1:, 0] = np.cumsum(0.5 * np.cos(th))
+    pts[1:, 1] = np.cumsum(0.5 * np.sin(th))
+    m = router()
+    sch = schedule(Toolpath([primitives.polyline(pts)]), m, Options(method="lp"))
+    vmax, amax, jmax = m.limit_arrays()
+    util = utilisation(sch.samples.position, TS, vmax, amax, jmax)
+    assert max(util.values()) <= LIMIT_FACTOR, util
