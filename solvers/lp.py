@@ -288,6 +288,13 @@ def axis_kinematics(
     return (fd[0], *kinematics.axis_kinematics(g, *fd))
 
 
+def tangent_jump(right: PathSamples, left: PathSamples, eps: float) -> FloatArray:
+    """|jump of x_s| per axis (K, 3) at breaks from the geometry eps mm either side: the difference
+    of x_s less its smooth part, eps (x_ss(+) + x_ss(-)), so a smooth knot of a tight curve (x_s
+    turning by 2 eps kappa over the 2 eps) does not count as a tangent break."""
+    return np.asarray(np.abs(right.d1 - left.d1 - eps * (right.d2 + left.d2)), dtype=np.float64)
+
+
 Coupling = tuple[NDArray[np.bool_], sp.csr_matrix, FloatArray]
 
 
@@ -704,7 +711,7 @@ class WindowLP:
             br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
             if br.size:
                 right, left = self.geometry(br + BREAK_EPS_MM), self.geometry(br - BREAK_EPS_MM)
-                jump, jump1 = np.abs(right.d2 - left.d2), np.abs(right.d1 - left.d1)
+                jump, jump1 = np.abs(right.d2 - left.d2), tangent_jump(right, left, BREAK_EPS_MM)
             else:
                 jump = jump1 = np.zeros((0, 3))
             self._step_cache = (br, np.asarray(jump, dtype=np.float64), np.asarray(jump1, dtype=np.float64))

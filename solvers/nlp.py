@@ -81,7 +81,7 @@ from scipy.ndimage import maximum_filter1d
 
 from geometry.toolpath import PathSamples
 from solvers import bspline, kinematics
-from solvers.lp import V_KERNEL_A, V_KERNEL_JC
+from solvers.lp import V_KERNEL_A, V_KERNEL_JC, tangent_jump
 from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
@@ -939,7 +939,7 @@ class NlpRefiner:
                 cap_f = np.sqrt(np.min(np.where(jump > AXIS_EPS, lim.a_step / np.where(jump > AXIS_EPS, jump, 1.0),
                                                 np.inf), axis=1))
             if lim.v_step is not None:
-                jump1 = np.abs(right.d1 - left.d1)
+                jump1 = tangent_jump(right, left, BREAK_EPS_MM)
                 cap_f = np.minimum(cap_f, np.min(np.where(
                     jump1 > AXIS_EPS, lim.v_step / np.where(jump1 > AXIS_EPS, jump1, 1.0), np.inf), axis=1))
         keep = np.isfinite(cap_f)
