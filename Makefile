@@ -12,7 +12,7 @@ PYTEST_ARGS ?=
 LOCK := requirements.lock
 PIP := $(BIN)/python -m pip install -q -c $(LOCK)
 
-.PHONY: venv run test lint typecheck pytest bench clean openapi load browser screenshot lock soak fuzz
+.PHONY: venv run test lint typecheck pytest bench clean openapi load browser screenshot lock soak fuzz docker-dry
 
 $(STAMP): pyproject.toml $(LOCK)
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -83,3 +83,7 @@ browser:
 screenshot: $(STAMP)
 	FEEDSCHED_REQUIRE_BROWSER=1 FEEDSCHED_SCREENSHOT=$(CURDIR)/docs/report-flower.png \
 		$(BIN)/python -m pytest -q tests/service/test_browser.py
+
+# the Dockerfile's steps without a Docker engine: COPY set, pip install, non-root CMD, HEALTHCHECK
+docker-dry: $(STAMP)
+	$(BIN)/python -m bench.docker_dry
