@@ -288,6 +288,13 @@ def axis_kinematics(
     return (fd[0], *kinematics.axis_kinematics(g, *fd))
 
 
+def step_cap(limit: FloatArray, jump: FloatArray) -> FloatArray:
+    """min over axes of limit_x / |jump_x| at each break (nb,) from jump (nb, 3); inf where no axis jumps."""
+    with np.errstate(divide="ignore"):
+        return np.asarray(np.min(np.where(jump > AXIS_EPS, limit[None, :] / np.where(jump > AXIS_EPS, jump, 1.0),
+                                          np.inf), axis=1), dtype=np.float64)
+
+
 def tangent_jump(right: PathSamples, left: PathSamples, eps: float) -> FloatArray:
     """|jump of x_s| per axis (K, 3) at breaks from the geometry eps mm either side: the difference
     of x_s less its smooth part, eps (x_ss(+) + x_ss(-)), so a smooth knot of a tight curve (x_s
@@ -601,21 +608,12 @@ class WindowLP:
     def _step_caps(self) -> FloatArray:
         """Cap on q at each break from the acceleration step, min_x a_step_x / |jump of x_ss|, (nb,)."""
         br, jump, _ = self._steps()
-        if self.lim.a_step is None:
-            return np.full(br.size, np.inf)
-        with np.errstate(divide="ignore"):
-            return np.asarray(np.min(np.where(
-                jump > AXIS_EPS, self.lim.a_step[None, :] / np.where(jump > AXIS_EPS, jump, 1.0), np.inf), axis=1))
+        return np.full(br.size, np.inf) if self.lim.a_step is None else step_cap(self.lim.a_step, jump)
 
     def _vstep_caps(self) -> FloatArray:
         """Cap on q at each break from the velocity step, min_x (v_step_x / |jump of x_s|)^2, (nb,)."""
         br, _, jump1 = self._steps()
-        if self.lim.v_step is None:
-            return np.full(br.size, np.inf)
-        with np.errstate(divide="ignore"):
-            return np.asarray(np.min(np.where(
-                jump1 > AXIS_EPS, self.lim.v_step[None, :] / np.where(jump1 > AXIS_EPS, jump1, 1.0), np.inf), axis=1)
-                ** 2)
+        return np.full(br.size, np.inf) if self.lim.v_step is None else step_cap(self.lim.v_step, jump1) ** 2
 
     def _vstep_terms(
         self, s: FloatArray, ax: int, limit: float, kernel: float, power: int

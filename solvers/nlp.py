@@ -81,7 +81,7 @@ from scipy.ndimage import maximum_filter1d
 
 from geometry.toolpath import PathSamples
 from solvers import bspline, kinematics
-from solvers.lp import V_KERNEL_A, V_KERNEL_JC, tangent_jump
+from solvers.lp import V_KERNEL_A, V_KERNEL_JC, step_cap, tangent_jump
 from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
@@ -933,15 +933,10 @@ class NlpRefiner:
             return br, np.zeros(0)
         right, left = geometry(br + BREAK_EPS_MM), geometry(br - BREAK_EPS_MM)
         cap_f = np.full(br.size, np.inf)
-        with np.errstate(divide="ignore"):
-            if lim.a_step is not None:
-                jump = np.abs(right.d2 - left.d2)
-                cap_f = np.sqrt(np.min(np.where(jump > AXIS_EPS, lim.a_step / np.where(jump > AXIS_EPS, jump, 1.0),
-                                                np.inf), axis=1))
-            if lim.v_step is not None:
-                jump1 = tangent_jump(right, left, BREAK_EPS_MM)
-                cap_f = np.minimum(cap_f, np.min(np.where(
-                    jump1 > AXIS_EPS, lim.v_step / np.where(jump1 > AXIS_EPS, jump1, 1.0), np.inf), axis=1))
+        if lim.a_step is not None:
+            cap_f = np.sqrt(step_cap(lim.a_step, np.abs(right.d2 - left.d2)))
+        if lim.v_step is not None:
+            cap_f = np.minimum(cap_f, step_cap(lim.v_step, tangent_jump(right, left, BREAK_EPS_MM)))
         keep = np.isfinite(cap_f)
         return br[keep], cap_f[keep]
 
