@@ -55,6 +55,8 @@ MIN_SEGMENT_LENGTH_MM = 1e-9
 #: Gaps between consecutive segments above this (and within the gap tolerance) are closed by moving
 #: the NURBS end control points that meet there (``close_gaps``); smaller ones are rounding.
 GAP_CLOSE_MIN_MM = 1e-9
+#: Turns below the corner tolerance are reported (``Toolpath.passed_turns``) from this angle on.
+PASSED_TURN_MIN_DEG = 1e-3
 #: Where |C'| vanishes (repeated control points) derivatives are taken this far
 #: inside (fraction of the parameter domain): the arc-length derivatives have a
 #: limit there but the u-derivative formulas divide by |C'|.
@@ -67,6 +69,21 @@ JUNCTION_CHUNK: Final = 65_536
 GENERIC: Final = 0
 LINE: Final = 1
 CLOTHOID: Final = 2
+
+
+@dataclass(frozen=True)
+class PassedTurns:
+    """Junctions turning by less than the corner tolerance (passed at speed), in order of s.
+
+    Attributes:
+        s: (n,) arc length of each, mm.
+        angle_deg: (n,) the turn.
+        jump: (n, 3) |jump of the unit tangent x_s| per axis (the velocity steps by feed x jump there).
+    """
+
+    s: FloatArray
+    angle_deg: FloatArray
+    jump: FloatArray
 
 
 def _clamped(seg: NurbsSegment) -> tuple[bool, bool]:
@@ -350,6 +367,7 @@ class Toolpath:
         junction_jumps: (S - 1, 2) the jumps of C_ss and of C_sss (Euclidean norm, 1/mm and 1/mm^2)
             across each junction between sub-segments (corners included).
         corners: rest points inside the path, in order of s.
+        passed_turns: junctions turning by PASSED_TURN_MIN_DEG up to the corner tolerance (``PassedTurns``).
         unblended: corners that a corner blend left as they were, with the reason (``Unblended``).
         pieces: rest-to-rest stretches.
     """
@@ -490,6 +508,7 @@ class Toolpath:
         gaps = np.empty(J)
         cos = np.empty(J)
         p_in = np.empty((J, 3))
+        dt = np.empty((J, 3))  # jump of the unit tangent
         self.junction_jumps = np.empty((J, 2))
         for a in range(0, J, JUNCTION_CHUNK):
             b = min(J, a + JUNCTION_CHUNK)  # junction k joins the end of sub k to the start of sub k + 1
@@ -501,6 +520,9 @@ class Toolpath:
             norms = np.linalg.norm(t_out, axis=1) * np.linalg.norm(t_in, axis=1)
             cos[a:b] = np.einsum("ij,ij->i", t_out, t_in) / norms
             p_in[a:b] = D_in[0]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                dt[a:b] = (t_in / np.linalg.norm(t_in, axis=1)[:, None]
+                           - t_out / np.linalg.norm(t_out, axis=1)[:, None])
         bad = np.flatnonzero(~(gaps <= gap_tol))
         if bad.size:
             k = int(bad[0])
@@ -522,6 +544,10 @@ class Toolpath:
             )
             for k in np.flatnonzero(angle > tol_rad).tolist()
         ]
+        # turns below the corner tolerance, passed at speed (the feed is capped there: solvers.lp.v_step_limit)
+        turn = 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(dt, axis=1), 0.0, 1.0))  # accurate near 0
+        at = np.flatnonzero((angle <= tol_rad) & (turn > np.radians(PASSED_TURN_MIN_DEG)))
+        self.passed_turns = PassedTurns(self.offsets[at + 1], np.degrees(turn[at]), np.abs(dt[at]))
 
     @staticmethod
     def _jumps(D_out: FloatArray, D_in: FloatArray) -> FloatArray:

@@ -40,7 +40,16 @@ from numpy.typing import NDArray
 from geometry.toolpath import PathSamples, Piece, Toolpath
 from solvers import kinematics, verify
 from solvers.errors import InfeasibleError, InvalidMachineError, InvalidOptionsError, LimitViolationError, SolverFailure
-from solvers.lp import INHERITED_INTERVALS, LimitSet, WindowLP, WindowResult, WindowSpec, v_step_limit, velocity_bound
+from solvers.lp import (
+    INHERITED_INTERVALS,
+    LimitSet,
+    WindowLP,
+    WindowResult,
+    WindowSpec,
+    step_cap,
+    v_step_limit,
+    velocity_bound,
+)
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.nlp import V_STEP_SHARE as NLP_V_STEP_SHARE
 from solvers.nlp import NlpLimits, NlpRefiner, NlpStats
@@ -53,6 +62,8 @@ SOLVERS = ("highs", "clarabel")
 #: Fewest knot intervals in a piece (short pieces need knots to shape their
 #: accelerate/decelerate ramps: 3 made 1-5 mm lines 2.1x slower than Ruckig).
 MIN_INTERVALS = 16
+#: Turns passed at speed listed in ``diagnostics.passed_turns`` (those with the lowest feed caps).
+PASSED_TURNS_LISTED = 10
 #: Default knot spacing as a fraction of the machine's stopping distance.
 KNOT_SPACING_PER_STOP = 0.1
 #: Overlap safety factor over the stopping distance (spec §6).
@@ -897,6 +908,7 @@ def schedule_stream(
         ],
         # gaps within the gap tolerance closed by moving the end control points to their midpoint
         "closed_gaps": [{"segment": i, "gap_mm": g} for i, g in getattr(toolpath, "closed_gaps", ())],
+        "passed_turns": _passed_turns(toolpath, nlp_lim.v_step if nlp_lim is not None else lim.v_step),
         "binding": _binding(toolpath, profiles, lim, opt, machine),
         "rest_acceleration": {ax: float(v) for ax, v in zip(AXES, lim.a_rest, strict=True)},
     }
@@ -927,6 +939,27 @@ def _peak_utilisation(
     if feed_cap is not None and np.isfinite(feed_cap).any():  # Fmax and programmed feeds (_feed_cap)
         out["feed"] = float(np.max(smp.feed / feed_cap))
     return out
+
+
+def _passed_turns(toolpath: Toolpath, v_step: FloatArray | None) -> dict[str, Any]:
+    """Junctions turning by less than the corner tolerance, passed at speed: how many, the largest
+    turn, and the PASSED_TURNS_LISTED with the lowest feed cap there (the velocity step's,
+    ``solvers.lp.v_step_limit``: feed x |jump of x_s| <= v_step per axis).  A dense polyline of small
+    turns is as slow as its caps; blending it (``corner_blend_mm``) removes them."""
+    pt = getattr(toolpath, "passed_turns", None)
+    if pt is None or pt.s.size == 0:
+        return {"count": 0}
+    cap = step_cap(v_step, pt.jump) if v_step is not None else np.full(pt.s.size, np.inf)
+    order = np.argsort(cap, kind="stable")[:PASSED_TURNS_LISTED]
+    return {
+        "count": int(pt.s.size),
+        "largest_angle_deg": float(np.max(pt.angle_deg)),
+        "lowest_feed_cap": [
+            {"s": float(pt.s[k]), "angle_deg": float(pt.angle_deg[k]),
+             "feed_cap": float(cap[k]) if np.isfinite(cap[k]) else None}
+            for k in order.tolist()
+        ],
+    }
 
 
 def _binding(

@@ -22,6 +22,8 @@ TS = 1e-3
 #: Allowed overshoot of any limit in the sampled output (issue: 1.01 x).
 LIMIT_FACTOR = 1.01
 LEG_MM = 10.0
+#: The feed at a vertex (interpolated from the samples) within this factor of the reported cap.
+FEED_CAP_TOL = 1.001
 LEGS = 12
 
 
@@ -63,6 +65,14 @@ def test_sub_tolerance_turns_pass_at_speed_within_limits(turn_deg: float, lift: 
     vertex_s = LEG_MM * np.arange(1, LEGS)
     feed_at = np.interp(vertex_s, sch.samples.s, sch.samples.feed)
     assert np.all(feed_at > 1.0), feed_at
+    # and reported, with the feed cap the schedule kept there
+    rep = sch.diagnostics["passed_turns"]
+    assert rep["count"] == LEGS - 1
+    assert rep["largest_angle_deg"] == pytest.approx(turn_deg, rel=1e-9)
+    for t in rep["lowest_feed_cap"]:
+        k = int(round(t["s"] / LEG_MM)) - 1
+        assert t["s"] == pytest.approx(vertex_s[k], abs=1e-9)
+        assert feed_at[k] <= t["feed_cap"] * FEED_CAP_TOL
     # and faster than stopping at every vertex (the same path with every junction a corner)
     stop = schedule(Toolpath(tp.segments, corner_tol_deg=0.0), m, Options(method=method))
     assert sch.summary["motion_time"] < stop.summary["motion_time"]
@@ -81,3 +91,11 @@ def test_dense_polyline_of_small_turns_schedules_within_limits() -> None:
     vmax, amax, jmax = m.limit_arrays()
     util = utilisation(sch.samples.position, TS, vmax, amax, jmax)
     assert max(util.values()) <= LIMIT_FACTOR, util
+
+
+def test_smooth_path_and_corners_report_no_passed_turns() -> None:
+    from geometry import examples as ex
+
+    for tp in (ex.flower(1), ex.square_corner(50.0)):
+        sch = schedule(tp, router(), Options(method="lp"))
+        assert sch.diagnostics["passed_turns"] == {"count": 0}
