@@ -98,6 +98,11 @@ V_STEP_SHARE_DRIVE = 0.5
 #: Velocity steps whose impulse stays below this share of a limit even at the break's largest feed
 #: get no coupled rows.
 V_STEP_MIN = 1e-3
+#: HiGHS presolve on the first try (a window that does not reach optimality is solved once more with
+#: the other setting).  Off: 26 % less HiGHS CPU over 100 random test-profile lp cases (4.97 -> 3.66 s,
+#: no failures, motion times within +-0.07 %: other optimal vertices); the LP's rows are already
+#: scaled and have no redundancy presolve could remove cheaply.
+PRESOLVE = "off"
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.
 COL_SCALE_MIN_BASIS = 0.1
@@ -888,6 +893,7 @@ class WindowLP:
         h = highspy.Highs()  # type: ignore[no-untyped-call]
         rows.highs = h
         h.setOptionValue("output_flag", False)
+        h.setOptionValue("presolve", PRESOLVE)
         lp = highspy.HighsLp()
         lp.num_col_ = A.shape[1]
         lp.num_row_ = A.shape[0]
@@ -907,8 +913,8 @@ class WindowLP:
     def _highs_run(self, h: highspy.Highs) -> FloatArray:
         h.run()
         status = h.getModelStatus()
-        if status != highspy.HighsModelStatus.kOptimal:
-            h.setOptionValue("presolve", "off")
+        if status != highspy.HighsModelStatus.kOptimal:  # once more with the other presolve setting
+            h.setOptionValue("presolve", "on" if PRESOLVE == "off" else "off")
             h.clearSolver()
             h.run()
             status = h.getModelStatus()
