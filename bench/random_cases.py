@@ -19,9 +19,11 @@ import argparse
 import json
 import math
 import multiprocessing as mp
+import queue
 import resource
 import signal
 import sys
+import threading
 import time
 import warnings
 from multiprocessing.connection import Connection
@@ -163,9 +165,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fresh", action="store_true", help="ignore earlier outcomes in <out>.jsonl")
     ap.add_argument("--retry-failed", action="store_true",
                     help="run again the seeds that failed earlier (after a fix), keep the rest")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="worker processes running cases side by side (each its own CPU limit; on an idle "
+                         "2-core machine 2 halves the wall time)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
-    worker = Worker(args.profile)
     log = args.out.with_suffix(".jsonl")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
@@ -179,20 +183,43 @@ def main(argv: list[str] | None = None) -> int:
             kept = [json.loads(line) for line in log.read_text().splitlines() if line.strip()]
             log.write_text("".join(json.dumps(r) + "\n" for r in kept if r["seed"] not in failed))
     done = {r["seed"] for r in rows}
+    todo = queue.SimpleQueue[int]()
+    for seed in range(args.start, args.start + args.n):
+        if seed not in done:
+            todo.put(seed)
+    lock = threading.Lock()
     with log.open("w" if args.fresh else "a") as fh:
-        for seed in range(args.start, args.start + args.n):
-            if seed in done:
-                continue
-            new = run_seed(seed, args.profile, worker)
-            for r in new:
-                fh.write(json.dumps(r) + "\n")
-            fh.flush()
-            rows.extend(new)
-            bad = [r for r in new if not r["ok"]]
-            for r in bad:
-                print(f"seed {seed} {r['method']}: {r['error'] or '; '.join(r['violations'])}", file=sys.stderr)
-            if (seed + 1) % 50 == 0:
-                args.out.write_text(json.dumps(summarise(rows, args.profile, args.n), indent=1))
+
+        def serve(worker: Worker) -> None:
+            """One thread per worker process: take seeds until none are left, log each seed's runs."""
+            try:
+                while True:
+                    try:
+                        seed = todo.get_nowait()
+                    except queue.Empty:
+                        return
+                    new = run_seed(seed, args.profile, worker)
+                    with lock:
+                        for r in new:
+                            fh.write(json.dumps(r) + "\n")
+                        fh.flush()
+                        rows.extend(new)
+                        for r in new:
+                            if not r["ok"]:
+                                print(f"seed {seed} {r['method']}: {r['error'] or '; '.join(r['violations'])}",
+                                      file=sys.stderr)
+                        if len({r["seed"] for r in rows}) % 50 == 0:
+                            args.out.write_text(json.dumps(summarise(rows, args.profile, args.n), indent=1))
+            finally:
+                worker.close()
+
+        # the processes are forked here, before any thread runs (a replacement after a time-out is forked
+        # by its thread while the others wait on their pipes)
+        threads = [threading.Thread(target=serve, args=(Worker(args.profile),)) for _ in range(max(1, args.workers))]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
     summary = summarise(rows, args.profile, args.n)
     args.out.write_text(json.dumps(summary, indent=1))
     print(json.dumps({k: v for k, v in summary.items() if k != "failures"}, indent=1))
