@@ -70,7 +70,7 @@ def test_sub_tolerance_turns_pass_at_speed_within_limits(turn_deg: float, lift: 
     assert rep["count"] == LEGS - 1
     assert rep["largest_angle_deg"] == pytest.approx(turn_deg, rel=1e-9)
     for t in rep["lowest_feed_cap"]:
-        k = int(round(t["s"] / LEG_MM)) - 1
+        k = round(t["s"] / LEG_MM) - 1
         assert t["s"] == pytest.approx(vertex_s[k], abs=1e-9)
         assert feed_at[k] <= t["feed_cap"] * FEED_CAP_TOL
     # and faster than stopping at every vertex (the same path with every junction a corner)
