@@ -156,6 +156,11 @@ IPOPT_OPTIONS: dict[str, Any] = {
     "ipopt.mumps_scaling": 0,
     "error_on_fail": False,
 }
+#: Re-solves of a window (tightening rounds) start from the previous round's primal and dual point:
+#: the rows are the same (a cut slot adds rows whose multipliers start at 0), only bounds moved.
+#: Flower x10 at 4.63 mm knots: re-solve iterations 415 -> ~220 (cold Ipopt walks back to the
+#: central path from mu_init).  First solves stay cold (the previous window's multipliers did not help).
+IPOPT_WARM_OPTIONS: dict[str, Any] = {**IPOPT_OPTIONS, "ipopt.warm_start_init_point": "yes"}
 
 
 class NlpFailure(Exception):
@@ -324,7 +329,10 @@ class _Shape:
             rows.append(sfh)
         g = ca.vertcat(*rows)
         obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh)
-        self.solver = ca.nlpsol("feed_nlp", "ipopt", {"x": x, "p": P, "f": obj, "g": g}, IPOPT_OPTIONS)
+        self._problem = {"x": x, "p": P, "f": obj, "g": g}
+        self.rows = int(g.size1())
+        self.solver = ca.nlpsol("feed_nlp", "ipopt", self._problem, IPOPT_OPTIONS)
+        self._warm_solver: Any = None
         # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
         Pm = sp.triu(self.B0.T @ self.B0, format="csc")
         A = sp.vstack([sp.eye(ncols), self.B0], format="csc")
@@ -336,6 +344,13 @@ class _Shape:
             # and a result must not depend on what this thread solved before
             warm_starting=False,
         )
+
+    @property
+    def warm_solver(self) -> Any:
+        """The same NLP with Ipopt warm-started from the given primal and dual point (built on first use)."""
+        if self._warm_solver is None:
+            self._warm_solver = ca.nlpsol("feed_nlp_warm", "ipopt", self._problem, IPOPT_WARM_OPTIONS)
+        return self._warm_solver
 
     @staticmethod
     def _axis_rows(f: Any, f1: Any, f2: Any, xs: list[Any], xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any],
@@ -390,6 +405,9 @@ class NlpStats:
     window_times: list[float] = field(default_factory=list)
     handover_scaled: int = 0
     softer_retries: int = 0
+    #: re-solves (tightening rounds) warm-started from the previous round's primal-dual point, and their iterations
+    warm_resolves: int = 0
+    warm_iterations: int = 0
     #: worst fine-grid utilisation of any accepted window (<= 1 + ACCEPT_TOL)
     worst_verified: float = 0.0
 
@@ -696,7 +714,8 @@ class NlpRefiner:
             return fd, util
 
         x = x0
-        lam_g = None
+        lam_g: FloatArray | None = None  # with lam_x: the previous round's dual point (re-solves start there)
+        lam_x: FloatArray | None = None
         worst = math.inf
         best: tuple[float, FloatArray] | None = None
         prev_fac: tuple[FloatArray, ...] | None = None
@@ -711,11 +730,16 @@ class NlpRefiner:
                 self.fault(index)
             p_all = np.concatenate([pvec, slots.params()]) if slots.any else pvec
             args: dict[str, Any] = {"x0": x, "p": p_all, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
-            if lam_g is not None:
-                args["lam_g0"] = lam_g
-            res = shape.solver(**args)
-            st = shape.solver.stats()
+            solver = shape.solver
+            if lam_g is not None and lam_x is not None:
+                args["lam_g0"], args["lam_x0"] = lam_g, lam_x
+                solver = shape.warm_solver
+            res = solver(**args)
+            st = solver.stats()
             self.stats.iterations += int(st.get("iter_count", 0))
+            if lam_g is not None:
+                self.stats.warm_resolves += 1
+                self.stats.warm_iterations += int(st.get("iter_count", 0))
             status = str(st.get("return_status", "unknown"))
             if not st.get("success", False) and status != "Solved_To_Acceptable_Level":
                 if best is not None and best[0] <= 1.0 + ACCEPT_TOL:
@@ -732,7 +756,8 @@ class NlpRefiner:
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure(f"Ipopt did not converge (round {rnd})", index, status)
             x = np.asarray(res["x"], dtype=np.float64).ravel()
-            lam_g = res["lam_g"]
+            lam_g = np.asarray(res["lam_g"], dtype=np.float64).ravel()
+            lam_x = np.asarray(res["lam_x"], dtype=np.float64).ravel()
             if not np.all(np.isfinite(x)):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("Ipopt returned a non-finite point", index, status)
@@ -763,9 +788,9 @@ class NlpRefiner:
             prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy(), slots.fac.copy())
             had_slots = slots.any
             util = slots.place(fine, g_fine, util)
-            if slots.any and not had_slots:  # the window's shape with slot rows (warm start from x only)
+            if slots.any and not had_slots:  # the window's shape with slot rows: the same rows, then the slots'
                 shape = self._shape(n, moving, slotted=True)
-                lam_g = None
+                lam_g = np.concatenate([lam_g, np.zeros(shape.rows - lam_g.size)])
             self._tighten(util, fine, a * d, d, moving, fac_u, fac_e, fac_k)
             # bounds of constant rows stay as they are (tightening them could only make the window infeasible)
             fac_u[~keep] = BOUND_FACTOR
@@ -1333,6 +1358,8 @@ def _parallel_spans(
                 refiner.stats.iterations += st.iterations
                 refiner.stats.cut_rounds += st.cut_rounds
                 refiner.stats.softer_retries += st.softer_retries
+                refiner.stats.warm_resolves += st.warm_resolves
+                refiner.stats.warm_iterations += st.warm_iterations
                 refiner.stats.handover_scaled += st.handover_scaled
                 refiner.stats.worst_verified = max(refiner.stats.worst_verified, st.worst_verified)
                 refiner.stats.window_times.extend(st.window_times)
