@@ -1073,7 +1073,14 @@ class NlpRefiner:
         s = np.linspace(s0, s1, n_fine + 1)
         br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
         extra = self.verify[(self.verify > s0) & (self.verify < s1)]
-        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br, br + BREAK_EPS_MM, extra]))
+        # both sides of the feed's own knots: f'' (so j, e) jumps there, and without its two sides the
+        # refinement (_fast_cells) bisected the cell next to every knot REFINE_LEVELS times, chasing the
+        # one-sided limit (flower at 4.63 mm knots: ~10 cells a level, every level, every round)
+        kn = d * np.arange(math.floor(s0 / d) + 1, math.ceil(s1 / d))
+        kn = kn[(kn > s0 + 2 * BREAK_EPS_MM) & (kn < s1 - 2 * BREAK_EPS_MM)]
+        return np.sort(np.concatenate([
+            s, br - BREAK_EPS_MM, br, br + BREAK_EPS_MM, kn - BREAK_EPS_MM, kn + BREAK_EPS_MM, extra,
+        ]))
 
     def _shrink_to_feasible(
         self,

@@ -234,3 +234,33 @@ def test_tightening_rounds_are_warm_started(monkeypatch: pytest.MonkeyPatch) -> 
     assert warm.summary["motion_time"] == pytest.approx(cold.summary["motion_time"], rel=1e-5)
     assert warm.diagnostics["nlp_fallbacks"] == []
     _check_drive(m, warm)
+
+
+def test_fine_grid_has_both_sides_of_feed_knots(monkeypatch: pytest.MonkeyPatch) -> None:
+    """f'' jumps at the feed's knots, so the verification grid holds both sides of each (and the
+    refinement does not chase the one-sided limit: at 4.63 mm knots on the flower it bisected ~10
+    cells next to knots at every level of every round)."""
+    from solvers import nlp
+
+    m = router()
+    ref = nlp.NlpRefiner(nlp.NlpLimits.from_machine(m, False, False), 4, 30, 10)
+    d = 4.5
+    fine = ref._fine_points(3 * d, 9 * d, d, np.zeros(0))
+    for k in range(4, 9):
+        for side in (-1, 1):
+            assert np.any(fine == k * d + side * nlp.BREAK_EPS_MM), (k, side)
+    assert fine[0] == 3 * d and fine[-1] == 9 * d
+    # the refinement's levels on one flower loop at 4.63 mm knots: few cells left after the first levels
+    sizes: list[int] = []
+    fast = nlp._fast_cells
+
+    def counting(f: np.ndarray, util: dict[str, np.ndarray]) -> np.ndarray:
+        out = fast(f, util)
+        sizes.append(out.size)
+        return out
+
+    monkeypatch.setattr(nlp, "_fast_cells", counting)
+    sch = schedule(ex.flower(1), m, Options(method="lp+nlp", knot_spacing=4.63))
+    rounds = sch.summary["nlp_windows"] + sch.summary["nlp_cut_rounds"]
+    # (each round refined REFINE_LEVELS times when the knots' cells were chased)
+    assert 0 < len(sizes) <= 0.8 * rounds * nlp.REFINE_LEVELS, (rounds, sizes)
