@@ -264,3 +264,25 @@ def test_fine_grid_has_both_sides_of_feed_knots(monkeypatch: pytest.MonkeyPatch)
     rounds = sch.summary["nlp_windows"] + sch.summary["nlp_cut_rounds"]
     # (each round refined REFINE_LEVELS times when the knots' cells were chased)
     assert 0 < len(sizes) <= 0.8 * rounds * nlp.REFINE_LEVELS, (rounds, sizes)
+
+
+def test_prefetched_geometry_serves_the_same_values() -> None:
+    """A window's set-up points are evaluated in one geometry call (``_Prefetched``): hits, misses and
+    mixed calls give the geometry's own values, and hits make no call."""
+    from solvers import nlp
+
+    tp = ex.flower(1)
+    calls: list[int] = []
+
+    def geometry(s: np.ndarray) -> object:
+        calls.append(np.asarray(s).size)
+        return tp.evaluate(np.asarray(s, dtype=np.float64))
+
+    pre = nlp._Prefetched(geometry, np.linspace(0.0, 100.0, 201)[::-1])  # (unsorted, sorted inside)
+    assert calls == [201]
+    for s in (np.array([50.0, 0.5, 99.5]), np.array([3.25, 7.1]), np.array([60.0, 3.25, 0.0, 7.1, 0.5])):
+        got, ref = pre(s), tp.evaluate(s)
+        np.testing.assert_array_equal(got.s, s)
+        for k in ("position", "d1", "d2", "d3"):
+            np.testing.assert_array_equal(getattr(got, k), getattr(ref, k))
+    assert calls == [201, 2, 2]  # the all-hit call made none; the mixed one evaluated its 2 misses
