@@ -257,6 +257,18 @@ def checkpoint_layout(n: int, N: int) -> tuple[NDArray[np.int64], FloatArray]:
     return k, tau
 
 
+def knot_twins(n: int, N: int) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Checkpoints (window-local indices) of the rows that depend on f and f' only (u, a, f): ``kept``,
+    and each interior knot's checkpoint seen from the left, ``dup`` (tau = 1 of interval k < n - 1),
+    with its ``twin`` seen from the right (tau = 0 of interval k + 1).  f and f' are continuous at a knot
+    and the geometry is evaluated at the same s, so those rows are the same function twice: ``_Shape``
+    keeps the twin's, bounded by both checkpoints' bounds (``NlpRefiner._row_bounds``)."""
+    K = n * (N + 1)
+    dup = np.arange(n - 1, dtype=np.int64) * (N + 1) + N
+    kept = np.setdiff1d(np.arange(K, dtype=np.int64), dup)
+    return kept, dup, dup + 1
+
+
 def _interval_basis(k: NDArray[np.int64], tau: FloatArray, ncols: int) -> tuple[sp.csr_matrix, ...]:
     """B0, B1, B2 (K, ncols) for unit knot spacing at explicit (interval, tau) points."""
     W0 = np.column_stack([(1 - tau) ** 2 / 2, (-2 * tau * tau + 2 * tau + 1) / 2, tau * tau / 2])
@@ -319,8 +331,18 @@ class _Shape:
         f = Fs * fh
         f1 = Fs * inv_d * ca.mtimes(ca.DM(B1), x)
         f2 = Fs * inv_d * inv_d * ca.mtimes(ca.DM(B2), x)
-        rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj)
-        rows.append(fh)
+        kept, _, _ = knot_twins(n, N)
+        sel = [int(i) for i in kept]
+        rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj, sel)
+        rows.append(fh[sel])
+        # row_index[block, checkpoint]: the row of that block at that checkpoint (-1: none)
+        reduced = ([True, False, False] + ([True, False, False] if with_aj else [])) * na + [True]
+        self.row_index = np.full((len(reduced), K), -1, dtype=np.int64)
+        nxt = 0
+        for blk, red in enumerate(reduced):
+            cols = kept if red else np.arange(K)
+            self.row_index[blk, cols] = nxt + np.arange(cols.size)
+            nxt += cols.size
         if slotted:
             # cut slots, one per knot interval at a tau given per call, with the path's exact derivatives
             # there (no envelope); unused slots have unbounded rows
@@ -339,6 +361,7 @@ class _Shape:
         obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh)
         self._problem = {"x": x, "p": P, "f": obj, "g": g}
         self.rows = int(g.size1())
+        self.base_rows = nxt
         self.solver = ca.nlpsol("feed_nlp", "ipopt", self._problem, IPOPT_OPTIONS)
         self._warm_solver: Any = None
         # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
@@ -362,8 +385,9 @@ class _Shape:
 
     @staticmethod
     def _axis_rows(f: Any, f1: Any, f2: Any, xs: list[Any], xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any],
-                   coef: list[Any], with_aj: bool) -> list[Any]:
-        """Per moving axis: u, e_hi, e_lo, [a, j_hi, j_lo] at points with feed f, f', f''."""
+                   coef: list[Any], with_aj: bool, sel: list[int] | None = None) -> list[Any]:
+        """Per moving axis: u, e_hi, e_lo, [a, j_hi, j_lo] at points with feed f, f', f''; the u and a rows
+        (f and f' only) at the points ``sel`` if given."""
         f_sq = f * f
         f_cu = f_sq * f
         rows = []
@@ -374,12 +398,13 @@ class _Shape:
             j_hi = xsss_hi[i] * f_cu + j_rest
             j_lo = xsss_lo[i] * f_cu + j_rest
             cf = coef[i]
-            rows.append(cf[0] * a + cf[1] * v)
+            u = cf[0] * a + cf[1] * v
+            rows.append(u if sel is None else u[sel])
             e_va = cf[2] * v + cf[3] * a
             rows.append(e_va + cf[4] * j_hi)
             rows.append(e_va + cf[4] * j_lo)
             if with_aj:
-                rows.append(cf[6] * a)
+                rows.append(cf[6] * a if sel is None else (cf[6] * a)[sel])
                 rows.append(cf[7] * j_hi)
                 rows.append(cf[7] * j_lo)
         return rows
@@ -738,7 +763,7 @@ class NlpRefiner:
         lam_g: FloatArray | None = None
         lam_x: FloatArray | None = None
         if prev is not None:
-            lam_g, lam_x = self._shifted_duals(a, n, moving, K)
+            lam_g, lam_x = self._shifted_duals(a, n, moving, shape)
         worst = math.inf
         best: tuple[float, FloatArray] | None = None
         prev_fac: tuple[FloatArray, ...] | None = None
@@ -834,7 +859,7 @@ class NlpRefiner:
         )
 
     def _shifted_duals(
-        self, a: int, n: int, moving: tuple[int, ...], K: int
+        self, a: int, n: int, moving: tuple[int, ...], shape: _Shape
     ) -> tuple[FloatArray | None, FloatArray | None]:
         """The previous window's last dual point (rows without cut slots) moved to this window's checkpoints,
         or (None, None) if that window had another shape.  Rows and variables past its end start at 0."""
@@ -842,12 +867,14 @@ class NlpRefiner:
         if dd is None or dd[1] != n or dd[2] != moving or not 0 < a - dd[0] < n:
             return None, None
         adv = a - dd[0]
-        old = dd[3].reshape(-1, K)
-        lam_g = np.zeros_like(old)
-        lam_g[:, : K - adv * (self.N + 1)] = old[:, adv * (self.N + 1) :]
+        sh = adv * (self.N + 1)
+        dst, src = shape.row_index[:, : shape.K - sh], shape.row_index[:, sh:]
+        ok = (dst >= 0) & (src >= 0)
+        lam_g = np.zeros(shape.base_rows)
+        lam_g[dst[ok]] = dd[3][src[ok]]
         lam_x = np.zeros(n + 2)
         lam_x[: n + 2 - adv] = dd[4][adv:]
-        return lam_g.ravel(), lam_x
+        return lam_g, lam_x
 
     def _inherited_floor(
         self,
@@ -974,6 +1001,14 @@ class NlpRefiner:
         for lo_i, hi_i in zip(lo, hi, strict=True):
             lo_i[off] = -np.inf
             hi_i[off] = np.inf
+        # u, a and f rows: one row per interior knot, bounded by both of its checkpoints' bounds
+        kept, dup, twin = knot_twins(K // (self.N + 1), self.N)
+        per_axis = 6 if lim.amax is not None else 3
+        reduced = [i for i in range(len(lo)) if i == len(lo) - 1 or i % per_axis in (0, 3)]
+        for i in reduced:
+            lo[i][twin] = np.maximum(lo[i][twin], lo[i][dup])
+            hi[i][twin] = np.minimum(hi[i][twin], hi[i][dup])
+            lo[i], hi[i] = lo[i][kept], hi[i][kept]
         return np.concatenate(lo), np.concatenate(hi)
 
     def _step_caps(
