@@ -167,8 +167,13 @@ IPOPT_OPTIONS: dict[str, Any] = {
 #: Flower x10 at 4.63 mm knots: re-solve iterations 415 -> ~220 (cold Ipopt walks back to the
 #: central path from mu_init).  A window inheriting from the previous one starts from that window's
 #: last dual point shifted by the advance (rows past its end at 0): 18.35 m path at 4.63 mm knots,
-#: 4280 -> 4042 iterations.
+#: 4280 -> 4042 iterations.  Other solves start from zero multipliers: one nlpsol per shape serves
+#: both (a second, cold one doubled the set-up: ~0.2 s a 39-interval shape, seconds for a
+#: full-horizon one), and zero multipliers cost about what Ipopt's own start does (63 flower
+#: windows replayed: 993 vs 994 iterations).
 IPOPT_WARM_OPTIONS: dict[str, Any] = {**IPOPT_OPTIONS, "ipopt.warm_start_init_point": "yes"}
+#: Start solves from the previous round's / window's dual point (tests compare with False).
+WARM_START = True
 
 
 class NlpFailure(Exception):
@@ -362,8 +367,7 @@ class _Shape:
         self._problem = {"x": x, "p": P, "f": obj, "g": g}
         self.rows = int(g.size1())
         self.base_rows = nxt
-        self.solver = ca.nlpsol("feed_nlp", "ipopt", self._problem, IPOPT_OPTIONS)
-        self._warm_solver: Any = None
+        self.solver = ca.nlpsol("feed_nlp", "ipopt", self._problem, IPOPT_WARM_OPTIONS)
         # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
         Pm = sp.triu(self.B0.T @ self.B0, format="csc")
         A = sp.vstack([sp.eye(ncols), self.B0], format="csc")
@@ -375,13 +379,6 @@ class _Shape:
             # and a result must not depend on what this thread solved before
             warm_starting=False,
         )
-
-    @property
-    def warm_solver(self) -> Any:
-        """The same NLP with Ipopt warm-started from the given primal and dual point (built on first use)."""
-        if self._warm_solver is None:
-            self._warm_solver = ca.nlpsol("feed_nlp_warm", "ipopt", self._problem, IPOPT_WARM_OPTIONS)
-        return self._warm_solver
 
     @staticmethod
     def _axis_rows(f: Any, f1: Any, f2: Any, xs: list[Any], xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any],
@@ -778,14 +775,14 @@ class NlpRefiner:
                 self.fault(index)
             p_all = np.concatenate([pvec, slots.params()]) if slots.any else pvec
             args: dict[str, Any] = {"x0": x, "p": p_all, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
+            warm = WARM_START and lam_g is not None and lam_x is not None
+            args["lam_g0"] = lam_g if warm else np.zeros(shape.rows)
+            args["lam_x0"] = lam_x if warm else np.zeros(n + 2)
             solver = shape.solver
-            if lam_g is not None and lam_x is not None:
-                args["lam_g0"], args["lam_x0"] = lam_g, lam_x
-                solver = shape.warm_solver
             res = solver(**args)
             st = solver.stats()
             self.stats.iterations += int(st.get("iter_count", 0))
-            if lam_g is not None:
+            if warm:
                 if rnd == 0 and retries == 0:
                     self.stats.warm_first += 1
                 else:
