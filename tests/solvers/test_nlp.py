@@ -338,3 +338,27 @@ def test_rows_at_knots_are_kept_once(with_aj: bool) -> None:
     assert np.allclose(hi[shape.row_index[0, twin]], (lim.umax[0] * 0.5 - lim.c[0] - lim.d[0]) / lim.umax[0])
     assert np.allclose(hi[shape.row_index[-1, twin]], 300.0 / Fs)
     assert np.allclose(hi[shape.row_index[-1, kept[kept % (N + 1) != 0]]], 500.0 / Fs)
+
+
+def test_failed_solve_is_retried_with_the_safe_settings(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A solve that fails with the fast, warm-started settings is retried once with Ipopt's cold start and
+    IPOPT_SAFE_OPTIONS before the window counts as failed: with the fast solver capped at 2 iterations
+    every solve fails, and the schedule still has no fallback."""
+    from solvers import nlp, pipeline
+
+    made: list[nlp.NlpStats] = []
+
+    class Capture(nlp.NlpStats):
+        def __init__(self) -> None:
+            super().__init__()
+            made.append(self)
+
+    monkeypatch.setattr(pipeline, "NlpStats", Capture)
+    monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)  # shapes built here stay here
+    monkeypatch.setattr(nlp, "IPOPT_WARM_OPTIONS", {**nlp.IPOPT_WARM_OPTIONS, "ipopt.max_iter": 2})
+    m = router()
+    sch = schedule(ex.flower(1), m, Options(method="lp+nlp"))
+    st = made[-1]
+    assert sch.diagnostics["nlp_fallbacks"] == []
+    assert st.safe_retries == st.windows + st.cut_rounds > 0
+    _check_drive(m, sch)
