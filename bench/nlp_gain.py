@@ -102,12 +102,16 @@ def child(method: str, loops: int, knot: float | None) -> None:
     tp = ex.flower(loops)
     rss0 = proc_status_mb("VmRSS")
     reset = reset_hwm()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _cpu_s()
     sch = schedule(tp, router(), Options(method=method, knot_spacing=knot))
-    el = time.perf_counter() - t0
+    el, cpu = time.perf_counter() - t0, _cpu_s() - c0
     n = sch.samples.t.size
-    print(json.dumps({"loops": loops, "method": method, "knot_spacing": sch.summary["knot_spacing"],
-                      "compute_time": el, "motion_time": sch.summary["motion_time"],
+    s = sch.summary
+    print(json.dumps({"loops": loops, "method": method, "knot_spacing": s["knot_spacing"],
+                      "compute_time": el, "compute_cpu": cpu, "motion_time": s["motion_time"],
+                      "lp_time": s["lp_time"], "nlp_time": s.get("nlp_time"), "nlp_windows": s.get("nlp_windows"),
+                      "ipopt_iterations": s.get("nlp_iterations"), "nlp_cut_rounds": s.get("nlp_cut_rounds"),
+                      "nlp_failures": s.get("nlp_failures"), "load_average": os.getloadavg()[0],
                       "rss_before_mb": rss0, "peak_mb": proc_status_mb("VmHWM") if reset else None,
                       "samples": n, "sample_mb": 8.0 * n * 21 / 2**20}), flush=True)
 

@@ -152,7 +152,9 @@ IPOPT_OPTIONS: dict[str, Any] = {
     "ipopt.sb": "yes",
     "print_time": False,
     "ipopt.max_iter": 300,
-    "ipopt.tol": 1e-7,
+    # (1e-7 before: 1e-6 saves 10 % of the iterations on the 18.35 m path at 4.63 mm knots, motion -0.06 %;
+    # the limits are verified on the fine grid whatever Ipopt reports; 1e-5 cost 0.2 % motion on the flower)
+    "ipopt.tol": 1e-6,
     "ipopt.acceptable_tol": 1e-5,
     # fewer iterations than the monotone default on this problem class (249 vs 337 on two flower loops)
     "ipopt.mu_strategy": "adaptive",
@@ -160,8 +162,28 @@ IPOPT_OPTIONS: dict[str, Any] = {
     # spec §10: MUMPS scaling off cut NLP time ~2.5x on this problem class
     "ipopt.mumps_permuting_scaling": 0,
     "ipopt.mumps_scaling": 0,
+    # no forced iterative-refinement step after each KKT solve (Ipopt still refines when the residual
+    # is large): the same iterates to ~1e-14 and ~10 % less Ipopt time (flower x10 at 4.63 mm, replayed
+    # windows, best of 5: 0.82 -> 0.74 s)
+    "ipopt.min_refinement_steps": 0,
     "error_on_fail": False,
 }
+#: Re-solves of a window (tightening rounds) start from the previous round's primal and dual point:
+#: the rows are the same (a cut slot adds rows whose multipliers start at 0), only bounds moved.
+#: Flower x10 at 4.63 mm knots: re-solve iterations 415 -> ~220 (cold Ipopt walks back to the
+#: central path from mu_init).  A window inheriting from the previous one starts from that window's
+#: last dual point shifted by the advance (rows past its end at 0): 18.35 m path at 4.63 mm knots,
+#: 4280 -> 4042 iterations.  Other solves start from zero multipliers: one nlpsol per shape serves
+#: both (a second, cold one doubled the set-up: ~0.2 s a 39-interval shape, seconds for a
+#: full-horizon one), and zero multipliers cost about what Ipopt's own start does (63 flower
+#: windows replayed: 993 vs 994 iterations).
+IPOPT_WARM_OPTIONS: dict[str, Any] = {**IPOPT_OPTIONS, "ipopt.warm_start_init_point": "yes"}
+#: Start solves from the previous round's / window's dual point (tests compare with False).
+WARM_START = True
+#: A solve that fails is retried once with Ipopt's own cold start and the tighter, slower settings
+#: (forced refinement step, tol 1e-7): on random bench cases the fast settings declared a few more
+#: windows locally infeasible in round 0 (80 bench-profile seeds: 13 fallbacks vs 6 before them).
+IPOPT_SAFE_OPTIONS: dict[str, Any] = {**IPOPT_OPTIONS, "ipopt.tol": 1e-7, "ipopt.min_refinement_steps": 1}
 
 
 class NlpFailure(Exception):
@@ -255,6 +277,18 @@ def checkpoint_layout(n: int, N: int) -> tuple[NDArray[np.int64], FloatArray]:
     return k, tau
 
 
+def knot_twins(n: int, N: int) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Checkpoints (window-local indices) of the rows that depend on f and f' only (u, a, f): ``kept``,
+    and each interior knot's checkpoint seen from the left, ``dup`` (tau = 1 of interval k < n - 1),
+    with its ``twin`` seen from the right (tau = 0 of interval k + 1).  f and f' are continuous at a knot
+    and the geometry is evaluated at the same s, so those rows are the same function twice: ``_Shape``
+    keeps the twin's, bounded by both checkpoints' bounds (``NlpRefiner._row_bounds``)."""
+    K = n * (N + 1)
+    dup = np.arange(n - 1, dtype=np.int64) * (N + 1) + N
+    kept = np.setdiff1d(np.arange(K, dtype=np.int64), dup)
+    return kept, dup, dup + 1
+
+
 def _interval_basis(k: NDArray[np.int64], tau: FloatArray, ncols: int) -> tuple[sp.csr_matrix, ...]:
     """B0, B1, B2 (K, ncols) for unit knot spacing at explicit (interval, tau) points."""
     W0 = np.column_stack([(1 - tau) ** 2 / 2, (-2 * tau * tau + 2 * tau + 1) / 2, tau * tau / 2])
@@ -317,8 +351,18 @@ class _Shape:
         f = Fs * fh
         f1 = Fs * inv_d * ca.mtimes(ca.DM(B1), x)
         f2 = Fs * inv_d * inv_d * ca.mtimes(ca.DM(B2), x)
-        rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj)
-        rows.append(fh)
+        kept, _, _ = knot_twins(n, N)
+        sel = [int(i) for i in kept]
+        rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj, sel)
+        rows.append(fh[sel])
+        # row_index[block, checkpoint]: the row of that block at that checkpoint (-1: none)
+        reduced = ([True, False, False] + ([True, False, False] if with_aj else [])) * na + [True]
+        self.row_index = np.full((len(reduced), K), -1, dtype=np.int64)
+        nxt = 0
+        for blk, red in enumerate(reduced):
+            cols = kept if red else np.arange(K)
+            self.row_index[blk, cols] = nxt + np.arange(cols.size)
+            nxt += cols.size
         if slotted:
             # cut slots, one per knot interval at a tau given per call, with the path's exact derivatives
             # there (no envelope); unused slots have unbounded rows
@@ -335,7 +379,11 @@ class _Shape:
             rows.append(sfh)
         g = ca.vertcat(*rows)
         obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh)
-        self.solver = ca.nlpsol("feed_nlp", "ipopt", {"x": x, "p": P, "f": obj, "g": g}, IPOPT_OPTIONS)
+        self._problem = {"x": x, "p": P, "f": obj, "g": g}
+        self.rows = int(g.size1())
+        self.base_rows = nxt
+        self.solver = ca.nlpsol("feed_nlp", "ipopt", self._problem, IPOPT_WARM_OPTIONS)
+        self._safe_solver: Any = None
         # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
         Pm = sp.triu(self.B0.T @ self.B0, format="csc")
         A = sp.vstack([sp.eye(ncols), self.B0], format="csc")
@@ -348,10 +396,18 @@ class _Shape:
             warm_starting=False,
         )
 
+    @property
+    def safe_solver(self) -> Any:
+        """The same NLP with IPOPT_SAFE_OPTIONS (built on first use: only after a failed solve)."""
+        if self._safe_solver is None:
+            self._safe_solver = ca.nlpsol("feed_nlp_safe", "ipopt", self._problem, IPOPT_SAFE_OPTIONS)
+        return self._safe_solver
+
     @staticmethod
     def _axis_rows(f: Any, f1: Any, f2: Any, xs: list[Any], xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any],
-                   coef: list[Any], with_aj: bool) -> list[Any]:
-        """Per moving axis: u, e_hi, e_lo, [a, j_hi, j_lo] at points with feed f, f', f''."""
+                   coef: list[Any], with_aj: bool, sel: list[int] | None = None) -> list[Any]:
+        """Per moving axis: u, e_hi, e_lo, [a, j_hi, j_lo] at points with feed f, f', f''; the u and a rows
+        (f and f' only) at the points ``sel`` if given."""
         f_sq = f * f
         f_cu = f_sq * f
         rows = []
@@ -362,12 +418,13 @@ class _Shape:
             j_hi = xsss_hi[i] * f_cu + j_rest
             j_lo = xsss_lo[i] * f_cu + j_rest
             cf = coef[i]
-            rows.append(cf[0] * a + cf[1] * v)
+            u = cf[0] * a + cf[1] * v
+            rows.append(u if sel is None else u[sel])
             e_va = cf[2] * v + cf[3] * a
             rows.append(e_va + cf[4] * j_hi)
             rows.append(e_va + cf[4] * j_lo)
             if with_aj:
-                rows.append(cf[6] * a)
+                rows.append(cf[6] * a if sel is None else (cf[6] * a)[sel])
                 rows.append(cf[7] * j_hi)
                 rows.append(cf[7] * j_lo)
         return rows
@@ -401,6 +458,13 @@ class NlpStats:
     window_times: list[float] = field(default_factory=list)
     handover_scaled: int = 0
     softer_retries: int = 0
+    #: re-solves (tightening rounds) warm-started from the previous round's primal-dual point, and their iterations
+    warm_resolves: int = 0
+    warm_iterations: int = 0
+    #: first solves of a window started from the previous window's dual point
+    warm_first: int = 0
+    #: failed solves retried with Ipopt's cold start and IPOPT_SAFE_OPTIONS
+    safe_retries: int = 0
     #: worst fine-grid utilisation of any accepted window (<= 1 + ACCEPT_TOL)
     worst_verified: float = 0.0
 
@@ -452,6 +516,9 @@ class NlpRefiner:
         self.stats = stats if stats is not None else NlpStats()
         #: piece-local s verified besides the fine grid (set per piece by ``refine``)
         self.verify: FloatArray = np.zeros(0)
+        #: the last solve's window start, size, moving axes, lam_g (rows without cut slots) and lam_x: the
+        #: next window of the chain (``prev`` given) starts from them
+        self._duals: tuple[int, int, tuple[int, ...], FloatArray, FloatArray] | None = None
 
     def _shape(self, n: int, axes: tuple[int, ...], slotted: bool = False) -> _Shape:
         key = (n, axes, slotted)
@@ -615,12 +682,20 @@ class NlpRefiner:
         n = b - a
         k_loc, tau = checkpoint_layout(n, N)
         s_chk = (a + k_loc + tau) * d
+        fine = self._fine_points(a * d, min(b, commit + VERIFY_PAST_COMMIT) * d, d, breaks)
+        # every point the set-up evaluates, in one call (a call costs ~0.6 ms on top of ~2 us a point)
+        br_near = breaks[(breaks > (a - 1) * d) & (breaks < (b + 1) * d)]
+        geometry = _Prefetched(geometry, np.concatenate([
+            s_chk, _envelope_points(k_loc, tau, a, d, N).ravel(), br_near - BREAK_EPS_MM,
+            br_near + BREAK_EPS_MM, fine,
+        ]))
         g = geometry(s_chk)
         xsss_hi, xsss_lo = _third_derivative_envelope(geometry, g, k_loc, tau, a, d, N, breaks)
         moving = tuple(
             ax for ax in range(3) if np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS
         )
         shape = self._shape(n, moving)
+        base_rows = shape.rows
         K = shape.K
         q_lp = bspline.evaluate(c, s_chk, d)[0]
         f_lp = np.sqrt(np.maximum(q_lp, 0.0))
@@ -686,7 +761,6 @@ class NlpRefiner:
             kc = kint * (N + 1) + np.clip(np.floor((x - kint) * N), 0, N - 1).astype(np.int64)
             for off in (0, 1):
                 np.minimum.at(feed_ub, kc + off, np.where(near_lp[kc + off], np.inf, f_cap))
-        fine = self._fine_points(a * d, min(b, commit + VERIFY_PAST_COMMIT) * d, d, breaks)
         floor_u, floor_e = self._inherited_floor(prev, g, xsss_hi, xsss_lo, k_loc, tau, d, moving)
         fine, g_fine = _refine_turns(geometry, fine, geometry(fine))
         # cut slots may sit where a free control point acts, off the fixed states at the window ends
@@ -707,7 +781,11 @@ class NlpRefiner:
             return fd, util
 
         x = x0
-        lam_g = None
+        # with lam_x: the dual point the solve starts from (the previous round's, or the previous window's)
+        lam_g: FloatArray | None = None
+        lam_x: FloatArray | None = None
+        if prev is not None:
+            lam_g, lam_x = self._shifted_duals(a, n, moving, shape)
         worst = math.inf
         best: tuple[float, FloatArray] | None = None
         prev_fac: tuple[FloatArray, ...] | None = None
@@ -722,12 +800,28 @@ class NlpRefiner:
                 self.fault(index)
             p_all = np.concatenate([pvec, slots.params()]) if slots.any else pvec
             args: dict[str, Any] = {"x0": x, "p": p_all, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
-            if lam_g is not None:
-                args["lam_g0"] = lam_g
-            res = shape.solver(**args)
-            st = shape.solver.stats()
+            warm = WARM_START and lam_g is not None and lam_x is not None
+            args["lam_g0"] = lam_g if warm else np.zeros(shape.rows)
+            args["lam_x0"] = lam_x if warm else np.zeros(n + 2)
+            solver = shape.solver
+            res = solver(**args)
+            st = solver.stats()
             self.stats.iterations += int(st.get("iter_count", 0))
+            if warm:
+                if rnd == 0 and retries == 0:
+                    self.stats.warm_first += 1
+                else:
+                    self.stats.warm_resolves += 1
+                    self.stats.warm_iterations += int(st.get("iter_count", 0))
             status = str(st.get("return_status", "unknown"))
+            if not st.get("success", False) and status != "Solved_To_Acceptable_Level":
+                # once per solve: Ipopt's own cold start with the safe settings
+                safe = shape.safe_solver
+                res = safe(**{k: v for k, v in args.items() if k not in ("lam_g0", "lam_x0")})
+                st = safe.stats()
+                self.stats.iterations += int(st.get("iter_count", 0))
+                self.stats.safe_retries += 1
+                status = str(st.get("return_status", "unknown"))
             if not st.get("success", False) and status != "Solved_To_Acceptable_Level":
                 if best is not None and best[0] <= 1.0 + ACCEPT_TOL:
                     return self._accept(best, t0)
@@ -743,7 +837,9 @@ class NlpRefiner:
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure(f"Ipopt did not converge (round {rnd})", index, status)
             x = np.asarray(res["x"], dtype=np.float64).ravel()
-            lam_g = res["lam_g"]
+            lam_g = np.asarray(res["lam_g"], dtype=np.float64).ravel()
+            lam_x = np.asarray(res["lam_x"], dtype=np.float64).ravel()
+            self._duals = (a, n, moving, lam_g[:base_rows].copy(), lam_x.copy())
             if not np.all(np.isfinite(x)):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("Ipopt returned a non-finite point", index, status)
@@ -774,9 +870,9 @@ class NlpRefiner:
             prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy(), slots.fac.copy())
             had_slots = slots.any
             util = slots.place(fine, g_fine, util)
-            if slots.any and not had_slots:  # the window's shape with slot rows (warm start from x only)
+            if slots.any and not had_slots:  # the window's shape with slot rows: the same rows, then the slots'
                 shape = self._shape(n, moving, slotted=True)
-                lam_g = None
+                lam_g = np.concatenate([lam_g, np.zeros(shape.rows - lam_g.size)])
             self._tighten(util, fine, a * d, d, moving, fac_u, fac_e, fac_k)
             # bounds of constant rows stay as they are (tightening them could only make the window infeasible)
             fac_u[~keep] = BOUND_FACTOR
@@ -791,6 +887,24 @@ class NlpRefiner:
             f"limits exceeded between checkpoints after {MAX_CUT_ROUNDS} rounds (worst {worst:.4f})",
             index, "unverified",
         )
+
+    def _shifted_duals(
+        self, a: int, n: int, moving: tuple[int, ...], shape: _Shape
+    ) -> tuple[FloatArray | None, FloatArray | None]:
+        """The previous window's last dual point (rows without cut slots) moved to this window's checkpoints,
+        or (None, None) if that window had another shape.  Rows and variables past its end start at 0."""
+        dd = self._duals
+        if dd is None or dd[1] != n or dd[2] != moving or not 0 < a - dd[0] < n:
+            return None, None
+        adv = a - dd[0]
+        sh = adv * (self.N + 1)
+        dst, src = shape.row_index[:, : shape.K - sh], shape.row_index[:, sh:]
+        ok = (dst >= 0) & (src >= 0)
+        lam_g = np.zeros(shape.base_rows)
+        lam_g[dst[ok]] = dd[3][src[ok]]
+        lam_x = np.zeros(n + 2)
+        lam_x[: n + 2 - adv] = dd[4][adv:]
+        return lam_g, lam_x
 
     def _inherited_floor(
         self,
@@ -917,6 +1031,14 @@ class NlpRefiner:
         for lo_i, hi_i in zip(lo, hi, strict=True):
             lo_i[off] = -np.inf
             hi_i[off] = np.inf
+        # u, a and f rows: one row per interior knot, bounded by both of its checkpoints' bounds
+        kept, dup, twin = knot_twins(K // (self.N + 1), self.N)
+        per_axis = 6 if lim.amax is not None else 3
+        reduced = [i for i in range(len(lo)) if i == len(lo) - 1 or i % per_axis in (0, 3)]
+        for i in reduced:
+            lo[i][twin] = np.maximum(lo[i][twin], lo[i][dup])
+            hi[i][twin] = np.minimum(hi[i][twin], hi[i][dup])
+            lo[i], hi[i] = lo[i][kept], hi[i][kept]
         return np.concatenate(lo), np.concatenate(hi)
 
     def _step_caps(
@@ -1031,7 +1153,14 @@ class NlpRefiner:
         s = np.linspace(s0, s1, n_fine + 1)
         br = breaks[(breaks > s0 + BREAK_EPS_MM) & (breaks < s1 - BREAK_EPS_MM)]
         extra = self.verify[(self.verify > s0) & (self.verify < s1)]
-        return np.sort(np.concatenate([s, br - BREAK_EPS_MM, br, br + BREAK_EPS_MM, extra]))
+        # both sides of the feed's own knots: f'' (so j, e) jumps there, and without its two sides the
+        # refinement (_fast_cells) bisected the cell next to every knot REFINE_LEVELS times, chasing the
+        # one-sided limit (flower at 4.63 mm knots: ~10 cells a level, every level, every round)
+        kn = d * np.arange(math.floor(s0 / d) + 1, math.ceil(s1 / d))
+        kn = kn[(kn > s0 + 2 * BREAK_EPS_MM) & (kn < s1 - 2 * BREAK_EPS_MM)]
+        return np.sort(np.concatenate([
+            s, br - BREAK_EPS_MM, br, br + BREAK_EPS_MM, kn - BREAK_EPS_MM, kn + BREAK_EPS_MM, extra,
+        ]))
 
     def _shrink_to_feasible(
         self,
@@ -1259,6 +1388,37 @@ def _friction_signs(d1: FloatArray) -> tuple[FloatArray, FloatArray]:
     return hi, lo
 
 
+def _envelope_points(k_loc: NDArray[np.int64], tau: FloatArray, a: int, d: float, N: int) -> FloatArray:
+    """Piece-local s (K, 2 ENVELOPE_SUBDIV + 1) spanning each checkpoint's cell (``_third_derivative_envelope``)."""
+    h = 0.5 / N
+    lo = np.clip(tau - h, 0.0, 1.0)
+    hi = np.clip(tau + h, 0.0, 1.0)
+    frac = np.linspace(0.0, 1.0, 2 * ENVELOPE_SUBDIV + 1)
+    return np.asarray((a + k_loc[:, None] + lo[:, None] + (hi - lo)[:, None] * frac[None, :]) * d, dtype=np.float64)
+
+
+class _Prefetched:
+    """A geometry evaluated once at given points: a call at those exact points is served from them,
+    other points are evaluated (the same values: the geometry is evaluated point by point)."""
+
+    def __init__(self, geometry: GeometryFn, s: FloatArray) -> None:
+        self.geometry = geometry
+        self.s = np.unique(s)
+        self.g = geometry(self.s)
+
+    def __call__(self, s: FloatArray) -> PathSamples:
+        s = np.asarray(s, dtype=np.float64)
+        i = np.minimum(np.searchsorted(self.s, s), self.s.size - 1)
+        hit = self.s[i] == s
+        if hit.all():
+            return _take(self.g, i)
+        if not hit.any():
+            return self.geometry(s)
+        where = np.concatenate([np.flatnonzero(hit), np.flatnonzero(~hit)])
+        both = _concat(_take(self.g, i[hit]), self.geometry(s[~hit]))
+        return _take(both, np.argsort(where, kind="stable"))
+
+
 def _third_derivative_envelope(
     geometry: GeometryFn,
     g: PathSamples,
@@ -1275,11 +1435,7 @@ def _third_derivative_envelope(
     knot interval; x_sss is sampled at ENVELOPE_SUBDIV points on each side and on
     both sides of every geometry knot inside the cell.
     """
-    h = 0.5 / N
-    lo = np.clip(tau - h, 0.0, 1.0)
-    hi = np.clip(tau + h, 0.0, 1.0)
-    frac = np.linspace(0.0, 1.0, 2 * ENVELOPE_SUBDIV + 1)
-    sub = (a + k_loc[:, None] + lo[:, None] + (hi - lo)[:, None] * frac[None, :]) * d  # (K, M)
+    sub = _envelope_points(k_loc, tau, a, d, N)
     gs = geometry(sub.ravel())
     d3 = gs.d3.reshape(sub.shape[0], sub.shape[1], 3)
     top = np.maximum(np.max(d3, axis=1), g.d3)
@@ -1353,6 +1509,10 @@ def _parallel_spans(
                 refiner.stats.iterations += st.iterations
                 refiner.stats.cut_rounds += st.cut_rounds
                 refiner.stats.softer_retries += st.softer_retries
+                refiner.stats.warm_resolves += st.warm_resolves
+                refiner.stats.warm_iterations += st.warm_iterations
+                refiner.stats.warm_first += st.warm_first
+                refiner.stats.safe_retries += st.safe_retries
                 refiner.stats.handover_scaled += st.handover_scaled
                 refiner.stats.worst_verified = max(refiner.stats.worst_verified, st.worst_verified)
                 refiner.stats.window_times.extend(st.window_times)

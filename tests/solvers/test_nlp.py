@@ -201,3 +201,164 @@ def test_cached_shapes_give_the_same_schedule_as_fresh_ones() -> None:
     assert all(nlp._SHAPE_CACHE.shapes.get(k) is v for k, v in built.items())  # reused, not rebuilt
     np.testing.assert_array_equal(again.samples.position, fresh.samples.position)
     assert again.summary["motion_time"] == fresh.summary["motion_time"]
+
+
+def test_tightening_rounds_are_warm_started(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A window's re-solves (tightening rounds, cut slots) start Ipopt from the previous round's primal and
+    dual point, and a window inheriting from the previous one from that window's (``WARM_START``).
+    At 4.63 mm knots on the flower most windows need a round: the warm re-solves take far fewer
+    iterations than cold ones and reach the same schedule (within Ipopt's tolerance), limits holding."""
+    from solvers import nlp, pipeline
+
+    made: list[nlp.NlpStats] = []
+
+    class Capture(nlp.NlpStats):
+        def __init__(self) -> None:
+            super().__init__()
+            made.append(self)
+
+    monkeypatch.setattr(pipeline, "NlpStats", Capture)
+    tp, m, opt = ex.flower(1), router(), Options(method="lp+nlp", knot_spacing=4.63)
+    warm = schedule(tp, m, opt)
+    st_warm = made[-1]
+    # the same rounds solved from zero multipliers
+    monkeypatch.setattr(nlp, "WARM_START", False)
+    cold = schedule(tp, m, opt)
+    st_cold = made[-1]
+    assert st_warm.cut_rounds == st_cold.cut_rounds >= 2
+    assert st_warm.warm_resolves == st_warm.cut_rounds and st_cold.warm_resolves == 0
+    # windows inheriting from the previous one start from its dual point, shifted
+    assert st_warm.warm_first >= 1 and st_cold.warm_first == 0
+    assert st_warm.iterations < 0.9 * st_cold.iterations, (st_warm.iterations, st_cold.iterations)
+    assert warm.summary["motion_time"] == pytest.approx(cold.summary["motion_time"], rel=1e-4)
+    assert warm.diagnostics["nlp_fallbacks"] == []
+    _check_drive(m, warm)
+
+
+def test_fine_grid_has_both_sides_of_feed_knots(monkeypatch: pytest.MonkeyPatch) -> None:
+    """f'' jumps at the feed's knots, so the verification grid holds both sides of each (and the
+    refinement does not chase the one-sided limit: at 4.63 mm knots on the flower it bisected ~10
+    cells next to knots at every level of every round)."""
+    from solvers import nlp
+
+    m = router()
+    ref = nlp.NlpRefiner(nlp.NlpLimits.from_machine(m, False, False), 4, 30, 10)
+    d = 4.5
+    fine = ref._fine_points(3 * d, 9 * d, d, np.zeros(0))
+    for k in range(4, 9):
+        for side in (-1, 1):
+            assert np.any(fine == k * d + side * nlp.BREAK_EPS_MM), (k, side)
+    assert fine[0] == 3 * d and fine[-1] == 9 * d
+    # the refinement's levels on one flower loop at 4.63 mm knots: few cells left after the first levels
+    sizes: list[int] = []
+    fast = nlp._fast_cells
+
+    def counting(f: np.ndarray, util: dict[str, np.ndarray]) -> np.ndarray:
+        out = fast(f, util)
+        sizes.append(out.size)
+        return out
+
+    monkeypatch.setattr(nlp, "_fast_cells", counting)
+    sch = schedule(ex.flower(1), m, Options(method="lp+nlp", knot_spacing=4.63))
+    rounds = sch.summary["nlp_windows"] + sch.summary["nlp_cut_rounds"]
+    # (each round refined REFINE_LEVELS times when the knots' cells were chased)
+    assert 0 < len(sizes) <= 0.8 * rounds * nlp.REFINE_LEVELS, (rounds, sizes)
+
+
+def test_prefetched_geometry_serves_the_same_values() -> None:
+    """A window's set-up points are evaluated in one geometry call (``_Prefetched``): hits, misses and
+    mixed calls give the geometry's own values, and hits make no call."""
+    from solvers import nlp
+
+    tp = ex.flower(1)
+    calls: list[int] = []
+
+    def geometry(s: np.ndarray) -> object:
+        calls.append(np.asarray(s).size)
+        return tp.evaluate(np.asarray(s, dtype=np.float64))
+
+    pre = nlp._Prefetched(geometry, np.linspace(0.0, 100.0, 201)[::-1])  # (unsorted, sorted inside)
+    assert calls == [201]
+    for s in (np.array([50.0, 0.5, 99.5]), np.array([3.25, 7.1]), np.array([60.0, 3.25, 0.0, 7.1, 0.5])):
+        got, ref = pre(s), tp.evaluate(s)
+        np.testing.assert_array_equal(got.s, s)
+        for k in ("position", "d1", "d2", "d3"):
+            np.testing.assert_array_equal(getattr(got, k), getattr(ref, k))
+    assert calls == [201, 2, 2]  # the all-hit call made none; the mixed one evaluated its 2 misses
+
+
+@pytest.mark.parametrize("with_aj", [False, True])
+def test_rows_at_knots_are_kept_once(with_aj: bool) -> None:
+    """u, a and f depend on f and f' only, which are continuous at a knot: ``_Shape`` keeps one row per
+    interior knot (``knot_twins``), and its value is that of the knot's checkpoint on either side."""
+    import casadi as ca
+
+    from solvers import nlp
+
+    n, N, axes = 5, 4, (0, 1)
+    shape = nlp._Shape(n, N, axes, with_aj)
+    k, tau = nlp.checkpoint_layout(n, N)
+    K = k.size
+    kept, dup, twin = nlp.knot_twins(n, N)
+    per_axis = 6 if with_aj else 3
+    assert shape.rows == len(axes) * (per_axis * K - (per_axis // 3) * dup.size) + kept.size
+    rng = np.random.default_rng(3)
+    s = k + tau  # the same s at a knot's two checkpoints: the same geometry there
+    d, Fs = 2.0, 100.0
+    geo = {name: np.column_stack([np.sin(s + i), np.cos(2 * s + i)]) for i, name in enumerate(("d1", "d2", "d3"))}
+    coef = rng.uniform(0.5, 1.5, (len(axes), 8))
+    p = np.concatenate([
+        [Fs, 1 / d], *geo["d1"].T, *geo["d2"].T, *geo["d3"].T, *geo["d3"].T, np.ones(K), np.zeros(K), coef.ravel(),
+    ])
+    x = rng.uniform(0.2, 1.0, n + 2)
+    g = np.asarray(ca.Function("g", [shape._problem["x"], shape._problem["p"]], [shape._problem["g"]])(x, p)).ravel()
+    f, f1, _ = nlp.eval_f(x * Fs, k, tau, d)
+    for m in range(len(axes)):
+        v = geo["d1"][:, m] * f
+        acc = geo["d2"][:, m] * f * f + geo["d1"][:, m] * f * f1
+        u = coef[m, 0] * acc + coef[m, 1] * v
+        blk = m * per_axis
+        np.testing.assert_allclose(g[shape.row_index[blk, kept]], u[kept], rtol=1e-12)
+        np.testing.assert_allclose(g[shape.row_index[blk, twin]], u[dup], rtol=1e-12)
+        assert np.all(shape.row_index[blk, dup] == -1) and np.all(shape.row_index[blk + 1] >= 0)
+        if with_aj:
+            np.testing.assert_allclose(g[shape.row_index[blk + 3, twin]], coef[m, 6] * acc[dup], rtol=1e-12)
+    np.testing.assert_allclose(g[shape.row_index[-1, twin]], f[dup] / Fs, rtol=1e-12)
+    # the kept row is bounded by both checkpoints' bounds
+    ref = nlp.NlpRefiner(nlp.NlpLimits.from_machine(router(), False, with_aj), N, 30, 10)
+    fac = np.full((K, len(axes)), 0.9)
+    fac[dup, 0] = 0.5
+    feed_ub = np.full(K, 500.0)
+    feed_ub[dup] = 300.0
+    sig = np.ones((K, 3))
+    lo, hi = ref._row_bounds(axes, fac, np.full((K, len(axes)), 0.9), np.ones(K), sig, sig, feed_ub, Fs,
+                             np.ones(K, dtype=bool), np.ones(K, dtype=bool))
+    assert lo.size == hi.size == shape.rows
+    lim = ref.lim
+    assert np.allclose(hi[shape.row_index[0, twin]], (lim.umax[0] * 0.5 - lim.c[0] - lim.d[0]) / lim.umax[0])
+    assert np.allclose(hi[shape.row_index[-1, twin]], 300.0 / Fs)
+    assert np.allclose(hi[shape.row_index[-1, kept[kept % (N + 1) != 0]]], 500.0 / Fs)
+
+
+def test_failed_solve_is_retried_with_the_safe_settings(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A solve that fails with the fast, warm-started settings is retried once with Ipopt's cold start and
+    IPOPT_SAFE_OPTIONS before the window counts as failed: with the fast solver capped at 2 iterations
+    every solve fails, and the schedule still has no fallback."""
+    from solvers import nlp, pipeline
+
+    made: list[nlp.NlpStats] = []
+
+    class Capture(nlp.NlpStats):
+        def __init__(self) -> None:
+            super().__init__()
+            made.append(self)
+
+    monkeypatch.setattr(pipeline, "NlpStats", Capture)
+    monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)  # shapes built here stay here
+    monkeypatch.setattr(nlp, "IPOPT_WARM_OPTIONS", {**nlp.IPOPT_WARM_OPTIONS, "ipopt.max_iter": 2})
+    m = router()
+    sch = schedule(ex.flower(1), m, Options(method="lp+nlp"))
+    st = made[-1]
+    assert sch.diagnostics["nlp_fallbacks"] == []
+    assert st.safe_retries == st.windows + st.cut_rounds > 0
+    _check_drive(m, sch)
