@@ -8,6 +8,7 @@ read straight from the machine's axes, give u and e.
 from __future__ import annotations
 
 from collections import OrderedDict
+from typing import Any
 
 import numpy as np
 import pytest
@@ -203,11 +204,8 @@ def test_cached_shapes_give_the_same_schedule_as_fresh_ones() -> None:
     assert again.summary["motion_time"] == fresh.summary["motion_time"]
 
 
-def test_tightening_rounds_are_warm_started(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A window's re-solves (tightening rounds, cut slots) start Ipopt from the previous round's primal and
-    dual point, and a window inheriting from the previous one from that window's (``WARM_START``).
-    At 4.63 mm knots on the flower most windows need a round: the warm re-solves take far fewer
-    iterations than cold ones and reach the same schedule (within Ipopt's tolerance), limits holding."""
+def _capture_stats(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
+    """The NlpStats of every schedule run from here on, in order (the pipeline's own objects)."""
     from solvers import nlp, pipeline
 
     made: list[nlp.NlpStats] = []
@@ -218,6 +216,17 @@ def test_tightening_rounds_are_warm_started(monkeypatch: pytest.MonkeyPatch) -> 
             made.append(self)
 
     monkeypatch.setattr(pipeline, "NlpStats", Capture)
+    return made
+
+
+def test_tightening_rounds_are_warm_started(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A window's re-solves (tightening rounds, cut slots) start Ipopt from the previous round's primal and
+    dual point, and a window inheriting from the previous one from that window's (``WARM_START``).
+    At 4.63 mm knots on the flower most windows need a round: the warm re-solves take far fewer
+    iterations than cold ones and reach the same schedule (within Ipopt's tolerance), limits holding."""
+    from solvers import nlp
+
+    made = _capture_stats(monkeypatch)
     tp, m, opt = ex.flower(1), router(), Options(method="lp+nlp", knot_spacing=4.63)
     warm = schedule(tp, m, opt)
     st_warm = made[-1]
@@ -344,16 +353,9 @@ def test_failed_solve_is_retried_with_the_safe_settings(monkeypatch: pytest.Monk
     """A solve that fails with the fast, warm-started settings is retried once with Ipopt's cold start and
     IPOPT_SAFE_OPTIONS before the window counts as failed: with the fast solver capped at 2 iterations
     every solve fails, and the schedule still has no fallback."""
-    from solvers import nlp, pipeline
+    from solvers import nlp
 
-    made: list[nlp.NlpStats] = []
-
-    class Capture(nlp.NlpStats):
-        def __init__(self) -> None:
-            super().__init__()
-            made.append(self)
-
-    monkeypatch.setattr(pipeline, "NlpStats", Capture)
+    made = _capture_stats(monkeypatch)
     monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)  # shapes built here stay here
     monkeypatch.setattr(nlp, "IPOPT_WARM_OPTIONS", {**nlp.IPOPT_WARM_OPTIONS, "ipopt.max_iter": 2})
     m = router()
