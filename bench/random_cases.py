@@ -22,6 +22,7 @@ import multiprocessing as mp
 import queue
 import resource
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -156,6 +157,19 @@ def summarise(rows: list[dict[str, Any]], profile: str, n: int) -> dict[str, Any
     }
 
 
+def _commit() -> str:
+    """The checked-out commit (with "+dirty" for local edits), or "unknown" outside git."""
+    here = Path(__file__).parent
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here, capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "geometry", "solvers"], cwd=here.parent,
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("+dirty" if dirty else "")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=10_000, help="number of cases (seeds start..start+n-1)")
@@ -188,6 +202,7 @@ def main(argv: list[str] | None = None) -> int:
         if seed not in done:
             todo.put(seed)
     lock = threading.Lock()
+    commit = _commit()
     with log.open("w" if args.fresh else "a") as fh:
 
         def serve(worker: Worker) -> None:
@@ -199,6 +214,8 @@ def main(argv: list[str] | None = None) -> int:
                     except queue.Empty:
                         return
                     new = run_seed(seed, args.profile, worker)
+                    for r in new:
+                        r["commit"] = commit  # which solvers produced the row (a run may span fixes)
                     with lock:
                         for r in new:
                             fh.write(json.dumps(r) + "\n")
