@@ -138,6 +138,15 @@ REFINE_MAX_POINTS = 20_000
 #: largest grid (a window slower than that per sample is not checked: its e changes little per sample).
 SAMPLED_SUBDIV = 8
 SAMPLED_MAX_POINTS = 400_000
+#: The sampled check also reads the motion just outside the window (``_Context``): this many sample
+#: periods of it on each side (the centres up to 2 Ts outside, whose differences reach 2 Ts further),
+#: found on a grid of at most CONTEXT_POINTS points.  Without it the centres within 2 Ts of a window
+#: end went unchecked: at 7 m/s a 31 mm piece is five samples, and bench seed 537 showed sampled
+#: e 1.023 x emax 1.3 Ts before a window's end, where the window's own check read 0.937.
+CONTEXT_SAMPLES = 4.5
+CONTEXT_POINTS = 2_000
+#: ... and evaluated every this many sample periods (the check's grid is Ts / SAMPLED_SUBDIV).
+CONTEXT_STEP = 1.0 / 16.0
 #: A window starts using cut slots when a violated stretch's worst point is over a limit by more than
 #: this factor (a feature the checkpoints do not see); smaller overshoots tighten the checkpoints
 #: around them.  Once it uses slots, every violated stretch gets one while its interval's is free.
@@ -618,7 +627,7 @@ class NlpRefiner:
         start: tuple[float, ...] = _lp_state(c, d, A)
         end = _lp_state(c, d, B)
         prev: FloatArray | None = None
-        last: tuple[int, int, tuple[float, ...], FloatArray | None] | None = None
+        last: tuple[int, int, tuple[float, ...], FloatArray | None, tuple[int, FloatArray] | None] | None = None
         W, P = self.window, self.overlap
         while True:
             b = B if B - a <= W else a + W
@@ -628,18 +637,21 @@ class NlpRefiner:
                 commit = a + W - P
                 if B - commit < W:
                     commit = max(B - W, a + 1)
+            left = (A, out[: a - A + 2].copy()) if a > A else None
             try:
-                sol = self._window(geometry, c, d, a, b, commit, start, end if b == B else (0.0, 0.0), breaks, prev)
+                sol = self._window(geometry, c, d, a, b, commit, start, end if b == B else (0.0, 0.0), breaks, prev,
+                                   left)
             except Exception as exc:
                 if last is None:
                     raise
                 # bridge: the previous window again, its far end joined to the LP state
-                la, lb, lstart, lprev = last
+                la, lb, lstart, lprev, lleft = last
                 reason = exc.reason if isinstance(exc, NlpFailure) else f"{type(exc).__name__}: {exc}"
                 status = exc.status if isinstance(exc, NlpFailure) else "exception"
                 window = exc.window if isinstance(exc, NlpFailure) else self.stats.windows - 1
                 try:
-                    bridge = self._window(geometry, c, d, la, lb, lb, lstart, _lp_state(c, d, lb), breaks, lprev)
+                    bridge = self._window(geometry, c, d, la, lb, lb, lstart, _lp_state(c, d, lb), breaks, lprev,
+                                          lleft)
                 except Exception:
                     raise NlpFailure(f"{reason}; the bridge to the LP feed failed too", window, status) from exc
                 self._record(a, lb, d, window, reason, status, "previous window re-solved to join the lp feed")
@@ -649,7 +661,7 @@ class NlpRefiner:
                 out[a - A :] = sol
                 return B, out
             out[a - A : commit - A + 3] = sol[: commit - a + 3]
-            last = (a, b, start, prev)
+            last = (a, b, start, prev, left)
             start = tuple(float(x) for x in sol[commit - a : commit - a + 3])
             prev = sol[commit - a :]
             a = commit
@@ -666,12 +678,15 @@ class NlpRefiner:
         end: tuple[float, float],
         breaks: FloatArray,
         prev: FloatArray | None,
+        left: tuple[int, FloatArray] | None = None,
     ) -> FloatArray:
         """Solve one NLP window over knot intervals [a, b); returns p_a .. p_{b+1} (mm/s).
 
         ``start``: the first 2 (from the LP) or 3 (from the previous window)
         control points, fixed; ``end``: p_b, p_{b+1}, fixed; ``prev``: the
-        previous window's solution from p_a on (initial guess), or None.
+        previous window's solution from p_a on (initial guess), or None;
+        ``left``: (A, p_A .. p_{a+1}), the chain's feed already committed before a
+        (None: the LP's feed is the motion before a).
         Limits are verified over [a, commit + 1] (one interval past the
         commit, which the next window inherits whole).
         """
@@ -683,12 +698,17 @@ class NlpRefiner:
         k_loc, tau = checkpoint_layout(n, N)
         s_chk = (a + k_loc + tau) * d
         fine = self._fine_points(a * d, min(b, commit + VERIFY_PAST_COMMIT) * d, d, breaks)
+        # the motion around the window for the sampled check: before a (the chain so far, or the LP), and
+        # after b when the chain ends there (inside a chain the next window checks what follows)
+        joins_lp = end[0] != 0.0 or end[1] != 0.0
+        ctx = _Context.around(c, d, a * d, fine[-1] if joins_lp else None, left, lim.sample_period)
         # every point the set-up evaluates, in one call (a call costs ~0.6 ms on top of ~2 us a point)
         br_near = breaks[(breaks > (a - 1) * d) & (breaks < (b + 1) * d)]
         geometry = _Prefetched(geometry, np.concatenate([
             s_chk, _envelope_points(k_loc, tau, a, d, N).ravel(), br_near - BREAK_EPS_MM,
-            br_near + BREAK_EPS_MM, fine,
+            br_near + BREAK_EPS_MM, fine, ctx.points(),
         ]))
+        ctx_motion = ctx.motion(geometry)
         g = geometry(s_chk)
         xsss_hi, xsss_lo = _third_derivative_envelope(geometry, g, k_loc, tau, a, d, N, breaks)
         moving = tuple(
@@ -852,7 +872,7 @@ class NlpRefiner:
                     break
                 fine, g_fine = _merge(fine, g_fine, mids, geometry(mids))
                 fd, util = verify(pw)
-            self._sampled(fine, g_fine, fd, util)  # (after the refinement: its utilisations are spread)
+            self._sampled(fine, g_fine, fd, util, ctx_motion)  # (after the refinement: its utilisations are spread)
             if np.any(fd[0] <= 0.0):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("feed reaches zero inside the window", index, "nonpositive feed")
@@ -1092,7 +1112,8 @@ class NlpRefiner:
         np.maximum.at(util["step"], rt, np.max((np.maximum(e[0], e[1]) + seen) / lim.emax, axis=1))
 
     def _sampled(
-        self, fine: FloatArray, g: PathSamples, fd: kinematics.FeedDerivs, util: dict[str, FloatArray]
+        self, fine: FloatArray, g: PathSamples, fd: kinematics.FeedDerivs, util: dict[str, FloatArray],
+        ctx: _ContextMotion | None = None,
     ) -> None:
         """u and e as the finite differences of the positions sampled at Ts see them, at every sample phase.
 
@@ -1105,20 +1126,27 @@ class NlpRefiner:
         changes within a sample (feed x Ts over a knot interval) these exceed the model's by a few percent
         (random cases 8, 133: 1.02 x emax with e <= 0.995 at every point).  Each centre's utilisation
         is spread over the points its differences use (+-2 Ts), so a violation tightens the checkpoints
-        there: ``util["sampled_control_signal"]``, ``util["sampled_servo_error"]`` (F, 3)."""
+        there: ``util["sampled_control_signal"]``, ``util["sampled_servo_error"]`` (F, 3).
+
+        ``ctx``: the motion just outside the window (``_Context``), read by the differences of the centres
+        near the window's ends (without it those within 2 Ts of an end are not checked)."""
         lim = self.lim
         Ts = lim.sample_period
         if Ts is None or fine.size < 3:
             return
         f = fd[0]
         t = np.concatenate([[0.0], np.cumsum(np.diff(fine) * 0.5 * (1.0 / f[:-1] + 1.0 / f[1:]))])
+        v, acc, _ = kinematics.axis_kinematics(g, *fd)
+        t_fine = t
+        if ctx is not None:
+            t, v, acc = ctx.joined(t, v, acc)
+            t_fine = t[ctx.left_size : ctx.left_size + fine.size]
         M = SAMPLED_SUBDIV
         h = Ts / M
-        n_u = int(t[-1] / h) + 1
+        n_u = int((t[-1] - t[0]) / h) + 1
         if n_u < 4 * M + 1 or n_u > SAMPLED_MAX_POINTS:
             return
-        tu = np.arange(n_u) * h
-        v, acc, _ = kinematics.axis_kinematics(g, *fd)
+        tu = t[0] + np.arange(n_u) * h
         k = np.arange(-M, M + 1)
         box = np.where(np.abs(k) == M, 0.5, 1.0) / (2 * M)
         hat = (M - np.abs(k)) / M**2
@@ -1136,7 +1164,7 @@ class NlpRefiner:
             u_s[valid, i] = np.abs(u[valid]) / lim.umax[i]
         for name, val in (("sampled_servo_error", e_s), ("sampled_control_signal", u_s)):
             spread = maximum_filter1d(val, size=4 * M + 1, axis=0)
-            util[name] = np.column_stack([np.interp(t, tu, spread[:, i]) for i in range(3)])
+            util[name] = np.column_stack([np.interp(t_fine, tu, spread[:, i]) for i in range(3)])
 
     def _feed_bound(self, g: PathSamples) -> FloatArray:
         """Upper bound on f at points g: min(Fmax, min_x vmax_x / |x_s|) (inf if neither applies), (K,)."""
@@ -1395,6 +1423,129 @@ def _envelope_points(k_loc: NDArray[np.int64], tau: FloatArray, a: int, d: float
     hi = np.clip(tau + h, 0.0, 1.0)
     frac = np.linspace(0.0, 1.0, 2 * ENVELOPE_SUBDIV + 1)
     return np.asarray((a + k_loc[:, None] + lo[:, None] + (hi - lo)[:, None] * frac[None, :]) * d, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class _ContextMotion:
+    """Axis motion just outside a window, in the window's time (t = 0 at its first fine point, s):
+    ``left_*`` before it (t < 0), ``right_*`` after its last fine point (``right_t`` from that point's time
+    on: added to the window's own duration).  v, acc: (K, 3) mm/s, mm/s^2."""
+
+    left_t: FloatArray
+    left_v: FloatArray
+    left_acc: FloatArray
+    right_t: FloatArray
+    right_v: FloatArray
+    right_acc: FloatArray
+
+    @property
+    def left_size(self) -> int:
+        return int(self.left_t.size)
+
+    def joined(self, t: FloatArray, v: FloatArray, acc: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The window's (t, v, acc) with the context before and after it."""
+        return (
+            np.concatenate([self.left_t, t, t[-1] + self.right_t]),
+            np.concatenate([self.left_v, v, self.right_v]),
+            np.concatenate([self.left_acc, acc, self.right_acc]),
+        )
+
+
+@dataclass(frozen=True)
+class _Context:
+    r"""The feed just outside an NLP window, fixed while the window is solved (piece-local s, mm).
+
+    Before the window: the chain's committed NLP feed f = sum p_k B_k(s) on knot intervals [A, a),
+    and the LP's f = sqrt(q) before A; after it (only where the window joins the LP state at its
+    end): the LP's feed.  Each side is a grid from the window's end outward covering
+    ``CONTEXT_SAMPLES`` sample periods of motion, t = integral ds / f (trapezoid, from the window's
+    end), or up to the piece's end (rest: f -> 0 there, and the grid stops where the time is covered).
+    Points in increasing s on both sides; ``left_t`` < 0 (before the window), ``right_t`` > 0 (after
+    its last verified point); fd: (f, f', f'') in time, as ``kinematics.from_q``."""
+
+    left_s: FloatArray
+    left_t: FloatArray
+    left_fd: kinematics.FeedDerivs
+    right_s: FloatArray
+    right_t: FloatArray
+    right_fd: kinematics.FeedDerivs
+
+    @staticmethod
+    def around(
+        c: FloatArray, d: float, s_a: float, s_b: float | None, left: tuple[int, FloatArray] | None,
+        Ts: float | None,
+    ) -> _Context:
+        """``c``: the LP's q control points over the piece; ``s_a``: the window's first s; ``s_b``: its
+        last verified s if the LP's feed follows it (None: nothing after it); ``left``: (A, p_A .. p_{a+1})."""
+        empty: kinematics.FeedDerivs = (np.zeros(0), np.zeros(0), np.zeros(0))
+        none = (np.zeros(0), np.zeros(0), empty)
+        if Ts is None:
+            return _Context(*none, *none)
+        length = (c.size - 2) * d
+
+        def feed(s: FloatArray) -> kinematics.FeedDerivs:
+            f, f1, f2 = kinematics.from_q(*bspline.evaluate(c, s, d))
+            if left is not None:
+                A, p = left
+                nlp = (s >= A * d) & (s <= s_a)
+                if nlp.any():
+                    a = A + p.size - 2
+                    fn = kinematics.from_f(*bspline.evaluate(p, s[nlp], d, k_lo=A, k_hi=a - 1, col0=A))
+                    f, f1, f2 = f.copy(), f1.copy(), f2.copy()
+                    f[nlp], f1[nlp], f2[nlp] = fn
+            return f, f1, f2
+
+        def side(edge: float, far: float) -> tuple[FloatArray, FloatArray, kinematics.FeedDerivs]:
+            need = CONTEXT_SAMPLES * Ts
+            # the feed is at most the largest control point around (convex hull): the s the time needs
+            f_hi = float(np.sqrt(max(float(np.max(c)), 0.0)))
+            if left is not None:
+                f_hi = max(f_hi, float(np.max(left[1])))
+            span = min(abs(far - edge), need * f_hi)
+            if span <= 0.0:
+                return none
+            s = edge + np.sign(far - edge) * np.linspace(0.0, span, CONTEXT_POINTS + 1)
+            # midpoint rule: f = 0 at the piece's end (rest) is a point of the grid, not of the rule
+            f_mid = feed(0.5 * (s[:-1] + s[1:]))[0]
+            t = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(s)) / np.maximum(f_mid, 1e-300))])
+            # points about CONTEXT_STEP apart in time up to the first one past the time needed (the
+            # edge itself is the window's)
+            m = min(s.size, int(np.searchsorted(t, need, side="right")) + 1)
+            step = CONTEXT_STEP * Ts
+            keep = np.unique(np.minimum(np.searchsorted(t[:m], np.arange(step, t[m - 1] + step, step)), m - 1))
+            keep = keep[keep > 0]
+            s_k, t_k = s[keep], t[keep]
+            fd = feed(s_k)
+            if m == s.size and span == abs(far - edge) and t[-1] < need:
+                # the piece's end reached in less time: at rest after it, up to the time needed
+                s_k = np.concatenate([s_k, [s[-1], s[-1]]])
+                t_k = np.concatenate([t_k, [t[-1] + 1e-9 * Ts, need]])
+                fd = (np.concatenate([fd[0], [0.0, 0.0]]), np.concatenate([fd[1], [0.0, 0.0]]),
+                      np.concatenate([fd[2], [0.0, 0.0]]))
+            if far < edge:
+                return s_k[::-1], -t_k[::-1], (fd[0][::-1], fd[1][::-1], fd[2][::-1])
+            return s_k, t_k, fd
+
+        lft = side(s_a, 0.0)
+        rgt = side(s_b, length) if s_b is not None else none
+        return _Context(*lft, *rgt)
+
+    def points(self) -> FloatArray:
+        return np.concatenate([self.left_s, self.right_s])
+
+    def motion(self, geometry: GeometryFn) -> _ContextMotion | None:
+        """Axis v and acc at the context's points, with their times (None when there is no context)."""
+        if not self.left_s.size and not self.right_s.size:
+            return None
+
+        def axis(s: FloatArray, fd: kinematics.FeedDerivs) -> tuple[FloatArray, FloatArray]:
+            if not s.size:
+                return np.zeros((0, 3)), np.zeros((0, 3))
+            v, acc, _ = kinematics.axis_kinematics(geometry(s), *fd)
+            return v, acc
+
+        return _ContextMotion(self.left_t, *axis(self.left_s, self.left_fd),
+                              self.right_t, *axis(self.right_s, self.right_fd))
 
 
 class _Prefetched:

@@ -256,3 +256,18 @@ def test_lp_nlp_keeps_the_lp_knots_when_the_lp_floor_binds() -> None:
     under lp+nlp the LP's knots are kept."""
     out = harness.run(gen.case(145, "bench"), "lp+nlp")
     assert out.ok, out.describe()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_sampled_servo_error_next_to_a_window_end() -> None:
+    """Bench seed 537 (lp+nlp): a 31 mm piece passed at up to 7.9 m/s is five 1 ms samples.  The NLP's
+    sampled check (u and e as the samples' differences see them) covered only the centres whose
+    differences lay inside the window, 2 Ts in from each end; the sample 1.3 Ts before the window's
+    end read 1.023 x emax (the window's own check 0.937), and the repair rounds, verifying more points
+    with the same blind spot, changed nothing: a LimitViolationError.  Now the check reads the motion
+    just outside the window (the chain so far, the LP after its end, rest past the piece's end) and
+    holds that sample within 1 %.  The NLP kept its feed (no fallback to the LP)."""
+    out = harness.run(gen.case(537, "bench"), "lp+nlp")
+    assert out.ok, out.describe()
+    assert out.nlp_fallbacks == 0
+    assert out.utilisation["servo_error_x"] <= 1.0 + 5e-3
