@@ -132,10 +132,12 @@ def summarise(rows: list[dict[str, Any]], profile: str, n: int) -> dict[str, Any
     worst: dict[str, dict[str, float]] = {}
     failures = []
     per_method: dict[str, dict[str, int]] = {}
+    per_commit: dict[str, dict[str, int]] = {}  # a resumed run may span solver fixes: which rows ran on which
     for r in rows:
-        pm = per_method.setdefault(r["method"], {"runs": 0, "ok": 0, "failed": 0})
-        pm["runs"] += 1
-        pm["ok" if r["ok"] else "failed"] += 1
+        for key, tab in ((r["method"], per_method), (r.get("commit", "unrecorded"), per_commit)):
+            pm = tab.setdefault(key, {"runs": 0, "ok": 0, "failed": 0})
+            pm["runs"] += 1
+            pm["ok" if r["ok"] else "failed"] += 1
         if not r["ok"]:
             failures.append({k: r[k] for k in ("seed", "method", "error", "violations", "tags")})
         for key, val in r["utilisation"].items():
@@ -151,6 +153,7 @@ def summarise(rows: list[dict[str, Any]], profile: str, n: int) -> dict[str, Any
         "failed_runs": len(failures),
         "failed_cases": len({f["seed"] for f in failures}),
         "per_method": per_method,
+        "per_commit": per_commit,
         "worst_utilisation": worst,
         "failures": failures,
         "seconds": sum(r["seconds"] for r in rows),
