@@ -364,3 +364,56 @@ def test_failed_solve_is_retried_with_the_safe_settings(monkeypatch: pytest.Monk
     assert sch.diagnostics["nlp_fallbacks"] == []
     assert st.safe_retries == st.windows + st.cut_rounds > 0
     _check_drive(m, sch)
+
+
+#: Context time against the analytic s / F of a constant feed: the trapezoid is exact there.
+CONTEXT_TIME_RTOL = 1e-12
+
+
+def test_context_around_a_window_is_the_motion_outside_it() -> None:
+    """``_Context``: the feed just outside an NLP window, timed by t = integral ds / f, for the sampled
+    check's centres near the window's ends.  Constant LP feed F (q = F^2 everywhere) before the chain,
+    the chain's committed NLP feed F2 (constant control points) on [A d, a d), and rest past the piece's
+    end: the times are the analytic distances over the feed, and the piece's end is followed by rest."""
+    from solvers.nlp import CONTEXT_SAMPLES, _Context
+
+    d, n_int, F, F2, Ts = 1.0, 40, 100.0, 50.0, 1e-3
+    c = np.full(n_int + 2, F**2)
+    A, a = 5, 10
+    p_left = np.full(a - A + 2, F2)
+    ctx = _Context.around(c, d, a * d, None, (A, p_left), Ts)
+    assert ctx.right_s.size == 0
+    # before a: F2 back to A d (5 mm = 0.1 s, more than CONTEXT_SAMPLES Ts: never reaches A)
+    assert np.all(np.diff(ctx.left_s) > 0) and np.all(ctx.left_s < a * d)
+    np.testing.assert_allclose(ctx.left_fd[0], F2, rtol=1e-12)
+    np.testing.assert_allclose(ctx.left_t, -(a * d - ctx.left_s) / F2, rtol=CONTEXT_TIME_RTOL)
+    assert ctx.left_t[0] <= -CONTEXT_SAMPLES * Ts  # covers the time the differences need
+    assert ctx.left_t[1] > -CONTEXT_SAMPLES * Ts
+
+    # after the window's last point, 0.2 mm before the piece's end at rest: the LP's F up to the end
+    # (2 us of motion), then rest (f = 0) up to the time needed
+    s_b = n_int * d - 0.2
+    ctx = _Context.around(c, d, a * d, s_b, None, Ts)
+    np.testing.assert_allclose(ctx.left_fd[0], F, rtol=1e-12)  # no chain before: the LP's feed
+    moving = ctx.right_fd[0] > 0
+    np.testing.assert_allclose(ctx.right_t[moving], (ctx.right_s[moving] - s_b) / F, rtol=CONTEXT_TIME_RTOL)
+    assert ctx.right_s[-1] == n_int * d
+    np.testing.assert_array_equal(ctx.right_fd[0][-2:], 0.0)
+    assert ctx.right_t[-1] == pytest.approx(CONTEXT_SAMPLES * Ts)
+    assert np.all(np.diff(ctx.right_t) > 0)
+
+    # the motion: v = x_s f and a = x_ss f^2 + x_s f f' on a straight line along x (x_ss = 0, f' = 0)
+    def line(s: np.ndarray) -> Any:
+        from geometry.toolpath import PathSamples
+        z = np.zeros((s.size, 3))
+        d1 = z.copy()
+        d1[:, 0] = 1.0
+        return PathSamples(s, np.column_stack([s, 0 * s, 0 * s]), d1, z, z, None)
+
+    mo = ctx.motion(line)
+    assert mo is not None
+    np.testing.assert_allclose(mo.left_v[:, 0], F, rtol=1e-12)
+    np.testing.assert_allclose(mo.right_v[moving, 0], F, rtol=1e-12)
+    np.testing.assert_array_equal(mo.right_v[~moving], 0.0)
+    t, v, acc = mo.joined(np.array([0.0, 1.0]), np.ones((2, 3)), np.zeros((2, 3)))
+    assert np.all(np.diff(t) > 0) and t.size == mo.left_size + 2 + mo.right_t.size
