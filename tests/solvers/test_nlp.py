@@ -415,5 +415,6 @@ def test_context_around_a_window_is_the_motion_outside_it() -> None:
     np.testing.assert_allclose(mo.left_v[:, 0], F, rtol=1e-12)
     np.testing.assert_allclose(mo.right_v[moving, 0], F, rtol=1e-12)
     np.testing.assert_array_equal(mo.right_v[~moving], 0.0)
-    t, v, acc = mo.joined(np.array([0.0, 1.0]), np.ones((2, 3)), np.zeros((2, 3)))
-    assert np.all(np.diff(t) > 0) and t.size == mo.left_size + 2 + mo.right_t.size
+    t, v, acc = mo.joined(np.array([0.0, 1.0]), np.full((2, 3), 7.0), np.zeros((2, 3)))
+    assert np.all(np.diff(t) > 0) and t.size == v.shape[0] == acc.shape[0] == mo.left_size + 2 + mo.right_t.size
+    np.testing.assert_array_equal(v[mo.left_size : mo.left_size + 2], 7.0)  # the window's own, in its place
