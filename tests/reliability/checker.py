@@ -62,6 +62,16 @@ FEED_STEP_SLACK = 2.0
 FEED_CONSISTENCY = 1e-2
 #: Golden-section iterations of the projection (bracket shrinks by 0.618 per step).
 GOLDEN_ITERATIONS = 50
+#: The fast first search of every point: golden-section steps (bracket down to ~0.3 %), then Newton
+#: steps on the projection with central differences of step NEWTON_H x the bracket.  Its distances are
+#: distances to curve points (upper bounds), so a point it finds close enough (SETTLED_MM) is settled
+#: and only the others get the full search.
+FAST_GOLDEN_ITERATIONS = 12
+NEWTON_STEPS = 3
+NEWTON_H = 1e-3
+#: ... settled by the fast search only this close (a wrong bracket can hold a curve point within
+#: PATH_TOL_MM of x that is not its foot, and the worst distance is reported): 1 nm.
+SETTLED_MM = 1e-3 * PATH_TOL_MM
 #: Dense polyline: initial points per knot span, and chord refinement target as a share of the path length.
 DENSE_PER_SPAN = 32
 DENSE_CHORD_SHARE = 1e-3
@@ -182,53 +192,92 @@ def dense_polyline(path: Sequence[Nurbs]) -> Dense:
 
 
 def path_distance(path: Sequence[Nurbs], x: FloatArray, dense: Dense | None = None) -> FloatArray:
-    """Distance (mm) of each point x (K, 3) from the path (union of the segments)."""
+    """Distance (mm) of each point x (K, 3) from the path (union of the segments).
+
+    Every figure is the distance to a point of the curve, so an upper bound of the true distance: a
+    cheap search that already finds a foot within SETTLED_MM settles the point; the others get the
+    full search (and then, if still over PATH_TOL_MM, the search of every bracket in reach)."""
     dense = dense or dense_polyline(path)
     tree = cKDTree(dense.pts)
     d0, j0 = tree.query(x, k=2)
     best = np.asarray(d0[:, 0], dtype=np.float64).copy()
-    M = dense.pts.shape[0]
-    g = (math.sqrt(5.0) - 1.0) / 2.0
-    for col in range(2):
-        j = j0[:, col]
-        for si in np.unique(dense.seg[j]):
-            seg = path[int(si)]
-            m = dense.seg[j] == si
-            jj = j[m]
-            jl = np.maximum(jj - 1, 0)
-            jr = np.minimum(jj + 1, M - 1)
-            a = np.where(dense.seg[jl] == si, dense.u[jl], dense.u[jj])
-            b = np.where(dense.seg[jr] == si, dense.u[jr], dense.u[jj])
-            xm = x[m]
-            for _ in range(GOLDEN_ITERATIONS):
-                c = b - g * (b - a)
-                e = a + g * (b - a)
-                left = _dist(seg, c, xm) < _dist(seg, e, xm)
-                b = np.where(left, e, b)
-                a = np.where(left, a, c)
-            best[m] = np.minimum(best[m], _dist(seg, 0.5 * (a + b), xm))
+    # fast: in the bracket of the nearest dense point, a short golden-section search, then Newton steps
+    # on (C(u) - x) . C'(u) = 0; the points it leaves off get the full search in the brackets of the
+    # two nearest
+    _nearest_brackets(path, dense, x, j0[:, :1], best, FAST_GOLDEN_ITERATIONS, NEWTON_STEPS)
+    off = np.flatnonzero(best > SETTLED_MM)
+    if off.size:
+        sub = best[off].copy()
+        _nearest_brackets(path, dense, x[off], j0[off], sub, GOLDEN_ITERATIONS, 0)
+        best[off] = np.minimum(best[off], sub)
     # Points still off: the true foot lies within a chord of some dense point no farther than the
     # nearest dense distance plus the longest chord (near a sharp corner the two nearest dense points
     # can sit on the other branch); search the brackets of all of them.
+    M = dense.pts.shape[0]
     chord = float(np.max(np.linalg.norm(np.diff(dense.pts, axis=0), axis=1))) if M > 1 else 0.0
     for i in np.flatnonzero(best > PATH_TOL_MM):
         cand = np.asarray(tree.query_ball_point(x[i], float(d0[i, 0]) + chord), dtype=np.int64)
         for si in np.unique(dense.seg[cand]):
             seg = path[int(si)]
             jj = cand[dense.seg[cand] == si]
-            jl = np.maximum(jj - 1, 0)
-            jr = np.minimum(jj + 1, M - 1)
-            a = np.where(dense.seg[jl] == si, dense.u[jl], dense.u[jj])
-            b = np.where(dense.seg[jr] == si, dense.u[jr], dense.u[jj])
+            a, b = _bracket(dense, si, jj)
             xm = np.repeat(x[i : i + 1], jj.size, axis=0)
-            for _ in range(GOLDEN_ITERATIONS):
-                c = b - g * (b - a)
-                e = a + g * (b - a)
-                left = _dist(seg, c, xm) < _dist(seg, e, xm)
-                b = np.where(left, e, b)
-                a = np.where(left, a, c)
+            a, b = _golden(seg, a, b, xm, GOLDEN_ITERATIONS)
             best[i] = min(best[i], float(np.min(_dist(seg, 0.5 * (a + b), xm))))
     return best
+
+
+def _bracket(dense: Dense, si: int, jj: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
+    """The parameter bracket of segment si around dense points jj: their neighbours on that segment."""
+    M = dense.pts.shape[0]
+    jl = np.maximum(jj - 1, 0)
+    jr = np.minimum(jj + 1, M - 1)
+    a = np.where(dense.seg[jl] == si, dense.u[jl], dense.u[jj])
+    b = np.where(dense.seg[jr] == si, dense.u[jr], dense.u[jj])
+    return a, b
+
+
+def _golden(seg: Nurbs, a: FloatArray, b: FloatArray, x: FloatArray, iterations: int) -> tuple[FloatArray, FloatArray]:
+    """Golden-section search of |C(u) - x| over [a, b] (the bracket shrinks by 0.618 per step)."""
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(iterations):
+        c = b - g * (b - a)
+        e = a + g * (b - a)
+        left = _dist(seg, c, x) < _dist(seg, e, x)
+        b = np.where(left, e, b)
+        a = np.where(left, a, c)
+    return a, b
+
+
+def _nearest_brackets(
+    path: Sequence[Nurbs], dense: Dense, x: FloatArray, j0: NDArray[np.int64], best: FloatArray,
+    iterations: int, newton: int,
+) -> None:
+    """Lower ``best`` (K,) to the distance found in the brackets of the dense points j0 (K, m): golden
+    section, then ``newton`` steps u -= f / f' with f = (C - x) . C', f' = |C'|^2 + (C - x) . C''
+    (central differences, step NEWTON_H of the bracket), kept inside the bracket."""
+    for col in range(j0.shape[1]):
+        j = j0[:, col]
+        for si in np.unique(dense.seg[j]):
+            seg = path[int(si)]
+            m = dense.seg[j] == si
+            a, b = _bracket(dense, int(si), j[m])
+            xm = x[m]
+            a, b = _golden(seg, a, b, xm, iterations)
+            u = 0.5 * (a + b)
+            d = _dist(seg, u, xm)
+            hi = seg.domain[1]
+            for _ in range(newton):
+                h = np.maximum(NEWTON_H * (b - a), 1e-14 * max(1.0, abs(hi)))
+                pts = seg.points(np.concatenate([u - h, u, u + h])).reshape(3, -1, 3)
+                r = pts[1] - xm
+                c1 = (pts[2] - pts[0]) / (2.0 * h[:, None])
+                c2 = (pts[2] - 2.0 * pts[1] + pts[0]) / (h * h)[:, None]
+                fp = np.sum(c1 * c1, axis=1) + np.sum(r * c2, axis=1)
+                step = np.where(fp > 0.0, np.sum(r * c1, axis=1) / np.where(fp > 0.0, fp, 1.0), 0.0)
+                u = np.clip(u - step, a, b)
+                d = np.minimum(d, _dist(seg, u, xm))
+            best[m] = np.minimum(best[m], d)
 
 
 def _dist(seg: Nurbs, u: FloatArray, x: FloatArray) -> FloatArray:
