@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from solvers.pipeline import Options, schedule
@@ -28,8 +29,10 @@ class Outcome:
         return f"seed {self.seed} method {self.method}: {what}"
 
 
-def run(case: gen.Case, method: str) -> Outcome:
-    """Schedule ``case`` with ``method`` and check the samples: lp -> v, a, j; lp+nlp -> u, e, v."""
+def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None = None) -> Outcome:
+    """Schedule ``case`` with ``method`` and check the samples: lp -> v, a, j; lp+nlp -> u, e, v.
+
+    ``before_check(samples)``, if given, is called between the two (the bench's time budgets)."""
     m = case.lp_machine if method == "lp" else case.machine
     try:
         tp = case.toolpath()
@@ -38,6 +41,8 @@ def run(case: gen.Case, method: str) -> Outcome:
         tb = traceback.format_exception_only(type(exc), exc)[-1].strip()
         return Outcome(case.seed, method, False, error=f"{tb}")
     smp = sch.samples
+    if before_check is not None:
+        before_check(int(smp.t.size))
     rep = checker.check(case.segments, gen.limits_of(m), TS, smp.t, smp.feed, smp.position,
                         kinematic=method == "lp", drive=method == "lp+nlp")
     fallbacks = len(sch.diagnostics.get("nlp_fallbacks", []))

@@ -70,3 +70,39 @@ def test_worker_survives_a_killed_case_and_runs_the_next(monkeypatch: pytest.Mon
         assert row["ok"], row
     finally:
         w.close()
+
+
+@pytest.mark.parametrize("check_budget_s", [1, 30], ids=["over_its_budget", "within_its_budget"])
+def test_the_check_has_its_own_cpu_budget(monkeypatch: pytest.MonkeyPatch, check_budget_s: int) -> None:
+    """The scheduling limit is the product's; the independent check (~20 us a sample) gets its own budget
+    once the schedule is done (bench seed 388: 6.1 M samples scheduled in 36 s were a time-out while the
+    checker ran).  A check computing CHECK_BUSY_S passes past a 2 s scheduling limit when its budget
+    allows it, and is reported as the check's time-out when it does not."""
+    from tests.reliability import checker
+
+    real_check = checker.check
+
+    def slow_check(*args: Any, **kwargs: Any) -> Any:
+        t0 = time.process_time()
+        while time.process_time() - t0 < CHECK_BUSY_S:
+            pass
+        return real_check(*args, **kwargs)
+
+    monkeypatch.setattr(checker, "check", slow_check)  # the worker forks with it
+    monkeypatch.setattr(random_cases, "CASE_TIMEOUT_S", TIME_LIMIT_S)
+    monkeypatch.setattr(random_cases, "CHECK_TIMEOUT_S", check_budget_s)
+    monkeypatch.setattr(random_cases, "CHECK_S_PER_SAMPLE", 0.0)
+    w = random_cases.Worker("test")
+    try:
+        row = w.run(SEED, "lp", TIME_LIMIT_S, 120)
+    finally:
+        w.close()
+    if check_budget_s > CHECK_BUSY_S:
+        assert row["ok"], row
+    else:
+        assert not row["ok"]
+        assert row["error"].startswith("CaseTimeout: the check of "), row["error"]
+
+
+#: CPU seconds the slowed check computes: over the scheduling limit, under the larger check budget.
+CHECK_BUSY_S = 3.0
