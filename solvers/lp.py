@@ -370,6 +370,8 @@ class WindowLP:
         self.Q = 1.0
         self._fine_g: tuple[FloatArray, PathSamples] | None = None
         self._step_cache: tuple[FloatArray, FloatArray, FloatArray] | None = None
+        #: knot intervals after k0 on which the previous window's solution and q* are inherited
+        self.inherited = INHERITED_INTERVALS
 
     # ----- row blocks ---------------------------------------------------------
     def _mats(self, s: FloatArray) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
@@ -385,7 +387,7 @@ class WindowLP:
         """Add rows at points s; on inherited intervals widen them to admit the previous solution."""
         spec = self.spec
         if spec.prev_c is not None:
-            near = s < (spec.k0 + INHERITED_INTERVALS) * spec.d
+            near = s < self._inherited_end(spec.prev_c) * spec.d
             if near.any():
                 k_prev, c_prev = spec.prev_c
                 x = np.zeros(spec.ncols)
@@ -450,13 +452,19 @@ class WindowLP:
         spec = self.spec
         return bspline.evaluate(c, s, spec.d, k_lo=spec.k0, k_hi=spec.k1 - 1, col0=spec.k0)
 
+    def _inherited_end(self, prev: tuple[int, FloatArray]) -> int:
+        """The knot up to which the previous window's ``prev`` = (k0_prev, control points) is inherited:
+        ``self.inherited`` intervals after k0, within the previous window."""
+        k_prev, c_prev = prev
+        return min(self.spec.k0 + self.inherited, k_prev + c_prev.size - 2)
+
     def _qstar(self, c_star: FloatArray, s: FloatArray) -> FloatArray:
         """q*(s) of this window, or of the previous window on the inherited intervals."""
         spec = self.spec
         q = self._eval(c_star, s)[0]
         if spec.prev_qstar is not None:
             k_prev, c_prev = spec.prev_qstar
-            near = s < (spec.k0 + INHERITED_INTERVALS) * spec.d
+            near = s < self._inherited_end(spec.prev_qstar) * spec.d
             if near.any():
                 q[near] = bspline.evaluate(
                     c_prev, s[near], spec.d, k_lo=spec.k0, k_hi=spec.k1 - 1, col0=k_prev
@@ -570,14 +578,28 @@ class WindowLP:
             self._jerk_rows(r2, g, Q, qstar)
             return self._cuts(self._run(r2, w, lo, col_hi), r2, w, lo, col_hi, Q, s_check, c_star)
 
-        for i, lo_i in enumerate(floors):  # a floor (or a cut round under it) infeasible: the next one
+        # A floor (or a cut round under it) infeasible: the next one.  All infeasible with an inherited
+        # start: again with the previous window's solution and q* inherited over twice the intervals, up
+        # to the whole overlap.  Bench seed 565: the previous window's stage 2 met a break's cap
+        # (q <= 24, the feed from 72 to 4.9 mm/s) 9.5 intervals after this window's start with the jerk
+        # binding all the way; this window's own q* differed by 0.2 % 1-2 intervals in, and its
+        # linearised jerk rows no longer reached the cap from the inherited state.
+        while True:
             try:
-                chat2, pts2 = stage2(lo_i)
+                for i, lo_i in enumerate(floors):
+                    try:
+                        chat2, pts2 = stage2(lo_i)
+                    except (InfeasibleError, SolverFailure):
+                        if i == len(floors) - 1:
+                            raise
+                        continue
+                    break
+                break
             except (InfeasibleError, SolverFailure):
-                if i == len(floors) - 1:
+                prev = spec.prev_qstar
+                if prev is None or self._inherited_end(prev) >= prev[0] + prev[1].size - 2:
                     raise
-                continue
-            break
+                self.inherited *= 2
         return WindowResult(chat2 * Q, c_star, self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1], pts2[2],
                             floored(chat2, lo_i))
 

@@ -271,3 +271,16 @@ def test_sampled_servo_error_next_to_a_window_end() -> None:
     assert out.ok, out.describe()
     assert out.nlp_fallbacks == 0
     assert out.utilisation["servo_error_x"] <= 1.0 + 5e-3
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_inherited_start_tight_against_a_break_cap() -> None:
+    """Bench seed 565 (lp): a curvature jump 106.73 mm into a piece caps q at 24 (feed 4.9 mm/s).  The
+    previous LP window decelerated from 72 mm/s to that cap with the jerk rows binding all the way; the
+    next window starts 9.5 knot intervals before the break from that window's state, and its own stage-1
+    q* differed by 0.2 % one or two intervals in: its linearised jerk rows no longer reached the cap in
+    time, and every floor was infeasible (`InfeasibleError` for window 7).  Now such a window's stage 2 is
+    solved again with the previous window's solution and q* inherited over twice the intervals (up to the
+    overlap); windows that were feasible are unchanged."""
+    out = harness.run(gen.case(565, "bench"), "lp")
+    assert out.ok, out.describe()
