@@ -38,8 +38,17 @@ NEWTON_STEPS = 1
 _GL = {n: np.polynomial.legendre.leggauss(n) for n in (GL_ORDER, GL_ORDER_PARTIAL)}
 
 
+#: Intervals per evaluation of the integrand (GL_ORDER points each): a time table over a 183.5 m piece
+#: evaluated 1.3 M points at once, ~0.5 GB of transients in the feed's evaluation.
+GL_CHUNK = 16_384
+
+
 def gauss_legendre(f: Integrand, a: FloatArray, b: FloatArray, order: int = GL_ORDER) -> FloatArray:
-    """Integral of f over each [a_i, b_i] (vectorised over i)."""
+    """Integral of f over each [a_i, b_i] (vectorised over i, GL_CHUNK intervals at a time)."""
+    if a.shape[0] > GL_CHUNK:
+        return np.concatenate([
+            gauss_legendre(f, a[i : i + GL_CHUNK], b[i : i + GL_CHUNK], order) for i in range(0, a.shape[0], GL_CHUNK)
+        ])
     x, w = _GL[order]
     half = 0.5 * (b - a)
     mid = 0.5 * (b + a)
