@@ -75,8 +75,13 @@ NLP_WINDOW_PER_OVERLAP = 3
 LP_PROGRESS_SHARE = 0.1
 #: Utilisation at or above which a constraint is reported as binding.
 BINDING_UTILISATION = 0.98
-#: Times a piece whose feed stalls is solved again with twice the knots.
+#: Times a piece whose feed stalls is solved again with twice the knots (the last time with a floor on
+#: q' at its rest ends) ...
 KNOT_REFINEMENTS = 3
+#: ... and more times, with that floor, while it is still stuck and its knots stay at most this many: bench
+#: seed 828, a 34 mm closed loop whose curvature jumps by 1.7e4 /mm at a knot 0.82 mm from its start
+#: (q <= 0.019 there), still stalled at 128 intervals and moves at 512.
+STUCK_REFINE_MAX_INTERVALS = 1024
 #: A piece refined because the LP held control points at their q floor keeps refining only while
 #: each refinement shortens its motion to under this share of the best so far.
 FLOOR_REFINE_GAIN = 0.99
@@ -350,15 +355,19 @@ def solve_piece(
     """
     n_int: int | None = None
     best: tuple[float, PieceProfile, list[int]] | None = None
-    for attempt in range(KNOT_REFINEMENTS + 1):
+    attempt = 0
+    while True:
         plan = plan_piece(piece, machine, opt, n_int)
         floor_refine = (opt.method == "lp" and opt.knot_spacing is None
                         and 2 * plan.n_int <= FLOOR_REFINE_MAX_INTERVALS)
         floored: list[int] = []
+        # after KNOT_REFINEMENTS doublings: with the rest floor, and on while the piece is still stuck and
+        # its knots stay under STUCK_REFINE_MAX_INTERVALS
+        last = attempt >= KNOT_REFINEMENTS and 2 * plan.n_int > STUCK_REFINE_MAX_INTERVALS
         try:
             prof, joins = _solve_windows(
                 toolpath, piece, plan, opt, lim, stats, on_window if attempt == 0 else None, verify, cache,
-                rest_floor=attempt == KNOT_REFINEMENTS, floored=floored if floor_refine else None,
+                rest_floor=attempt >= KNOT_REFINEMENTS, floored=floored if floor_refine else None,
             )
         except (InfeasibleError, SolverFailure):
             if best is None:  # (a refinement for a floor only: keep what moved)
@@ -374,7 +383,10 @@ def solve_piece(
                 best = (duration, prof, joins)
             if not floored:
                 break
+        if last:
+            break
         n_int = 2 * plan.n_int
+        attempt += 1
         stats["knot_refinements"] = stats.get("knot_refinements", 0) + 1
     if best is not None:
         return best[1], best[2]

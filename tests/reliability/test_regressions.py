@@ -284,3 +284,14 @@ def test_inherited_start_tight_against_a_break_cap() -> None:
     overlap); windows that were feasible are unchanged."""
     out = harness.run(gen.case(565, "bench"), "lp")
     assert out.ok, out.describe()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_stuck_small_piece_keeps_refining_its_knots() -> None:
+    """Bench seed 828 (lp): a 34 mm closed loop whose curvature jumps by 1.7e4 /mm at a knot 0.82 mm from
+    its start (the acceleration step caps q at 0.019 there).  On 16 to 64 knot intervals the LP could not
+    leave rest (q' = 0 at the start), on 128 (the third doubling, with the rest floor) the feed stalled
+    next to the knot: a ScheduleError.  Now a piece still stuck keeps doubling its knots while they stay
+    at most STUCK_REFINE_MAX_INTERVALS: it moves at 512."""
+    out = harness.run(gen.case(828, "bench"), "lp")
+    assert out.ok, out.describe()
