@@ -295,3 +295,27 @@ def test_stuck_small_piece_keeps_refining_its_knots() -> None:
     at most STUCK_REFINE_MAX_INTERVALS: it moves at 512."""
     out = harness.run(gen.case(828, "bench"), "lp")
     assert out.ok, out.describe()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_stalled_highs_run_is_stopped_and_solved_cold(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Bench seed 949 (lp): on its fourth knot refinement (128 intervals) a cut round's hot-started dual
+    simplex on 5,730 rows never returned (243 iterations in 5 s when limited; the case hit the bench's
+    120 s CPU limit).  Each HiGHS run now has a wall-time limit (HIGHS_TIME_LIMIT_S + HIGHS_TIME_PER_ROW_S
+    a row; set here to 1 s so the test is quick), after which the window is solved once more from scratch
+    (431 iterations, 0.03 s)."""
+    from bench import random_cases
+    from solvers import lp
+
+    monkeypatch.setattr(lp, "HIGHS_TIME_LIMIT_S", 1.0)
+    monkeypatch.setattr(lp, "HIGHS_TIME_PER_ROW_S", 0.0)
+    w = random_cases.Worker("bench")  # forked with the limits above; killed if the run hangs again
+    try:
+        row = w.run(949, "lp", STALL_CASE_CPU_S, STALL_CASE_CPU_S)
+    finally:
+        w.close()
+    assert row["ok"], row
+
+
+#: CPU (and wall) seconds bench seed 949 lp may take in its worker (it schedules in ~4 s with the limit).
+STALL_CASE_CPU_S = 60
