@@ -195,6 +195,23 @@ def check_rows(
     return RowCheck(over, util, kind, axis)
 
 
+def analytic_over(feed: FloatArray, v: FloatArray, a: FloatArray, j: FloatArray, lim: Limits) -> BoolArray:
+    """(K,) samples whose emitted values alone (no differences: those need the next samples) are over
+    1 + REPAIR_TOL of an enforced limit (feed cap included)."""
+    over = np.zeros(feed.shape[0], dtype=bool)
+    per = [(v, lim.vmax), (a, lim.amax), (j, lim.jmax)]
+    if lim.drive is not None:
+        u_an, e_an = drive_outputs(lim.drive, v, a, j)
+        per += [(u_an, lim.drive["umax"]), (e_an, lim.drive["emax"])]
+    for an, limit in per:
+        if limit is not None:
+            over |= np.any(np.abs(an) / limit > 1.0 + REPAIR_TOL, axis=1)
+    if lim.feed_cap is not None:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            over |= np.where(np.isfinite(lim.feed_cap), feed / lim.feed_cap, 0.0) > 1.0 + REPAIR_TOL
+    return over
+
+
 def spread(over: BoolArray, left: bool = False, right: bool = False) -> BoolArray:
     """Samples to send back: those over a limit and their neighbours (a difference spans
     neighbouring samples).  ``left`` / ``right``: whether the samples just outside are over."""

@@ -319,3 +319,15 @@ def test_stalled_highs_run_is_stopped_and_solved_cold(monkeypatch: pytest.Monkey
 
 #: CPU (and wall) seconds bench seed 949 lp may take in its worker (it schedules in ~4 s with the limit).
 STALL_CASE_CPU_S = 60
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_held_samples_over_a_limit_repair_their_own_piece() -> None:
+    """Bench seed 1291 (lp): at ~30 m/s the jerk of a piece's second-last sample, 1.8 mm before a corner,
+    was 1.29 x jmax in the emitted values (the LP's own model too: a point between its verification
+    points).  A piece's last samples are held until the next piece is sampled (their differences read it),
+    so the violation was found only with the next piece, which the repair rounds re-solved in vain: a
+    LimitViolationError.  Now the emitted values of the held samples are checked with their own piece, and
+    that piece is repaired (verified at those s and solved again)."""
+    out = harness.run(gen.case(1291, "bench"), "lp")
+    assert out.ok, out.describe()
