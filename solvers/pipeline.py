@@ -361,9 +361,6 @@ def solve_piece(
         floor_refine = (opt.method == "lp" and opt.knot_spacing is None
                         and 2 * plan.n_int <= FLOOR_REFINE_MAX_INTERVALS)
         floored: list[int] = []
-        # after KNOT_REFINEMENTS doublings: with the rest floor, and on while the piece is still stuck and
-        # its knots stay under STUCK_REFINE_MAX_INTERVALS
-        last = attempt >= KNOT_REFINEMENTS and 2 * plan.n_int > STUCK_REFINE_MAX_INTERVALS
         try:
             prof, joins = _solve_windows(
                 toolpath, piece, plan, opt, lim, stats, on_window if attempt == 0 else None, verify, cache,
@@ -373,7 +370,8 @@ def solve_piece(
             if best is None:  # (a refinement for a floor only: keep what moved)
                 raise
             break
-        if not stuck(prof):
+        is_stuck = stuck(prof)
+        if not is_stuck:
             if not floored and best is None:
                 break
             duration = PieceTiming.build(prof).duration
@@ -383,7 +381,9 @@ def solve_piece(
                 best = (duration, prof, joins)
             if not floored:
                 break
-        if last:
+        # after KNOT_REFINEMENTS doublings (the last with the rest floor) only a piece still stuck goes on,
+        # with the rest floor, while its knots stay at most STUCK_REFINE_MAX_INTERVALS
+        if attempt >= KNOT_REFINEMENTS and (not is_stuck or 2 * plan.n_int > STUCK_REFINE_MAX_INTERVALS):
             break
         n_int = 2 * plan.n_int
         attempt += 1
