@@ -232,22 +232,26 @@ def _rows(smp: TimeSamples, a: int, b: int) -> TimeSamples:
     )
 
 
-def concat_samples(parts: list[TimeSamples]) -> TimeSamples:
-    """Consecutive sample runs joined into one (u and e only if every part has them)."""
+def concat_samples(parts: list[TimeSamples], consume: bool = False) -> TimeSamples:
+    """Consecutive sample runs joined into one (u and e only if every part has them).
+
+    ``consume``: empty ``parts`` and join column by column, each part's column released once joined, so
+    the peak is the samples plus one column, not twice the samples (bench seed 615: 15.3 M samples,
+    21 columns of float64 = 2.6 GB)."""
     if not parts:
         z, z3 = np.zeros(0), np.zeros((0, 3))
         return TimeSamples(z, z, z, z3, z3, z3, z3)
     if len(parts) == 1:
         return parts[0]
-
-    def cat(name: str) -> FloatArray:
-        return np.concatenate([getattr(p, name) for p in parts])
-
     drive = all(p.control_signal is not None and p.servo_error is not None for p in parts)
-    return TimeSamples(
-        cat("t"), cat("s"), cat("feed"), cat("position"), cat("velocity"), cat("acceleration"), cat("jerk"),
-        cat("control_signal") if drive else None, cat("servo_error") if drive else None,
-    )
+    names = [f.name for f in fields(TimeSamples) if drive or f.name not in ("control_signal", "servo_error")]
+    cols = [{n: getattr(p, n) for n in names} for p in parts]
+    if consume:
+        parts.clear()
+    out: dict[str, FloatArray] = {}
+    for n in names:
+        out[n] = np.concatenate([c.pop(n) for c in cols])
+    return TimeSamples(**out)
 
 
 @dataclass(frozen=True)
@@ -628,24 +632,8 @@ def schedule(
         else:
             end = item
     assert end is not None
-    return Schedule(samples=_concat_consuming(parts), summary=end.summary, diagnostics=end.diagnostics,
+    return Schedule(samples=concat_samples(parts, consume=True), summary=end.summary, diagnostics=end.diagnostics,
                     profiles=end.profiles)
-
-
-def _concat_consuming(parts: list[TimeSamples]) -> TimeSamples:
-    """``concat_samples(parts)``, emptying ``parts``: column by column, each part's column released once
-    joined, so the peak is the samples plus one column, not twice the samples (bench seed 615: 15.3 M
-    samples, 21 columns of float64 = 2.6 GB)."""
-    if len(parts) <= 1:
-        return concat_samples(parts)
-    drive = all(p.control_signal is not None and p.servo_error is not None for p in parts)
-    names = [f.name for f in fields(TimeSamples) if drive or f.name not in ("control_signal", "servo_error")]
-    cols = [{n: getattr(p, n) for n in names} for p in parts]
-    parts.clear()
-    out: dict[str, FloatArray] = {}
-    for n in names:
-        out[n] = np.concatenate([c.pop(n) for c in cols])
-    return TimeSamples(**out)
 
 
 #: Samples at the end of a piece that ``schedule_stream`` holds back until the next piece is sampled: the
