@@ -41,7 +41,6 @@ from geometry.toolpath import PathSamples, Piece, Toolpath
 from solvers import kinematics, verify
 from solvers.errors import InfeasibleError, InvalidMachineError, InvalidOptionsError, LimitViolationError, SolverFailure
 from solvers.lp import (
-    INHERITED_INTERVALS,
     LimitSet,
     WindowLP,
     WindowResult,
@@ -419,9 +418,12 @@ def _solve_windows(
     prev_qstar: tuple[int, FloatArray] | None = None
     prev_c: tuple[int, FloatArray] | None = None
     N = opt.checkpoints_per_interval
-    shared = opt.method == "lp+nlp"  # (which needs drives: a_rest from the servo-error budget)
-    a_rest_start = _corner_rest(toolpath, piece, lim, at_end=False) if shared else None
-    a_rest_end = _corner_rest(toolpath, piece, lim, at_end=True) if shared else None
+    # the step at a corner is shared by the pieces on both sides, under either method (until session 6
+    # only under lp+nlp: bench seed 1723, lp, a 5.8 degree corner with x moving on through it, stepped by
+    # 2 a_rest = jmax Ts and the third difference across it read 1.018 x jmax; sharing costs test-profile
+    # lp cases with corners 1.4 % of motion time, geometric mean over 47)
+    a_rest_start = _corner_rest(toolpath, piece, lim, at_end=False)
+    a_rest_end = _corner_rest(toolpath, piece, lim, at_end=True)
     while True:
         k1 = min(k0 + plan.window, plan.n_int)
         # avoid a last window shorter than the overlap: stretch this one instead
@@ -500,7 +502,9 @@ def _inherited(prev: tuple[int, FloatArray] | None, k0: int) -> FloatArray:
     if prev is None:
         return np.zeros(0)
     k_prev, arr = prev
-    return np.asarray(arr[k0 - k_prev : k0 - k_prev + INHERITED_INTERVALS + 3], dtype=np.float64)
+    # all of them from k0 on: a window whose stage 2 is infeasible inherits more than INHERITED_INTERVALS
+    # (``WindowLP.inherited``), up to the whole overlap
+    return np.asarray(arr[k0 - k_prev :], dtype=np.float64)
 
 
 def _join_knot(geometry: Any, c_win: FloatArray, k0: int, k_last: int, plan: WindowPlan, lim: LimitSet) -> int:

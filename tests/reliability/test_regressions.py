@@ -331,3 +331,14 @@ def test_held_samples_over_a_limit_repair_their_own_piece() -> None:
     that piece is repaired (verified at those s and solved again)."""
     out = harness.run(gen.case(1291, "bench"), "lp")
     assert out.ok, out.describe()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_corner_rest_step_is_shared_under_lp_too() -> None:
+    """Bench seed 1723 (lp): at a 5.8 degree corner x moves on the same way through it, and each piece
+    took the whole rest acceleration a_rest = jmax Ts / 2 (the corner share was applied under lp+nlp only),
+    so the step was up to jmax Ts and the third difference across the corner read 1.018 x jmax (a
+    LimitViolationError after 2 repair rounds: verifying more points cannot change a rest bound).  Now
+    the pieces share it under lp as well."""
+    out = harness.run(gen.case(1723, "bench"), "lp")
+    assert out.ok, out.describe()
