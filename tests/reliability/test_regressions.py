@@ -342,3 +342,17 @@ def test_corner_rest_step_is_shared_under_lp_too() -> None:
     the pieces share it under lp as well."""
     out = harness.run(gen.case(1723, "bench"), "lp")
     assert out.ok, out.describe()
+
+
+@pytest.mark.xfail(strict=True, reason="open: a 159 degree turn of 3.5 nm radius inside a segment is not a corner")
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_turn_of_nanometre_radius_inside_a_segment() -> None:
+    """Bench seed 1731 (lp), not fixed: the fourth segment turns by 159 degrees within ~6 nm of arc length
+    at s = 3.39525 mm (|x_ss| peak 2.9e5 /mm, radius 3.5 nm), smoothly, 32 um after a knot.  Corner
+    detection looks at knots and zero-speed knots only, so the turn is passed at 20 mm/s; the LP's
+    verification grid and the repair rounds' points (2.7 um apart) never land on the peak, and the
+    samples' second difference reads 6.0 x amax: a LimitViolationError (a typed 422, not a silent
+    violation).  The fix is in the geometry: find turns sharper than the corner tolerance within a
+    micrometre and make them corners (as cusps are split at zero-speed knots)."""
+    out = harness.run(gen.case(1731, "bench"), "lp")
+    assert out.ok, out.describe()
