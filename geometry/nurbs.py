@@ -217,13 +217,11 @@ class NurbsSegment:
         bp = self.breakpoints
         frac = np.linspace(0.0, 1.0, SHARP_TURN_SAMPLES + 1)[:-1]
         u = np.append((bp[:-1, None] + np.diff(bp)[:, None] * frac[None, :]).ravel(), bp[-1])
-        h0, h1 = self._hom(u, 0), self._hom(u, 1)  # (C and C' only)
-        c0 = h0[:, :3] / h0[:, 3:4]
-        c1 = (h1[:, :3] - h1[:, 3:4] * c0) / h0[:, 3:4]
-        sp = np.linalg.norm(c1, axis=1)
-        tan = c1 / np.where(sp > 0.0, sp, 1.0)[:, None]
+        d = self.derivatives(u)
+        sp = np.linalg.norm(d[1], axis=1)
+        tan = d[1] / np.where(sp > 0.0, sp, 1.0)[:, None]
         cos = np.clip(np.einsum("ij,ij->i", tan[:-1], tan[1:]), -1.0, 1.0)
-        chord = np.linalg.norm(np.diff(c0, axis=0), axis=1)
+        chord = np.linalg.norm(np.diff(d[0], axis=0), axis=1)
         cand = np.flatnonzero((cos < math.cos(math.radians(SHARP_TURN_DEG))) & (chord < SHARP_TURN_MM)
                               & (sp[:-1] > 0.0) & (sp[1:] > 0.0))
         if cand.size == 0:
