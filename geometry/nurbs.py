@@ -17,7 +17,6 @@ follow from the quotient rule (Piegl & Tiller eq. 4.8):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -35,14 +34,6 @@ DEGENERATE_SPAN_MM = 1e-9
 #: An interior knot where |C'| is at most this share of the control polygon's length per unit u
 #: is a zero-speed point (repeated control points): the segment is split there.
 ZERO_SPEED_SHARE = 1e-9
-#: A turn of more than SHARP_TURN_DEG within SHARP_TURN_MM of arc length between two of
-#: SHARP_TURN_SAMPLES parameter samples per knot span (a near-cusp: control points nearly
-#: coincide, so the speed dips and the turn is squeezed into nanometres) is located at the speed's
-#: minimum (``sharp_turns``) for the solvers to verify there.  Bench seed 1731: 159 degrees within
-#: ~6 nm (radius 3.5 nm), 32 um after a knot, where no verification grid landed.
-SHARP_TURN_DEG = 30.0
-SHARP_TURN_MM = 1e-3
-SHARP_TURN_SAMPLES = 64
 
 
 @dataclass(frozen=True, eq=False)
@@ -210,33 +201,6 @@ class NurbsSegment:
             return cand
         polygon = float(np.sum(np.linalg.norm(np.diff(self.control_points, axis=0), axis=1)))
         return np.asarray(cand[self.speed(cand) <= ZERO_SPEED_SHARE * polygon / (hi - lo)], dtype=np.float64)
-
-    def sharp_turns(self) -> FloatArray:
-        """Parameters (sorted) of turns sharper than SHARP_TURN_DEG within SHARP_TURN_MM of arc length,
-        each at the minimum of |C'| between the two samples it lies between (golden section), (T,)."""
-        bp = self.breakpoints
-        frac = np.linspace(0.0, 1.0, SHARP_TURN_SAMPLES + 1)[:-1]
-        u = np.append((bp[:-1, None] + np.diff(bp)[:, None] * frac[None, :]).ravel(), bp[-1])
-        d = self.derivatives(u)
-        sp = np.linalg.norm(d[1], axis=1)
-        tan = d[1] / np.where(sp > 0.0, sp, 1.0)[:, None]
-        cos = np.clip(np.einsum("ij,ij->i", tan[:-1], tan[1:]), -1.0, 1.0)
-        chord = np.linalg.norm(np.diff(d[0], axis=0), axis=1)
-        cand = np.flatnonzero((cos < math.cos(math.radians(SHARP_TURN_DEG))) & (chord < SHARP_TURN_MM)
-                              & (sp[:-1] > 0.0) & (sp[1:] > 0.0))
-        if cand.size == 0:
-            return np.zeros(0)
-        a, b = u[cand], u[cand + 1]
-        g = (math.sqrt(5.0) - 1.0) / 2.0
-        for _ in range(80):  # the bracket shrinks to ~1e-17 of a sample step
-            c = b - g * (b - a)
-            e = a + g * (b - a)
-            left = self.speed(c) < self.speed(e)
-            b = np.where(left, e, b)
-            a = np.where(left, a, c)
-        r = np.sort(0.5 * (a + b))  # (one turn flagged by two sample pairs converges twice)
-        lo, hi = self.domain
-        return np.asarray(r[np.concatenate([[True], np.diff(r) > 1e-9 * (hi - lo)])], dtype=np.float64)
 
     def insert_knot(self, u: float, times: int = 1) -> NurbsSegment:
         """The same curve with knot u inserted ``times`` times (Boehm; Piegl & Tiller A5.1).

@@ -364,7 +364,6 @@ class Toolpath:
         sub_origin: (S,) index of the input segment each sub-segment came from.
         offsets: (S + 1,) cumulative arc length at each sub-segment start, mm.
         knot_s: arc lengths (sorted, unique) of the knots inside sub-segments and of the junctions between them.
-        sharp_turn_s: arc lengths (sorted) of near-cusp turns inside sub-segments (``NurbsSegment.sharp_turns``).
         junction_jumps: (S - 1, 2) the jumps of C_ss and of C_sss (Euclidean norm, 1/mm and 1/mm^2)
             across each junction between sub-segments (corners included).
         corners: rest points inside the path, in order of s.
@@ -441,10 +440,6 @@ class Toolpath:
         # are piece ends, outside every piece); closed-form parts have no inner knots
         inner = [self.offsets[k] + t.s_of_u(t.segment.breakpoints[1:-1]) for k, t in sorted(tables.items())]
         self.knot_s = np.union1d(np.concatenate([np.zeros(0), *inner]), self.offsets[1:-1])
-        # near-cusp turns inside sub-segments (``NurbsSegment.sharp_turns``): the solvers verify them
-        turns = [self.offsets[k] + t.s_of_u(t.segment.sharp_turns()) for k, t in sorted(tables.items())
-                 if isinstance(t.segment, NurbsSegment)]
-        self.sharp_turn_s = np.unique(np.concatenate([np.zeros(0), *turns]))
         self._junctions(gap_tol, np.radians(corner_tol_deg))
         self.pieces = self._pieces()
 

@@ -800,12 +800,7 @@ def schedule_stream(
             report((s0 + lp_share * s_done) / total)
 
         t0 = time.perf_counter()
-        # near-cusp turns inside the piece are verified from the start (bench seed 1731: 159 degrees within
-        # ~6 nm, where no verification grid lands)
-        turns = toolpath.sharp_turn_s[(toolpath.sharp_turn_s > piece.s_start) & (toolpath.sharp_turn_s < piece.s_end)]
-        verify_s = turns - piece.s_start
-        lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window,
-                                     verify_s if verify_s.size else None, cache)
+        lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache)
         t_lp += time.perf_counter() - t0
         prof = lp_prof
         if nlp_stats is not None and nlp_lim is not None:
@@ -814,9 +809,10 @@ def schedule_stream(
 
             t0 = time.perf_counter()
             prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
-                                 on_chain, verify_s if verify_s.size else None)
+                                 on_chain)
             t_nlp += time.perf_counter() - t0
         emit("piece_solved", i)
+        verify_s = np.zeros(0)
         rounds = 0
         while True:
             timing = PieceTiming.build(prof)

@@ -369,28 +369,3 @@ def test_random_arcs_keep_radius_and_end_point(
     assert seg.control_points.shape[0] == 2 * n_pieces + 1
     if r >= 1.0:  # arc length through the Toolpath tables (skip tiny arcs to keep the test fast)
         assert Toolpath([seg]).length == pytest.approx(r * abs(total), rel=LENGTH_REL_TOL)
-
-
-def test_sharp_turn_is_located_at_the_curvature_peak() -> None:
-    """``NurbsSegment.sharp_turns``: a cubic whose middle control points nearly coincide turns by ~180
-    degrees within nanometres.  Independent truth: the peak of |C x C'| / |C'|^3 (the curvature) on a
-    dense parameter grid around it, by central differences of C(u) (C itself is checked against geomdl in
-    test_nurbs_oracle.py)."""
-    from geometry.nurbs import NurbsSegment
-
-    eps = 1e-6
-    seg = NurbsSegment.create(3, [0, 0, 0, 0, 1, 1, 1, 1],
-                              [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, eps, 0.0], [0.0, eps, 0.0]])
-    turns = seg.sharp_turns()
-    assert turns.size == 1
-    u = np.linspace(0.3, 0.7, 400_001)
-    p = seg.points(u)
-    h = u[1] - u[0]
-    d1 = (p[2:] - p[:-2]) / (2 * h)
-    d2 = (p[2:] - 2 * p[1:-1] + p[:-2]) / h**2
-    kappa = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / np.linalg.norm(d1, axis=1) ** 3
-    u_peak = u[1:-1][np.argmax(kappa)]
-    assert turns[0] == pytest.approx(u_peak, abs=5 * h)
-    # a circle of 10 mm turns 360 degrees but never within a micrometre: nothing found
-    from geometry import examples as ex
-    assert ex.circle(10.0).sharp_turns().size == 0
