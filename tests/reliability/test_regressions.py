@@ -361,6 +361,7 @@ def test_turn_of_nanometre_radius_inside_a_segment() -> None:
 @pytest.mark.xfail(strict=True, reason="open: found at the end of session 6, not diagnosed")
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 @pytest.mark.parametrize(("seed", "what"), [
+    (1951, "lp+nlp ScheduleError 'feed stalls' (lp passes)"),
     (1978, "lp+nlp ScheduleError 'feed stalls' at s = 6.48 mm of the piece from 4.61 mm (lp passes)"),
     (1987, "lp+nlp ScheduleError 'feed stalls' (lp passes)"),
     (2053, "lp+nlp LimitViolationError: sampled servo error 1.019 x after 2 repair rounds at s = 2.70 mm"),
