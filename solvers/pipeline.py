@@ -52,7 +52,7 @@ from solvers.lp import (
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.nlp import V_STEP_SHARE as NLP_V_STEP_SHARE
 from solvers.nlp import NlpLimits, NlpRefiner, NlpStats
-from solvers.timing import PieceProfile, PieceTiming, stuck
+from solvers.timing import PieceProfile, PieceTiming, stalled_intervals, stuck
 
 FloatArray = NDArray[np.float64]
 
@@ -550,6 +550,23 @@ def _refine_piece(
         _local(toolpath, piece), lp_prof.c, lp_prof.d, joins, _breaks(toolpath, piece), on_chain, opt.nlp_workers,
         verify_s,
     )
+    # A refined feed that stalls between its verification points (its quadratic dips to ~0 inside a knot
+    # interval: bench seeds 1951, 1978, 1987) keeps the LP's feed over that NLP span: a run of refined
+    # intervals starts and ends on the LP's state, so the feed stays continuous
+    for k in stalled_intervals(replace(lp_prof, p=p, f_mask=mask)):
+        if not mask[k] or stuck(lp_prof):
+            continue
+        lo, hi = int(k), int(k) + 1
+        while lo > 0 and mask[lo - 1]:
+            lo -= 1
+        while hi < mask.size and mask[hi]:
+            hi += 1
+        mask[lo:hi] = False
+        stats.failures.append({
+            "nlp_window": -1, "s_range": [lo * lp_prof.d, hi * lp_prof.d],
+            "reason": "the refined feed stalls inside a knot interval", "status": "stall",
+            "fallback": "lp feed over the span",
+        })
     return replace(lp_prof, p=p, f_mask=mask)
 
 

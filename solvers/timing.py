@@ -135,7 +135,7 @@ class PieceTiming:
                 field="toolpath",
                 value={"s_start": profile.s_start, "dq_start": q1_0, "dq_end": q1_L},
             )
-        stalls = _stalls(profile)
+        stalls = stalled_intervals(profile)
         if stalls.size:
             raise ScheduleError(
                 "feed stalls inside the path (q reaches 0, or under 1e-12 of its peak): the path turns too "
@@ -159,10 +159,10 @@ def stuck(profile: PieceProfile) -> bool:
     """True if the feed cannot leave or reach a rest end (q' = 0 there) or stalls inside the piece."""
     q1_0 = (profile.c[1] - profile.c[0]) / profile.d
     q1_L = (profile.c[-1] - profile.c[-2]) / profile.d
-    return not (q1_0 > 0 and q1_L < 0) or _stalls(profile).size > 0
+    return not (q1_0 > 0 and q1_L < 0) or stalled_intervals(profile).size > 0
 
 
-def _stalls(profile: PieceProfile) -> NDArray[np.int64]:
+def stalled_intervals(profile: PieceProfile) -> NDArray[np.int64]:
     """Knot intervals (not the two rest intervals) where the feed reaches 0, or drops below
     sqrt(STALL_Q_SHARE) of its peak: there the time integral of 1 / sdot diverges, or the
     quadrature bisects for minutes towards the near-singularity.  Each interval's quadratic
