@@ -551,10 +551,11 @@ def _refine_piece(
         verify_s,
     )
     # A refined feed that stalls between its verification points (its quadratic dips to ~0 inside a knot
-    # interval: bench seeds 1951, 1978, 1987) keeps the LP's feed over that NLP span: a run of refined
-    # intervals starts and ends on the LP's state, so the feed stays continuous
-    for k in stalled_intervals(replace(lp_prof, p=p, f_mask=mask)):
-        if not mask[k] or stuck(lp_prof):
+    # interval: bench seeds 1978, 1987) keeps the LP's feed over that NLP span (unless the LP's stalls too):
+    # a run of refined intervals starts and ends on the LP's state, so the feed stays continuous
+    stalled = stalled_intervals(replace(lp_prof, p=p, f_mask=mask))
+    for k in stalled if stalled.size and not stuck(lp_prof) else ():
+        if not mask[k]:
             continue
         lo, hi = int(k), int(k) + 1
         while lo > 0 and mask[lo - 1]:
@@ -719,7 +720,6 @@ def _repair_points(seq: TimeSamples, repair: NDArray[np.bool_], last: bool) -> F
     gap after it (a peak between two samples is what a difference over neighbouring samples sees); the
     path's last sample has no gap after it."""
     k_bad = np.flatnonzero(repair[:-1] if last else repair)
-    k_bad = k_bad[k_bad < seq.s.size]
     gap = seq.s[np.minimum(k_bad + 1, seq.s.size - 1)] - seq.s[k_bad]  # (none after seq's last sample)
     return np.asarray((seq.s[k_bad, None] + gap[:, None] * (np.arange(REPAIR_SUBDIV) / REPAIR_SUBDIV)).ravel(),
                       dtype=np.float64)

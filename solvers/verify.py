@@ -160,19 +160,9 @@ def check_rows(
         c1 = min(K, c0 + CHUNK)
         sl = slice(c0, c1)
         v_fd, a_fd, j_fd, v_c, j_c = _fd(padded, np.arange(c0, c1) + REST_PAD, Ts)
-        per: list[tuple[int, FloatArray, FloatArray, FloatArray]] = []  # kind, analytic, fd, limit
-        if lim.vmax is not None:
-            per.append((0, v[sl], v_fd, lim.vmax))
-        if lim.amax is not None:
-            per.append((1, a[sl], a_fd, lim.amax))
-        if lim.jmax is not None:
-            per.append((2, j[sl], j_fd, lim.jmax))
-        if lim.drive is not None:
-            dr = lim.drive
-            u_an, e_an = drive_outputs(dr, v[sl], a[sl], j[sl])
-            u_fd, e_fd = drive_outputs(dr, v_c, a_fd, j_c)
-            per.append((3, u_an, u_fd, dr["umax"]))
-            per.append((4, e_an, e_fd, dr["emax"]))
+        # kind, analytic, fd, limit (the differences' u and e from the central v and j)
+        per = [(kd, an, fd, limit) for (kd, an, limit), (_, fd, _) in zip(
+            _terms(v[sl], a[sl], j[sl], lim), _terms(v_fd, a_fd, j_fd, lim, (v_c, a_fd, j_c)), strict=True)]
         for kd, an, fd, limit in per:
             ua = np.abs(an) / limit
             uf = np.abs(fd) / limit
@@ -185,8 +175,7 @@ def check_rows(
             kind[sl] = np.where(up, kd, kind[sl])
             axis[sl] = np.where(up, i2, axis[sl])
     if lim.feed_cap is not None:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            uf_ = np.where(np.isfinite(lim.feed_cap), feed / lim.feed_cap, 0.0)
+        uf_ = _feed_util(feed, lim.feed_cap)
         over |= uf_ > 1.0 + REPAIR_TOL
         up = uf_ > util
         util = np.where(up, uf_, util)
@@ -197,19 +186,36 @@ def check_rows(
 
 def analytic_over(feed: FloatArray, v: FloatArray, a: FloatArray, j: FloatArray, lim: Limits) -> BoolArray:
     """(K,) samples whose emitted values alone (no differences: those need the next samples) are over
-    1 + REPAIR_TOL of an enforced limit (feed cap included)."""
+    1 + REPAIR_TOL of an enforced limit (feed cap included): ``check_rows``' analytic half."""
     over = np.zeros(feed.shape[0], dtype=bool)
-    per = [(v, lim.vmax), (a, lim.amax), (j, lim.jmax)]
-    if lim.drive is not None:
-        u_an, e_an = drive_outputs(lim.drive, v, a, j)
-        per += [(u_an, lim.drive["umax"]), (e_an, lim.drive["emax"])]
-    for an, limit in per:
-        if limit is not None:
-            over |= np.any(np.abs(an) / limit > 1.0 + REPAIR_TOL, axis=1)
+    for _, an, limit in _terms(v, a, j, lim):
+        over |= np.any(np.abs(an) / limit > 1.0 + REPAIR_TOL, axis=1)
     if lim.feed_cap is not None:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            over |= np.where(np.isfinite(lim.feed_cap), feed / lim.feed_cap, 0.0) > 1.0 + REPAIR_TOL
+        over |= _feed_util(feed, lim.feed_cap) > 1.0 + REPAIR_TOL
     return over
+
+
+def _terms(
+    v: FloatArray, a: FloatArray, j: FloatArray, lim: Limits,
+    drive_vaj: tuple[FloatArray, FloatArray, FloatArray] | None = None,
+) -> list[tuple[int, FloatArray, FloatArray]]:
+    """(kind index into KINDS, values (K, 3), limit (3,)) of every enforced limit, in KINDS order: v, a, j
+    themselves, and u, e from the drive model at ``drive_vaj`` (default (v, a, j))."""
+    out: list[tuple[int, FloatArray, FloatArray]] = []
+    for kd, val, limit in ((0, v, lim.vmax), (1, a, lim.amax), (2, j, lim.jmax)):
+        if limit is not None:
+            out.append((kd, val, limit))
+    if lim.drive is not None:
+        dr = lim.drive
+        u, e = drive_outputs(dr, *(drive_vaj if drive_vaj is not None else (v, a, j)))
+        out += [(3, u, dr["umax"]), (4, e, dr["emax"])]
+    return out
+
+
+def _feed_util(feed: FloatArray, cap: FloatArray) -> FloatArray:
+    """feed / cap (K,), 0 where the cap is infinite."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.asarray(np.where(np.isfinite(cap), feed / cap, 0.0), dtype=np.float64)
 
 
 def spread(over: BoolArray, left: bool = False, right: bool = False) -> BoolArray:
