@@ -17,7 +17,8 @@ follow from the quotient rule (Piegl & Tiller eq. 4.8):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import itertools
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -34,6 +35,19 @@ DEGENERATE_SPAN_MM = 1e-9
 #: An interior knot where |C'| is at most this share of the control polygon's length per unit u
 #: is a zero-speed point (repeated control points): the segment is split there.
 ZERO_SPEED_SHARE = 1e-9
+#: A turn inside a segment is *sharp* where the tangent turns faster than along a circle of this
+#: radius (mm) over one sampling interval (SHARP_TURN_SAMPLES per knot span) and by more than the
+#: corner tolerance within SHARP_TURN_CUT_MM of its apex on either side: a near-cusp (bench seeds
+#: 1731: 159 degrees within ~6 nm; 1951: 176 degrees within 2 nm).  Passed at speed it is a kink
+#: the samples' differences see (6 x amax on 1731); passed at the feed its radius allows it is a
+#: crawl (1,000 s for 4 um on 1951).  It is cut out and made a corner (``cut_sharp_turns``).
+SHARP_TURN_RADIUS_MM = 1e-3
+#: Chord (mm) cut off each side of a sharp turn's apex: the path moves by at most this much.
+SHARP_TURN_CUT_MM = 1e-4
+#: Samples per knot span in the search for sharp turns.
+SHARP_TURN_SAMPLES = 16
+#: Knot spans searched for sharp turns at once (bounds the temporaries of a long segment).
+SHARP_TURN_CHUNK = 4096
 
 
 @dataclass(frozen=True, eq=False)
@@ -188,6 +202,115 @@ class NurbsSegment:
         h = self._hom(np.clip(np.asarray(u, dtype=np.float64), lo, hi), 0)
         return np.asarray(h[:, :3] / h[:, 3:4], dtype=np.float64)
 
+    def unit_tangents(self, u: FloatArray) -> FloatArray:
+        """C'(u) / |C'(u)|, (K, 3) (NaN where |C'| = 0)."""
+        lo, hi = self.domain
+        uu = np.clip(np.asarray(u, dtype=np.float64), lo, hi)
+        h0 = self._hom(uu, 0)
+        h1 = self._hom(uu, 1)
+        c1 = h1[:, :3] - h1[:, 3:4] * (h0[:, :3] / h0[:, 3:4])  # (times W > 0: the direction of C')
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.asarray(c1 / np.linalg.norm(c1, axis=1)[:, None], dtype=np.float64)
+
+    def sharp_turns(self, tol_rad: float) -> FloatArray:
+        """Sharp turns inside the segment (``SHARP_TURN_RADIUS_MM``), as (T, 2) parameter intervals
+        [u_a, u_b] to cut out: C(u_a) and C(u_b) are SHARP_TURN_CUT_MM (chord) from the apex, and the
+        tangent turns by more than ``tol_rad`` between them.
+
+        Every knot span is sampled at SHARP_TURN_SAMPLES + 1 points.  An interval between samples
+        whose tangent turns by more than ``tol_rad`` is searched for an apex if the turn is
+        concentrated: more than twice what the curvature kappa at its ends explains (turn > 2 chord
+        max kappa: the curvature peaks inside), or an end has a radius under SHARP_TURN_RADIUS_MM
+        (the apex is on a sample).  The search keeps the subinterval turning most, eight at a
+        time, down to a chord of 1e-3 x SHARP_TURN_CUT_MM: its midpoint is the apex, and a radius
+        there of SHARP_TURN_RADIUS_MM or more is not a sharp turn.  Turns whose cut would reach the
+        segment's ends are left alone, and so is a turn whose tangents at the cut differ by no
+        more than ``tol_rad``."""
+        bp = self.breakpoints
+        t = np.linspace(0.0, 1.0, SHARP_TURN_SAMPLES + 1)
+        out: list[tuple[float, float]] = []
+        for a in range(0, bp.size - 1, SHARP_TURN_CHUNK):
+            b = min(bp.size - 1, a + SHARP_TURN_CHUNK)
+            lo, hi = bp[a:b], bp[a + 1 : b + 1]
+            uu = lo[:, None] + (hi - lo)[:, None] * t[None, :]
+            D = self.derivatives(uu.ravel()).reshape(4, lo.size, t.size, 3)
+            sp = np.linalg.norm(D[1], axis=2)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                tan = D[1] / sp[..., None]
+                kappa = np.linalg.norm(np.cross(D[1], D[2]), axis=2) / sp**3
+                turn = _angle(tan[:, :-1], tan[:, 1:])
+                chord = np.linalg.norm(np.diff(D[0], axis=1), axis=2)
+                k_end = np.fmax(kappa[:, :-1], kappa[:, 1:])
+                flag = (turn > tol_rad) & ((turn > 2.0 * chord * k_end) | (k_end * SHARP_TURN_RADIUS_MM > 1.0)
+                                           | ~np.isfinite(k_end))
+            for i, j in zip(*np.nonzero(flag), strict=True):
+                cut = self._cut_around(float(uu[i, j]), float(uu[i, j + 1]), tol_rad)
+                if cut is not None and (not out or cut[0] > out[-1][1]):
+                    out.append(cut)
+        return np.asarray(out, dtype=np.float64).reshape(-1, 2)
+
+    def _cut_around(self, ua: float, ub: float, tol_rad: float) -> tuple[float, float] | None:
+        """[u_a, u_b] around the apex of the turn inside [ua, ub] (``sharp_turns``), or None."""
+        lo, hi = self.domain
+        for _ in range(200):
+            uu = np.linspace(ua, ub, 9)
+            k = int(np.nanargmax(np.nan_to_num(_angle(self.unit_tangents(uu[:-1]), self.unit_tangents(uu[1:])),
+                                               nan=np.pi)))
+            ua, ub = float(uu[k]), float(uu[k + 1])
+            ends = self.points(np.array([ua, ub]))
+            if np.linalg.norm(ends[1] - ends[0]) < 1e-3 * SHARP_TURN_CUT_MM or ub - ua <= 4.0 * np.spacing(ub):
+                break
+        uc = 0.5 * (ua + ub)
+        D = self.derivatives(np.array([uc]))[:, 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            kappa = float(np.linalg.norm(np.cross(D[1], D[2])) / np.linalg.norm(D[1]) ** 3)
+        if not kappa * SHARP_TURN_RADIUS_MM > 1.0 and np.isfinite(kappa):
+            return None  # (tight, but a radius the schedule passes: not a near-cusp)
+        apex = D[0]
+        sides: list[float] = []
+        for end in (lo, hi):
+            near, far = uc, end
+            if np.linalg.norm(self.points(np.array([far]))[0] - apex) <= SHARP_TURN_CUT_MM:
+                return None  # the cut would reach the segment's end
+            for _ in range(200):  # bisection: the point SHARP_TURN_CUT_MM (chord) from the apex
+                mid = 0.5 * (near + far)
+                if mid in (near, far):
+                    break
+                if np.linalg.norm(self.points(np.array([mid]))[0] - apex) < SHARP_TURN_CUT_MM:
+                    near = mid
+                else:
+                    far = mid
+            sides.append(far)
+        u_a, u_b = sides
+        if not (lo < u_a < uc < u_b < hi):
+            return None
+        tan = self.unit_tangents(np.array([u_a, u_b]))
+        if not float(_angle(tan[:1], tan[1:])[0]) > tol_rad:
+            return None
+        return u_a, u_b
+
+    def cut_sharp_turns(self, tol_rad: float) -> tuple[list[NurbsSegment], FloatArray]:
+        """The segment with its sharp turns (``sharp_turns``) cut out: the parts between them, each
+        cut [u_a, u_b] closed by moving the two end control points that meet there to their midpoint
+        (as ``geometry.toolpath.close_gaps``; the rational basis is in [0, 1], so no point moves by
+        more than half the gap, itself at most 2 SHARP_TURN_CUT_MM).  The Toolpath sees the tangent
+        break left at each as a corner.  Returns (parts, (T, 2) the cuts)."""
+        cuts = self.sharp_turns(tol_rad)
+        if cuts.size == 0:
+            return [self], cuts
+        p = self.degree
+        seg = self
+        for v in np.unique(cuts):
+            seg = seg.insert_knot(float(v), p - int(np.sum(seg.knots == v)))
+        starts = set(cuts[:, 0].tolist())
+        parts = [replace(part, control_points=part.control_points.copy())
+                 for part in seg._split_c0(keep_degenerate=True) if part.domain[0] not in starts]
+        for a, b in itertools.pairwise(parts):
+            mid = 0.5 * (a.control_points[-1] + b.control_points[0])
+            a.control_points[-1] = mid
+            b.control_points[0] = mid
+        return parts, cuts
+
     def zero_speed_knots(self) -> FloatArray:
         """Interior knots (multiplicity < p) where |C'(u)| vanishes, (Z,).
 
@@ -239,7 +362,7 @@ class NurbsSegment:
             seg = seg.insert_knot(float(v), self.degree - int(np.sum(seg.knots == v)))
         return seg._split_c0()
 
-    def _split_c0(self) -> list[NurbsSegment]:
+    def _split_c0(self, keep_degenerate: bool = False) -> list[NurbsSegment]:
         p = self.degree
         lo, hi = self.domain
         U = self.knots
@@ -271,7 +394,15 @@ class NurbsSegment:
             offset += j - 1
             seg = right
         pieces.append(seg)
+        if keep_degenerate:
+            return pieces
         return [s for s in pieces if float(np.max(np.ptp(s.control_points, axis=0))) > DEGENERATE_SPAN_MM]
+
+
+def _angle(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Angle (rad) between unit vectors along the last axis (accurate near 0 and pi; NaN stays NaN)."""
+    d = np.linalg.norm(a - b, axis=-1)
+    return np.asarray(2.0 * np.arcsin(np.minimum(0.5 * d, 1.0)), dtype=np.float64)
 
 
 def _check_degree(degree: object, name: str) -> int:

@@ -367,6 +367,8 @@ class Toolpath:
         junction_jumps: (S - 1, 2) the jumps of C_ss and of C_sss (Euclidean norm, 1/mm and 1/mm^2)
             across each junction between sub-segments (corners included).
         corners: rest points inside the path, in order of s.
+        sharp_turns: the corners made where a turn inside a segment was cut out
+            (``NurbsSegment.cut_sharp_turns``: sharper than a micrometre radius).
         passed_turns: junctions turning by PASSED_TURN_MIN_DEG up to the corner tolerance (``PassedTurns``).
         unblended: corners that a corner blend left as they were, with the reason (``Unblended``).
         pieces: rest-to-rest stretches.
@@ -396,9 +398,10 @@ class Toolpath:
         kinds: list[int] = []
         tables: dict[int, ArcLengthTable] = {}
         lengths: list[float] = []
+        cut_after: list[int] = []  # sub-segments that start where a sharp turn was cut out
         for i, seg in enumerate(self.segments):
             kind = segment_kind(seg)
-            for part in [seg] if kind != GENERIC else seg.split_at_c0_knots():
+            for part in [seg] if kind != GENERIC else self._cut_sharp_turns(seg, corner_tol_deg, cut_after, len(parts)):
                 pk = kind if kind != GENERIC else segment_kind(part)
                 if pk == GENERIC:
                     table = ArcLengthTable.build(part)
@@ -441,7 +444,25 @@ class Toolpath:
         inner = [self.offsets[k] + t.s_of_u(t.segment.breakpoints[1:-1]) for k, t in sorted(tables.items())]
         self.knot_s = np.union1d(np.concatenate([np.zeros(0), *inner]), self.offsets[1:-1])
         self._junctions(gap_tol, np.radians(corner_tol_deg))
+        if not keep.all():
+            cut_after = [new[j] for j in cut_after if j in new]
+        self.sharp_turns = [c for c in self.corners if int(np.searchsorted(self.offsets, c.s)) in set(cut_after)]
         self.pieces = self._pieces()
+
+    @staticmethod
+    def _cut_sharp_turns(seg: Segment, corner_tol_deg: float, cut_after: list[int], n_before: int) -> list[Segment]:
+        """``seg`` split at its C0 and zero-speed knots, and each part with its sharp turns cut out
+        (``NurbsSegment.cut_sharp_turns``: the tangent break left there is a corner); the index each
+        part after a cut will have among the sub-segments is appended to ``cut_after``."""
+        out: list[Segment] = []
+        for part in seg.split_at_c0_knots():
+            if isinstance(part, NurbsSegment):
+                cut_parts, _ = part.cut_sharp_turns(np.radians(corner_tol_deg))
+                cut_after.extend(n_before + len(out) + k for k in range(1, len(cut_parts)))
+                out.extend(cut_parts)
+            else:
+                out.append(part)
+        return out
 
     @property
     def length(self) -> float:

@@ -945,6 +945,10 @@ def schedule_stream(
             {"segment": u.segment, "position": list(u.position), "angle_deg": u.angle_deg, "reason": u.reason}
             for u in getattr(toolpath, "unblended", ())
         ],
+        # corners made of turns inside a segment sharper than a micrometre radius (cut out, within
+        # geometry.nurbs.SHARP_TURN_CUT_MM of the apex): also listed in corners
+        "sharp_turns": [{"s": c.s, "angle_deg": c.angle_deg, "segment": c.segment}
+                        for c in getattr(toolpath, "sharp_turns", ())],
         # gaps within the gap tolerance closed by moving the end control points to their midpoint
         "closed_gaps": [{"segment": i, "gap_mm": g} for i, g in getattr(toolpath, "closed_gaps", ())],
         "passed_turns": _passed_turns(toolpath, nlp_lim.v_step if nlp_lim is not None else lim.v_step),

@@ -177,7 +177,11 @@ def stalled_intervals(profile: PieceProfile) -> NDArray[np.int64]:
         use_f = profile.f_mask[k]
         f_lo = _interval_min(profile.p, k)
         lo = np.where(use_f, f_lo * np.abs(f_lo), lo)  # compare f^2 with q
-        peak = max(peak, float(np.max(profile.p)) ** 2)
+        # the peak of the feed in use: f's control points of intervals that use f (the NLP's p elsewhere is
+        # not the feed; counting it flagged an LP interval at 2.9e-11 of a smaller q peak: bench seed 1951)
+        used = np.flatnonzero(profile.f_mask)
+        if used.size:
+            peak = max(peak, float(np.max(profile.p[np.concatenate([used, used + 1, used + 2])])) ** 2)
     return np.asarray(k[~(lo > STALL_Q_SHARE * peak)], dtype=np.int64)
 
 

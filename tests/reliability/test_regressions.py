@@ -344,40 +344,45 @@ def test_corner_rest_step_is_shared_under_lp_too() -> None:
     assert out.ok, out.describe()
 
 
-@pytest.mark.xfail(strict=True, reason="open: a 159 degree turn of 3.5 nm radius inside a segment is not a corner")
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
-def test_turn_of_nanometre_radius_inside_a_segment() -> None:
-    """Bench seed 1731 (lp), not fixed: the fourth segment turns by 159 degrees within ~6 nm of arc length
-    at s = 3.39525 mm (|x_ss| peak 2.9e5 /mm, radius 3.5 nm), smoothly, 32 um after a knot.  Corner
-    detection looks at knots and zero-speed knots only, so the turn is passed at 20 mm/s; the LP's
-    verification grid and the repair rounds' points (2.7 um apart) never land on the peak, and the
-    samples' second difference reads 6.0 x amax: a LimitViolationError (a typed 422, not a silent
-    violation).  The fix is in the geometry: find turns sharper than the corner tolerance within a
-    micrometre and make them corners (as cusps are split at zero-speed knots)."""
-    out = harness.run(gen.case(1731, "bench"), "lp")
-    assert out.ok, out.describe()
-
-
-@pytest.mark.xfail(strict=True, reason="open: found at the end of session 6, not diagnosed")
-@pytest.mark.filterwarnings("ignore::RuntimeWarning")
-@pytest.mark.parametrize(("seed", "what"), [
-    (1951, "lp+nlp ScheduleError 'feed stalls' (lp passes; not the NLP stall fixed for 1978 and 1987)"),
-    (2053, "lp+nlp LimitViolationError: sampled servo error 1.019 x after 2 repair rounds at s = 2.70 mm"),
+@pytest.mark.parametrize(("seed", "method", "turn_deg"), [
+    (1731, "lp", 150.0), (1731, "lp+nlp", 150.0), (1951, "lp", 150.0), (1951, "lp+nlp", 150.0),
+    (1978, "lp+nlp", 13.0), (2053, "lp+nlp", 13.0),
 ])
-def test_open_lp_nlp_failures_of_session_6(seed: int, what: str) -> None:
-    """Bench seeds found failing in the last hour of session 6, the same on d0e4978 (so not from that
-    session's changes): typed errors, not silent violations.  Each becomes a regression case once fixed."""
-    out = harness.run(gen.case(seed, "bench"), "lp+nlp")
-    assert out.ok, f"{what}: {out.describe()}"
+def test_turn_of_nanometre_radius_inside_a_segment_is_a_corner(seed: int, method: str, turn_deg: float) -> None:
+    """Bench seeds 1731 and 1951: a turn inside a segment sharper than any knot spacing resolves.
+
+    1731 (lp failed): the fourth segment turns by 159 degrees within ~6 nm of arc length at
+    s = 3.39525 mm (radius 3.5 nm), smoothly, 32 um after a knot.  Corners were found at knots only,
+    so the turn was passed at 20 mm/s, no verification point landed on it, and the samples' second
+    difference read 6.0 x amax (a LimitViolationError).
+    1951 (lp+nlp failed): a closed 1 mm path whose last quadratic span turns by 176 degrees within
+    2 nm (radius 1.4 nm) 6.2 um after a corner.  The LP crawled through it at q ~ 3e-11 (feed 5e-6
+    mm/s: 1,170 s of motion for 1 mm, both methods), and under lp+nlp ``stalled_intervals`` took the
+    peak of the whole NLP feed (p, 2.7 mm/s) for a piece that kept the LP's feed everywhere, so the
+    LP's q read as a stall.
+    1978 (lp+nlp, 'feed stalls'; kept the LP feed on the NLP span since 0f122d4) and 2053 (lp+nlp,
+    sampled servo error 1.019 x after 2 repair rounds) each have a 13-14 degree turn of sub-micrometre
+    radius inside a segment too (at s = 6.388 and 5.293 mm), and pass without an NLP fallback now.
+    Now such a turn is cut out (``NurbsSegment.cut_sharp_turns``: 0.1 um chord each side of the apex)
+    and the tangent break left is a corner; and the stall test takes the peak of the feed in use."""
+    case = gen.case(seed, "bench")
+    out = harness.run(case, method)
+    assert out.ok, out.describe()
+    tp = case.toolpath()
+    assert len(tp.sharp_turns) == 1 and tp.sharp_turns[0].angle_deg > turn_deg
+    assert out.nlp_fallbacks == 0
+    assert out.samples < 20_000  # (1951: 1,169,853 samples before, a 1,170 s crawl)
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
-@pytest.mark.parametrize("seed", [1978, 1987])
+@pytest.mark.parametrize("seed", [1987])
 def test_refined_feed_stalling_between_verification_points_keeps_the_lp_feed(seed: int) -> None:
     """Bench seeds 1978 and 1987 (lp+nlp, found at the end of session 6, failing on d0e4978 too): the NLP's
     feed passed its verification points but its quadratic dipped to ~0 inside a knot interval (piece 1 of
     1978, interval 5), and the time table refused the piece ("feed stalls").  Now such an NLP span keeps
-    the LP's feed (recorded in the NLP fallbacks); the LP's feed there does not stall."""
+    the LP's feed (recorded in the NLP fallbacks); the LP's feed there does not stall.  (1978 has no
+    such span any more: its sharp turn is a corner, ``test_turn_of_nanometre_radius_inside_a_segment_is_a_corner``.)"""
     out = harness.run(gen.case(seed, "bench"), "lp+nlp")
     assert out.ok, out.describe()
     assert out.nlp_fallbacks >= 1

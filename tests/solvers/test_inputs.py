@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ import pytest
 from solvers.errors import InvalidMachineError, InvalidOptionsError, ScheduleError
 from solvers.machine import Axis, AxisLimits, DriveModel, Machine, derive_limits, preset, router
 from solvers.pipeline import Options
-from solvers.timing import PieceProfile, PieceTiming
+from solvers.timing import PieceProfile, PieceTiming, stalled_intervals
 
 
 @pytest.mark.parametrize(
@@ -84,3 +85,20 @@ def test_feed_reaching_zero_inside_a_piece_is_a_clear_error_not_a_runaway() -> N
     c[10] = c[11] = -5.0  # q < 0 around the middle
     with pytest.raises(ScheduleError):
         PieceTiming.build(PieceProfile(s_start=0.0, length=20.0, d=1.0, c=c))
+
+
+def test_stall_is_judged_against_the_peak_of_the_feed_in_use() -> None:
+    """``stalled_intervals`` compares each interval's lowest q (or f^2) with the peak of the feed the
+    profile uses.  Bench seed 1951: a piece keeping the LP's q everywhere (f_mask all False) was
+    judged against the NLP's unused f (p), whose square was over 1e12 x q's dip, and read as stalled."""
+    n = 20
+    c = np.full(n + 2, 100.0)
+    c[0], c[-1] = -c[1], -c[-2]
+    c[10] = c[11] = 1e-9  # q's dip: 1e-11 of its peak, above STALL_Q_SHARE
+    p = np.full(n + 2, 1e4)  # f^2 = 1e8: the dip is 1e-17 of that
+    idle = PieceProfile(s_start=0.0, length=20.0, d=1.0, c=c, p=p, f_mask=np.zeros(n, dtype=bool))
+    assert stalled_intervals(idle).size == 0
+    PieceTiming.build(idle)  # (integrates: no stall)
+    used = np.zeros(n, dtype=bool)
+    used[2:6] = True  # now f = 1e4 mm/s is the feed on intervals 2-5, and q's dip is a stall beside it
+    assert stalled_intervals(replace(idle, f_mask=used)).tolist() == [9, 10]
