@@ -287,12 +287,16 @@ def test_inherited_start_tight_against_a_break_cap() -> None:
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
-def test_stuck_small_piece_keeps_refining_its_knots() -> None:
+def test_stuck_small_piece_keeps_refining_its_knots(monkeypatch: pytest.MonkeyPatch) -> None:
     """Bench seed 828 (lp): a 34 mm closed loop whose curvature jumps by 1.7e4 /mm at a knot 0.82 mm from
     its start (the acceleration step caps q at 0.019 there).  On 16 to 64 knot intervals the LP could not
     leave rest (q' = 0 at the start), on 128 (the third doubling, with the rest floor) the feed stalled
     next to the knot: a ScheduleError.  Now a piece still stuck keeps doubling its knots while they stay
-    at most STUCK_REFINE_MAX_INTERVALS: it moves at 512."""
+    at most STUCK_REFINE_MAX_INTERVALS: it moves at 512.  (Since 82d7df0 the loop's 72 degree turn of
+    sub-micrometre radius at 0.816 mm is cut out as a corner; the case runs as found, without the cut.)"""
+    import geometry.nurbs
+
+    monkeypatch.setattr(geometry.nurbs, "SHARP_TURN_RADIUS_MM", 0.0)
     out = harness.run(gen.case(828, "bench"), "lp")
     assert out.ok, out.describe()
 
@@ -303,10 +307,13 @@ def test_stalled_highs_run_is_stopped_and_solved_cold(monkeypatch: pytest.Monkey
     simplex on 5,730 rows never returned (243 iterations in 5 s when limited; the case hit the bench's
     120 s CPU limit).  Each HiGHS run now has a wall-time limit (HIGHS_TIME_LIMIT_S + HIGHS_TIME_PER_ROW_S
     a row; set here to 1 s so the test is quick), after which the window is solved once more from scratch
-    (431 iterations, 0.03 s)."""
+    (431 iterations, 0.03 s).  (Since 82d7df0 its 138 degree turn of sub-micrometre radius is cut out as a
+    corner; the case runs as found, without the cut.)"""
+    import geometry.nurbs
     from bench import random_cases
     from solvers import lp
 
+    monkeypatch.setattr(geometry.nurbs, "SHARP_TURN_RADIUS_MM", 0.0)
     monkeypatch.setattr(lp, "HIGHS_TIME_LIMIT_S", 1.0)
     monkeypatch.setattr(lp, "HIGHS_TIME_PER_ROW_S", 0.0)
     w = random_cases.Worker("bench")  # forked with the limits above; killed if the run hangs again
@@ -347,7 +354,7 @@ def test_corner_rest_step_is_shared_under_lp_too() -> None:
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 @pytest.mark.parametrize(("seed", "method", "turn_deg"), [
     (1731, "lp", 150.0), (1731, "lp+nlp", 150.0), (1951, "lp", 150.0), (1951, "lp+nlp", 150.0),
-    (1978, "lp+nlp", 13.0), (2053, "lp+nlp", 13.0),
+    (1978, "lp+nlp", 13.0), (2053, "lp+nlp", 13.0), (2285, "lp", 11.0),
 ])
 def test_turn_of_nanometre_radius_inside_a_segment_is_a_corner(seed: int, method: str, turn_deg: float) -> None:
     """Bench seeds 1731 and 1951: a turn inside a segment sharper than any knot spacing resolves.
@@ -364,6 +371,8 @@ def test_turn_of_nanometre_radius_inside_a_segment_is_a_corner(seed: int, method
     1978 (lp+nlp, 'feed stalls'; kept the LP feed on the NLP span since 0f122d4) and 2053 (lp+nlp,
     sampled servo error 1.019 x after 2 repair rounds) each have a 13-14 degree turn of sub-micrometre
     radius inside a segment too (at s = 6.388 and 5.293 mm), and pass without an NLP fallback now.
+    2285 (lp, 'feed stalls' at s = 2254.40 mm of a 2.5 m path; lp+nlp ran over 120 s): an 11.9 degree one
+    at 2254.54 mm; both pass now (lp+nlp in 17 s of CPU: only lp runs here).
     Now such a turn is cut out (``NurbsSegment.cut_sharp_turns``: 0.1 um chord each side of the apex)
     and the tangent break left is a corner; and the stall test takes the peak of the feed in use."""
     case = gen.case(seed, "bench")
