@@ -217,6 +217,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fresh", action="store_true", help="ignore earlier outcomes in <out>.jsonl")
     ap.add_argument("--retry-failed", action="store_true",
                     help="run again the seeds that failed earlier (after a fix), keep the rest")
+    ap.add_argument("--seeds", type=Path, default=None,
+                    help="file of seeds (whitespace-separated) to run instead of start..start+n-1, e.g. the "
+                         "seeds a change touches (write to their own --out)")
     ap.add_argument("--workers", type=int, default=1,
                     help="worker processes running cases side by side (each its own CPU limit; on an idle "
                          "2-core machine 2 halves the wall time)")
@@ -225,9 +228,14 @@ def main(argv: list[str] | None = None) -> int:
     log = args.out.with_suffix(".jsonl")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
+    wanted = (list(range(args.start, args.start + args.n)) if args.seeds is None
+              else [int(x) for x in args.seeds.read_text().split()])
+    if args.seeds is not None:
+        args.n = len(wanted)
     if log.exists() and not args.fresh:
         rows = [json.loads(line) for line in log.read_text().splitlines() if line.strip()]
-        rows = [r for r in rows if args.start <= r["seed"] < args.start + args.n]
+        keep = set(wanted)
+        rows = [r for r in rows if r["seed"] in keep]
     if args.retry_failed:
         failed = {r["seed"] for r in rows if not r["ok"]}
         rows = [r for r in rows if r["seed"] not in failed]
@@ -236,7 +244,7 @@ def main(argv: list[str] | None = None) -> int:
             log.write_text("".join(json.dumps(r) + "\n" for r in kept if r["seed"] not in failed))
     done = {r["seed"] for r in rows}
     todo = queue.SimpleQueue[int]()
-    for seed in range(args.start, args.start + args.n):
+    for seed in wanted:
         if seed not in done:
             todo.put(seed)
     lock = threading.Lock()
