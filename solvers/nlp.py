@@ -775,14 +775,18 @@ class NlpRefiner:
         if end[0] != 0.0 or end[1] != 0.0:
             near_lp |= k_loc == n - 1
         feed_ub = np.where(near_lp, np.maximum(feed_ub, f_lp * (1.0 + 1e-9)), feed_ub)
-        # curvature jumps (knots, smooth junctions): f <= f_cap there, held at the two checkpoints around each
+        # curvature jumps (knots, smooth junctions): f <= f_cap there, held at the two checkpoints around each.
+        # At a checkpoint next to a state taken from the LP the cap is deferred (``_LpSideCaps``): added, as
+        # max(f_cap, the LP's feed), once the verification finds the step at that break over its limit
         br, f_cap = self._step_caps(geometry, a * d, b * d, breaks)
+        lp_side = _LpSideCaps.empty()
         if br.size:
             x = (br - a * d) / d
             kint = np.clip(np.floor(x), 0, n - 1).astype(np.int64)
             kc = kint * (N + 1) + np.clip(np.floor((x - kint) * N), 0, N - 1).astype(np.int64)
             for off in (0, 1):
                 np.minimum.at(feed_ub, kc + off, np.where(near_lp[kc + off], np.inf, f_cap))
+            lp_side = _LpSideCaps.at(br, f_cap, kc, near_lp, f_lp)
         floor_u, floor_e = self._inherited_floor(prev, g, xsss_hi, xsss_lo, k_loc, tau, d, moving)
         fine, g_fine = _refine_turns(geometry, fine, geometry(fine))
         # cut slots may sit where a free control point acts, off the fixed states at the window ends
@@ -890,12 +894,15 @@ class NlpRefiner:
             # the worst point of each violated stretch gets a cut slot while slots last; the rest
             # tighten the bounds of the checkpoints around them
             prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy(), slots.fac.copy())
+            # a deferred cap whose step is over its limit is added from the next round on (bench seed 2053)
+            added = lp_side.add_violated(fine, util, feed_ub)
             had_slots = slots.any
             util = slots.place(fine, g_fine, util)
             if slots.any and not had_slots:  # the window's shape with slot rows: the same rows, then the slots'
                 shape = self._shape(n, moving, slotted=True)
                 lam_g = np.concatenate([lam_g, np.zeros(shape.rows - lam_g.size)])
             self._tighten(util, fine, a * d, d, moving, fac_u, fac_e, fac_k)
+            fac_k[added] = prev_fac[2][added]  # (a cap just added is not tightened: its overshoot was without it)
             # bounds of constant rows stay as they are (tightening them could only make the window infeasible)
             fac_u[~keep] = BOUND_FACTOR
             fac_e[~free_rows] = BOUND_FACTOR
@@ -1349,6 +1356,59 @@ class _Slots:
             for name in names:
                 out[name][run] = 0.0
         return out
+
+
+@dataclass
+class _LpSideCaps:
+    """Feed caps at curvature jumps whose checkpoints sit next to a state taken from the LP (a chain's
+    start, a join to the LP at its end), deferred until the verification finds the step there over its
+    limit.
+
+    Those checkpoints' feed rows admit the LP's own feed (next to its state) and carry no step cap (without
+    a drive vmax or Fmax they are unbounded), so nothing in the NLP held the step at such a break: the
+    e rows and a cut slot do not see the step term.  Bench seed 2053 (lp+nlp): a curvature
+    jump 0.9 of a knot interval into the piece's first NLP window, passed at 1.27 x the LP's feed (the
+    sampled step's servo error 1.76 x emax) through all cut rounds; the window, the whole piece, fell back
+    to the LP's feed.  The cap is max(f_cap, the LP's feed at the checkpoint): the LP's feed stays
+    admissible, and the tightening of the feed rows acts on it.  Windows whose steps there hold keep
+    their rows (their results are unchanged)."""
+
+    #: piece-local s of each break (B,), its checkpoints (B, 2) (kc, kc + 1), which of them are next to
+    #: the LP's state (B, 2), the cap at each (B, 2) mm/s, and whether it was added (B, 2)
+    br: FloatArray
+    idx: NDArray[np.int64]
+    lp: NDArray[np.bool_]
+    cap: FloatArray
+    added: NDArray[np.bool_]
+
+    @staticmethod
+    def empty() -> _LpSideCaps:
+        z = np.zeros((0, 2), dtype=bool)
+        return _LpSideCaps(np.zeros(0), np.zeros((0, 2), dtype=np.int64), z, np.zeros((0, 2)), z.copy())
+
+    @staticmethod
+    def at(
+        br: FloatArray, f_cap: FloatArray, kc: NDArray[np.int64], near_lp: NDArray[np.bool_], f_lp: FloatArray
+    ) -> _LpSideCaps:
+        """Breaks ``br`` with caps ``f_cap`` (B,) held at checkpoints kc, kc + 1; ``near_lp`` and the LP's
+        feed ``f_lp`` (K,) at the window's checkpoints."""
+        idx = kc[:, None] + np.arange(2)[None, :]
+        cap = np.maximum(f_cap[:, None], f_lp[idx] * (1.0 + 1e-9))
+        return _LpSideCaps(br, idx, near_lp[idx], cap, np.zeros(idx.shape, dtype=bool))
+
+    def add_violated(self, fine: FloatArray, util: dict[str, FloatArray], feed_ub: FloatArray) -> NDArray[np.int64]:
+        """Add (into ``feed_ub``) the deferred caps of the breaks whose ``util["step"]`` is over
+        1 + VERIFY_TOL; returns the checkpoints whose cap was added now."""
+        pending = self.lp & ~self.added
+        if not pending.any() or "step" not in util:
+            return np.zeros(0, dtype=np.int64)
+        at = _find(fine, self.br + BREAK_EPS_MM)
+        over = np.zeros(self.br.size, dtype=bool)
+        over[at >= 0] = util["step"][at[at >= 0]] > 1.0 + VERIFY_TOL
+        new = pending & over[:, None]
+        np.minimum.at(feed_ub, self.idx[new], self.cap[new])
+        self.added |= new
+        return np.unique(self.idx[new])
 
 
 def _find(sorted_s: FloatArray, s: FloatArray) -> NDArray[np.int64]:

@@ -385,6 +385,34 @@ def test_turn_of_nanometre_radius_inside_a_segment_is_a_corner(seed: int, method
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_curvature_jump_next_to_the_lp_state_of_an_nlp_window(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Bench seed 2053 (lp+nlp, found at the end of session 6, failing on d0e4978 too): the first piece
+    (6.91 mm, 18 knot intervals of 0.384 mm) is one NLP window, starting from the LP's state at knot 1.
+    A curvature jump (|jump of x_ss| 22.5 /mm) lies 0.90 of the way through that first interval, whose
+    checkpoints' feed rows were unbounded (the LP's own feed must stay admissible next to its state) and
+    whose step cap was skipped: nothing in the NLP held the step there.  Round 0 passed it at 1.25 mm/s
+    (the LP's feed, at its cap, is 0.69), the cut slot and the tightened e rows could not touch the step
+    term, and after 4 rounds it was still at 0.88 mm/s, the step's sampled servo error 1.76 x emax: the
+    window failed and the whole piece kept the LP's feed.  That feed sits at the LP's step cap at another
+    jump (s = 2.6996 mm, 1.10 /mm), where the LP of lp+nlp lets the step alone take 0.9 emax ((Ka + Kj /
+    (2 Ts)) |step|) and leaves e either side (0.18-0.28 emax here) to the NLP: the sample at s = 2.7002
+    read 1.019 x.  The repair rounds could not help: their points do not move the LP (its a and j rows
+    held there) and the NLP failed again at s = 0.73, so each round gave the same samples.  Now a cap at a
+    jump next to the LP's state, max(f_cap, the LP's feed), is added once the verification finds that
+    step over its limit (``solvers.nlp._LpSideCaps``): the window passes in its second round, the NLP
+    keeps its feed (6.18 s of motion, servo error 0.999 x).  Bench seed 14's first window failed the same
+    way (1.32 x); it now keeps its NLP feed too.  (Since 82d7df0 the 14 degree sub-micrometre turn at
+    s = 5.29 mm is a corner, and the case passes without this fix too; it runs as found, without the cut.)"""
+    import geometry.nurbs
+
+    monkeypatch.setattr(geometry.nurbs, "SHARP_TURN_RADIUS_MM", 0.0)
+    out = harness.run(gen.case(2053, "bench"), "lp+nlp")
+    assert out.ok, out.describe()
+    assert out.nlp_fallbacks == 0
+    assert out.utilisation["servo_error_x"] <= 1.0 + 5e-3
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
 @pytest.mark.parametrize("seed", [1987])
 def test_refined_feed_stalling_between_verification_points_keeps_the_lp_feed(seed: int) -> None:
     """Bench seeds 1978 and 1987 (lp+nlp, found at the end of session 6, failing on d0e4978 too): the NLP's
