@@ -931,6 +931,7 @@ def schedule_stream(
             "nlp_failures": len(nlp_stats.failures),
             "nlp_softer_retries": nlp_stats.softer_retries,
             "nlp_handover_shrink_steps": nlp_stats.handover_scaled,
+            "nlp_handover_unscaled": nlp_stats.handover_unscaled,
             # worst fine-grid utilisation (u, e, feed, ...) of any accepted NLP window
             "nlp_worst_verified_utilisation": nlp_stats.worst_verified,
             "nlp_window_times": nlp_stats.window_times,

@@ -423,3 +423,29 @@ def test_refined_feed_stalling_between_verification_points_keeps_the_lp_feed(see
     out = harness.run(gen.case(seed, "bench"), "lp+nlp")
     assert out.ok, out.describe()
     assert out.nlp_fallbacks >= 1
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_hand_over_that_scaling_cannot_make_feasible_starts_unscaled() -> None:
+    """Bench seed 1885 (lp+nlp): a 5.4 m path at 0.41 mm knots, 304 NLP windows, over the bench's 120 s of
+    CPU (lp: 4 s).  The LP's feed sits at Fmax, so in 296 windows the hand-over stayed over a limit
+    however far it was scaled (the feed at the fixed LP states 1 + 1e-13 x Fmax; a fit stopping at the
+    window's artificial rest 25 x emax): every window ran all HANDOVER_MAX_STEPS scale-downs and Ipopt
+    started from 0.40 x a point that was still infeasible (16,264 iterations, 114 s in Ipopt, 5
+    windows declared infeasible).  Such a hand-over is now used unscaled: 4,777 iterations, ~37 s of CPU,
+    no fallbacks."""
+    from bench import random_cases
+
+    w = random_cases.Worker("bench")  # RLIMIT_CPU: killed if the NLP grinds again
+    try:
+        row = w.run(1885, "lp+nlp", SLOW_NLP_CASE_CPU_S, SLOW_NLP_CASE_WALL_S)
+    finally:
+        w.close()
+    assert row["ok"], row
+    assert row["nlp_fallbacks"] == 0, row
+
+
+#: CPU seconds bench seed 1885 lp+nlp may take in its worker (~37 s with the fix, over 120 s before) ...
+SLOW_NLP_CASE_CPU_S = 80
+#: ... and wall seconds (the CPU limit is the test; this only bounds a hang on a loaded machine).
+SLOW_NLP_CASE_WALL_S = 900
