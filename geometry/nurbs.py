@@ -17,7 +17,6 @@ follow from the quotient rule (Piegl & Tiller eq. 4.8):
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -238,7 +237,7 @@ class NurbsSegment:
             with np.errstate(invalid="ignore", divide="ignore"):
                 tan = D[1] / sp[..., None]
                 kappa = np.linalg.norm(np.cross(D[1], D[2]), axis=2) / sp**3
-                turn = _angle(tan[:, :-1], tan[:, 1:])
+                turn = turn_angle(tan[:, :-1], tan[:, 1:])
                 chord = np.linalg.norm(np.diff(D[0], axis=1), axis=2)
                 k_end = np.fmax(kappa[:, :-1], kappa[:, 1:])
                 flag = (turn > tol_rad) & ((turn > 2.0 * chord * k_end) | (k_end * SHARP_TURN_RADIUS_MM > 1.0)
@@ -254,7 +253,7 @@ class NurbsSegment:
         lo, hi = self.domain
         for _ in range(200):
             uu = np.linspace(ua, ub, 9)
-            k = int(np.nanargmax(np.nan_to_num(_angle(self.unit_tangents(uu[:-1]), self.unit_tangents(uu[1:])),
+            k = int(np.nanargmax(np.nan_to_num(turn_angle(self.unit_tangents(uu[:-1]), self.unit_tangents(uu[1:])),
                                                nan=np.pi)))
             ua, ub = float(uu[k]), float(uu[k + 1])
             ends = self.points(np.array([ua, ub]))
@@ -285,7 +284,7 @@ class NurbsSegment:
         if not (lo < u_a < uc < u_b < hi):
             return None
         tan = self.unit_tangents(np.array([u_a, u_b]))
-        if not float(_angle(tan[:1], tan[1:])[0]) > tol_rad:
+        if not float(turn_angle(tan[:1], tan[1:])[0]) > tol_rad:
             return None
         return u_a, u_b
 
@@ -303,12 +302,9 @@ class NurbsSegment:
         for v in np.unique(cuts):
             seg = seg.insert_knot(float(v), p - int(np.sum(seg.knots == v)))
         starts = set(cuts[:, 0].tolist())
-        parts = [replace(part, control_points=part.control_points.copy())
-                 for part in seg._split_c0(keep_degenerate=True) if part.domain[0] not in starts]
-        for a, b in itertools.pairwise(parts):
-            mid = 0.5 * (a.control_points[-1] + b.control_points[0])
-            a.control_points[-1] = mid
-            b.control_points[0] = mid
+        parts = [part for part in seg._split_c0(keep_degenerate=True) if part.domain[0] not in starts]
+        for k in range(len(parts) - 1):
+            parts[k], parts[k + 1] = meet_at_midpoint(parts[k], parts[k + 1])
         return parts, cuts
 
     def zero_speed_knots(self) -> FloatArray:
@@ -399,10 +395,23 @@ class NurbsSegment:
         return [s for s in pieces if float(np.max(np.ptp(s.control_points, axis=0))) > DEGENERATE_SPAN_MM]
 
 
-def _angle(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Angle (rad) between unit vectors along the last axis (accurate near 0 and pi; NaN stays NaN)."""
+def meet_at_midpoint(a: NurbsSegment, b: NurbsSegment) -> tuple[NurbsSegment, NurbsSegment]:
+    """``a`` and ``b`` with a's last and b's first control point moved to their midpoint (copies).
+
+    For curves clamped there (their end points), the two then meet; a NURBS's rational basis
+    functions are in [0, 1], so no point of either curve moves by more than half the gap."""
+    mid = 0.5 * (a.control_points[-1] + b.control_points[0])
+    Pa, Pb = a.control_points.copy(), b.control_points.copy()
+    Pa[-1] = mid
+    Pb[0] = mid
+    return replace(a, control_points=Pa), replace(b, control_points=Pb)
+
+
+def turn_angle(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Angle (rad) between unit vectors along the last axis, 2 arcsin(|a - b| / 2) (accurate near 0
+    and pi; NaN stays NaN)."""
     d = np.linalg.norm(a - b, axis=-1)
-    return np.asarray(2.0 * np.arcsin(np.minimum(0.5 * d, 1.0)), dtype=np.float64)
+    return np.asarray(2.0 * np.arcsin(np.clip(0.5 * d, 0.0, 1.0)), dtype=np.float64)
 
 
 def _check_degree(degree: object, name: str) -> int:

@@ -29,7 +29,7 @@ the tables of closed-form sub-segments only when asked for.
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Final, overload
 
 import numpy as np
@@ -40,7 +40,7 @@ from geometry.arcblend import Unblended
 from geometry.arclength import ArcLengthTable
 from geometry.clothoid import ClothoidSegment
 from geometry.errors import GeometryError
-from geometry.nurbs import ZERO_SPEED_SHARE, NurbsSegment
+from geometry.nurbs import ZERO_SPEED_SHARE, NurbsSegment, meet_at_midpoint
 from geometry.segment import Segment
 
 FloatArray = NDArray[np.float64]
@@ -118,13 +118,9 @@ def close_gaps(segments: Sequence[Segment], gap_tol: float) -> tuple[list[Segmen
         a, b = out[k], out[k + 1]
         if not (isinstance(a, NurbsSegment) and isinstance(b, NurbsSegment)):  # (a finite gap has both)
             continue
-        mid = 0.5 * (ends[k] + starts[k + 1])
-        Pa, Pb = a.control_points.copy(), b.control_points.copy()
-        Pa[-1] = mid
-        Pb[0] = mid
-        out[k] = replace(a, control_points=Pa)
-        out[k + 1] = replace(b, control_points=Pb)
-        ends[k], starts[k + 1] = mid, mid
+        a, b = meet_at_midpoint(a, b)
+        out[k], out[k + 1] = a, b
+        ends[k] = starts[k + 1] = a.control_points[-1]
         closed.append((k + 1, float(gap[k])))
     return out, closed
 
