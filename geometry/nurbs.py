@@ -34,10 +34,10 @@ DEGENERATE_SPAN_MM = 1e-9
 #: An interior knot where |C'| is at most this share of the control polygon's length per unit u
 #: is a zero-speed point (repeated control points): the segment is split there.
 ZERO_SPEED_SHARE = 1e-9
-#: A turn inside a segment is *sharp* where the tangent turns faster than along a circle of this
-#: radius (mm) over one sampling interval (SHARP_TURN_SAMPLES per knot span) and by more than the
-#: corner tolerance within SHARP_TURN_CUT_MM of its apex on either side: a near-cusp (bench seeds
-#: 1731: 159 degrees within ~6 nm; 1951: 176 degrees within 2 nm).  Passed at speed it is a kink
+#: A turn inside a segment is *sharp* where its radius of curvature at the apex is under this (mm)
+#: and the tangent turns by more than the corner tolerance between the points SHARP_TURN_CUT_MM
+#: either side of the apex: a near-cusp (bench seeds 1731: 159 degrees within ~6 nm; 1951: 176
+#: degrees within 2 nm).  Passed at speed it is a kink
 #: the samples' differences see (6 x amax on 1731); passed at the feed its radius allows it is a
 #: crawl (1,000 s for 4 um on 1951).  It is cut out and made a corner (``cut_sharp_turns``).
 SHARP_TURN_RADIUS_MM = 1e-3
@@ -253,8 +253,8 @@ class NurbsSegment:
         lo, hi = self.domain
         for _ in range(200):
             uu = np.linspace(ua, ub, 9)
-            k = int(np.nanargmax(np.nan_to_num(turn_angle(self.unit_tangents(uu[:-1]), self.unit_tangents(uu[1:])),
-                                               nan=np.pi)))
+            tan = self.unit_tangents(uu)
+            k = int(np.argmax(np.nan_to_num(turn_angle(tan[:-1], tan[1:]), nan=np.pi)))
             ua, ub = float(uu[k]), float(uu[k + 1])
             ends = self.points(np.array([ua, ub]))
             if np.linalg.norm(ends[1] - ends[0]) < 1e-3 * SHARP_TURN_CUT_MM or ub - ua <= 4.0 * np.spacing(ub):
