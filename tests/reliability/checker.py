@@ -72,6 +72,8 @@ NEWTON_H = 1e-3
 #: ... settled by the fast search only this close (a wrong bracket can hold a curve point within
 #: PATH_TOL_MM of x that is not its foot, and the worst distance is reported): 1 nm.
 SETTLED_MM = 1e-3 * PATH_TOL_MM
+#: Curve points per bracket scanned before the last search of a point still off the path.
+SCAN_POINTS = 257
 #: Points per chunk of the distance search (bench seed 388: 5.5 M samples ran out of a 4 GB limit).
 DISTANCE_CHUNK = 100_000
 #: Dense polyline: initial points per knot span, and chord refinement target as a share of the path length.
@@ -220,16 +222,30 @@ def path_distance(path: Sequence[Nurbs], x: FloatArray, dense: Dense | None = No
     # can sit on the other branch); search the brackets of all of them.
     M = dense.pts.shape[0]
     chord = float(np.max(np.linalg.norm(np.diff(dense.pts, axis=0), axis=1))) if M > 1 else 0.0
+    # A bracket need not be unimodal (bench seed 2527: a tight bend inside one holds two local minima of
+    # the distance, and the golden search settled on the one 66 um off), so each is first scanned at
+    # SCAN_POINTS and the search runs around the best of them.
     for i in np.flatnonzero(best > PATH_TOL_MM):
         cand = np.asarray(tree.query_ball_point(x[i], float(d0[i, 0]) + chord), dtype=np.int64)
         for si in np.unique(dense.seg[cand]):
             seg = path[int(si)]
             jj = cand[dense.seg[cand] == si]
-            a, b = _bracket(dense, si, jj)
+            a, b = _scan(seg, *_bracket(dense, si, jj), x[i])
             xm = np.repeat(x[i : i + 1], jj.size, axis=0)
             a, b = _golden(seg, a, b, xm, GOLDEN_ITERATIONS)
             best[i] = min(best[i], float(np.min(_dist(seg, 0.5 * (a + b), xm))))
     return best
+
+
+def _scan(seg: Nurbs, a: FloatArray, b: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Brackets [a, b] (m,) narrowed to the two scan steps around the nearest of SCAN_POINTS curve points
+    of each (to x (3,))."""
+    t = np.linspace(0.0, 1.0, SCAN_POINTS)
+    u = a[:, None] + (b - a)[:, None] * t[None, :]
+    d = _dist(seg, u.ravel(), np.repeat(x[None, :], u.size, axis=0)).reshape(u.shape)
+    k = np.argmin(d, axis=1)
+    rows = np.arange(u.shape[0])
+    return u[rows, np.maximum(k - 1, 0)], u[rows, np.minimum(k + 1, SCAN_POINTS - 1)]
 
 
 def _bracket(dense: Dense, si: int, jj: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:

@@ -95,3 +95,23 @@ def test_rejects_nan_and_a_broken_period(corner_run: tuple) -> None:  # type: ig
     t = smp.t.copy()
     t[5] += 0.1 * TS
     assert any("period" in v for v in _check(path, lim, t, smp.feed, smp.position).violations)
+
+
+#: Distance (mm) a point on the curve may read from it (the searches stop at ~1e-12 of a bracket).
+ON_CURVE_MM = 1e-6
+
+
+def test_points_on_the_curve_read_as_on_it_where_a_bracket_has_two_minima() -> None:
+    """Bench seed 2527's last segment (degree 4, weights 0.34-2.2, 2,594 mm over two knot spans): its
+    dense polyline has 5.9 mm chords, and around u = 7.30355 (a tight bend) one bracket holds two local
+    minima of the distance; the golden search took the wrong one and read a point on the curve as
+    66 um off (both methods failed the bench).  Points of the curve itself must read ~0: that one,
+    and 2,000 random ones over the path."""
+    path = gen.case(2527, "bench").segments
+    rng = np.random.default_rng(0)
+    pts = [path[4].points(np.array([7.3035553]))]
+    for seg in path:
+        lo, hi = seg.domain
+        pts.append(seg.points(rng.uniform(lo, hi, 400)))
+    d = checker.path_distance(path, np.concatenate(pts))
+    assert float(np.max(d)) <= ON_CURVE_MM
