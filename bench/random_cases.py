@@ -168,13 +168,17 @@ def summarise(rows: list[dict[str, Any]], profile: str, n: int) -> dict[str, Any
     failures = []
     per_method: dict[str, dict[str, int]] = {}
     per_commit: dict[str, dict[str, int]] = {}  # a resumed run may span solver fixes: which rows ran on which
+    refusals = []  # typed refusals by the output cap (harness.MAX_SAMPLES): a defined outcome, not a failure
     for r in rows:
+        refused = not r["ok"] and (r.get("error") or "").startswith(harness.REFUSED)
+        outcome = "ok" if r["ok"] else "refused" if refused else "failed"
         for key, tab in ((r["method"], per_method), (r.get("commit", "unrecorded"), per_commit)):
-            pm = tab.setdefault(key, {"runs": 0, "ok": 0, "failed": 0})
+            pm = tab.setdefault(key, {"runs": 0, "ok": 0, "failed": 0, "refused": 0})
             pm["runs"] += 1
-            pm["ok" if r["ok"] else "failed"] += 1
-        if not r["ok"]:
-            failures.append({k: r[k] for k in ("seed", "method", "error", "violations", "tags")})
+            pm[outcome] = pm.get(outcome, 0) + 1
+        if outcome != "ok":
+            (refusals if refused else failures).append(
+                {k: r[k] for k in ("seed", "method", "error", "violations", "tags")})
         for key, val in r["utilisation"].items():
             w = worst.setdefault(r["method"], {})
             if key not in w or val > w[key]:
@@ -187,10 +191,12 @@ def summarise(rows: list[dict[str, Any]], profile: str, n: int) -> dict[str, Any
         "runs": len(rows),
         "failed_runs": len(failures),
         "failed_cases": len({f["seed"] for f in failures}),
+        "refused_runs": len(refusals),
         "per_method": per_method,
         "per_commit": per_commit,
         "worst_utilisation": worst,
         "failures": failures,
+        "refusals": refusals,
         "seconds": sum(r["seconds"] for r in rows),
     }
 

@@ -22,7 +22,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from geometry import GeometryError
 from service.schemas import MEDIA_PROBLEM, UNION_TAGS
-from solvers.errors import ScheduleError
+from solvers.errors import OutputTooLargeError, ScheduleError
 
 log = logging.getLogger("feedsched.service")
 TYPE_BASE = "urn:feedsched:problem:"
@@ -145,6 +145,9 @@ def problem_from_exception(exc: BaseException) -> dict[str, Any]:
     if isinstance(exc, GeometryError):
         return _problem(422, "invalid-toolpath", "Invalid toolpath", str(exc), [_entry(exc.field, exc.value, exc.rule)],
                         segment=exc.segment)
+    if isinstance(exc, OutputTooLargeError):
+        return _problem(413, "too-large", "Output over the budget", str(exc), [_entry(exc.field, exc.value, exc.rule)],
+                        jobs="/v1/jobs")
     if isinstance(exc, ScheduleError):
         kind = type(exc).__name__
         slug = {"InvalidMachineError": "invalid-machine", "InvalidOptionsError": "invalid-options",

@@ -12,6 +12,7 @@ import os
 import threading
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -32,6 +33,7 @@ def compute(request: dict[str, Any], budget: Budget, progress: Callable[[float],
     req = ScheduleRequest.model_validate(request)
     tp, machine, opts = to_problem(req)
     check_budget(tp, machine, opts, budget)
+    opts = replace(opts, max_samples=budget.max_samples)  # (the exact count, once the motion time is known)
     return from_schedule(schedule(tp, machine, opts, progress=progress))
 
 
@@ -44,6 +46,7 @@ def compute_ndjson(
     req = ScheduleRequest.model_validate(request)
     tp, machine, opts = to_problem(req)
     check_budget(tp, machine, opts, budget)
+    opts = replace(opts, max_samples=budget.max_samples)  # (the exact count, once the motion time is known)
     for item in schedule_stream(tp, machine, opts, progress=progress):
         if isinstance(item, SampleBlock):
             yield from (("rows", chunk) for chunk in ndjson_rows(columns_of(item.samples)))

@@ -60,3 +60,7 @@ class SolverFailure(ScheduleError):
 
 class LimitViolationError(ScheduleError):
     """The sampled output still exceeds a limit after re-verification: nothing is returned."""
+
+
+class OutputTooLargeError(ScheduleError):
+    """The schedule's time samples would exceed ``Options.max_samples``: raised before they are built."""

@@ -39,7 +39,14 @@ from numpy.typing import NDArray
 
 from geometry.toolpath import PathSamples, Piece, Toolpath
 from solvers import kinematics, verify
-from solvers.errors import InfeasibleError, InvalidMachineError, InvalidOptionsError, LimitViolationError, SolverFailure
+from solvers.errors import (
+    InfeasibleError,
+    InvalidMachineError,
+    InvalidOptionsError,
+    LimitViolationError,
+    OutputTooLargeError,
+    SolverFailure,
+)
 from solvers.lp import (
     LimitSet,
     WindowLP,
@@ -118,6 +125,9 @@ class Options:
         nlp_axis_velocity: also hold |v| <= the LP's vmax per axis in the NLP (off: the NLP limits
             speed through the control signal, servo error and the drive's own vmax if given).
         nlp_kinematic: keep the velocity, acceleration and true-jerk limits in the NLP too.
+        max_samples: most time samples the schedule may have (None: no cap); a piece whose samples
+            would take the total over it raises ``OutputTooLargeError`` before they are built (the
+            service sets its budget here: the motion time is known only once the pieces are solved).
     """
 
     method: str = "lp+nlp"
@@ -134,6 +144,7 @@ class Options:
     nlp_workers: int = 1
     nlp_axis_velocity: bool = False
     nlp_kinematic: bool = False
+    max_samples: int | None = None
     #: test hook: called with each NLP window's index before it is solved (may raise to inject a fault)
     nlp_fault: Callable[[int], None] | None = field(default=None, repr=False, compare=False)
 
@@ -162,6 +173,11 @@ class Options:
             raise InvalidOptionsError(
                 "must be an integer in [3, lp_window / 2]", field="options.lp_overlap", value=self.lp_overlap
             )
+        if self.max_samples is not None and not (
+            isinstance(self.max_samples, int) and not isinstance(self.max_samples, bool) and self.max_samples >= 1
+        ):
+            raise InvalidOptionsError("must be a positive integer or None", field="options.max_samples",
+                                      value=self.max_samples)
         if not (isinstance(self.nlp_workers, int) and not isinstance(self.nlp_workers, bool)
                 and 1 <= self.nlp_workers <= 64):
             raise InvalidOptionsError("must be an integer in [1, 64]", field="options.nlp_workers",
@@ -835,6 +851,12 @@ def schedule_stream(
             timing = PieceTiming.build(prof)
             t_next = t_end + timing.duration
             k_hi = max(k_next, math.ceil(t_next / Ts - 1e-9) + 1) if last else first_sample_at(t_next, Ts)
+            if opt.max_samples is not None and k_hi > opt.max_samples:
+                raise OutputTooLargeError(
+                    f"the schedule needs at least {k_hi} time samples ({t_next:.6g} s of motion up to the end of "
+                    f"piece {i}, every {Ts:g} s), over the {opt.max_samples} allowed",
+                    field="options.max_samples", value=opt.max_samples,
+                )
             own = _sample_piece(toolpath, piece, prof, timing, t_end, k_next, k_hi, Ts)
             seq = own if held is None else concat_samples([held, own])
             del own  # (a copy in seq unless nothing was held)

@@ -11,6 +11,12 @@ from tests.reliability import checker, gen
 
 TS = 1e-3
 METHODS = ("lp", "lp+nlp")
+#: Most time samples a case may have (``Options.max_samples``): above it the schedule refuses with an
+#: ``OutputTooLargeError`` before building them (bench seed 3061: 70 M samples, 19.5 h of motion, ran a
+#: bench worker out of its 8 GB).  4 x the service's job budget (5 M), and seed 615's 15.3 M fit under it.
+MAX_SAMPLES = 20_000_000
+#: How a refusal by that cap reads in ``Outcome.error`` (the bench counts these apart from failures).
+REFUSED = "solvers.errors.OutputTooLargeError"
 
 
 @dataclass
@@ -36,7 +42,7 @@ def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None 
     m = case.lp_machine if method == "lp" else case.machine
     try:
         tp = case.toolpath()
-        sch = schedule(tp, m, Options(method=method, sample_period=TS))
+        sch = schedule(tp, m, Options(method=method, sample_period=TS, max_samples=MAX_SAMPLES))
     except Exception as exc:
         tb = traceback.format_exception_only(type(exc), exc)[-1].strip()
         return Outcome(case.seed, method, False, error=f"{tb}")

@@ -16,6 +16,7 @@ import pytest
 
 from bench import random_cases
 from solvers import nlp
+from tests.reliability import gen, harness
 
 SEED = 3  # any case whose lp+nlp schedule reaches an NLP window
 SLOW_WINDOW_S = 30.0
@@ -106,3 +107,19 @@ def test_the_check_has_its_own_cpu_budget(monkeypatch: pytest.MonkeyPatch, check
 
 #: CPU seconds the slowed check computes: over the scheduling limit, under the larger check budget.
 CHECK_BUSY_S = 3.0
+
+
+def test_a_refusal_by_the_output_cap_is_counted_apart_from_failures(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A case over harness.MAX_SAMPLES (bench seed 3061: 70 M samples) is refused with a typed
+    OutputTooLargeError before any sample is built; the summary counts it as refused, not failed."""
+    monkeypatch.setattr(harness, "MAX_SAMPLES", 10)
+    out = harness.run(gen.case(0, "test"), "lp")
+    assert not out.ok and out.error is not None and out.error.startswith(harness.REFUSED), out.error
+    row = {"seed": 0, "method": "lp", "ok": False, "error": out.error, "violations": [], "utilisation": {},
+           "seconds": 0.1, "tags": {}}
+    good = {**row, "seed": 1, "ok": True, "error": None}
+    bad = {**row, "seed": 2, "error": "solvers.errors.LimitViolationError: x"}
+    s = random_cases.summarise([row, good, bad], "test", 3)
+    assert (s["refused_runs"], s["failed_runs"]) == (1, 1)
+    assert s["per_method"]["lp"] == {"runs": 3, "ok": 1, "failed": 1, "refused": 1}
+    assert [f["seed"] for f in s["refusals"]] == [0] and [f["seed"] for f in s["failures"]] == [2]

@@ -186,6 +186,15 @@ def test_sync_budget_points_to_jobs(client: TestClient) -> None:
     assert b["jobs"] == "/v1/jobs"
 
 
+def test_exact_sample_count_over_the_budget_is_413(client: TestClient) -> None:
+    """The sample-count lower bound (length / |vmax|) passes a slow machine's path; the exact count, known once
+    the pieces are solved, is over the fixture's 50 000: a 413 naming options.max_samples (no samples built)."""
+    axes = {ax: {"limits": {"vmax": 1e4, "amax": 0.05, "jmax": 1.0}} for ax in ("x", "y", "z")}
+    body = {**EXAMPLE, "machine": {"axes": axes}, "options": {"method": "lp"}}
+    b = assert_problem(client.post("/v1/schedule", json=body), 413, "options.max_samples")
+    assert b["jobs"] == "/v1/jobs" and "50000 allowed" in b["detail"]
+
+
 def test_404_405_problem(client: TestClient) -> None:
     assert_problem(client.get("/v2/nothing"), 404, "path")
     assert_problem(client.put("/v1/schedule", json=EXAMPLE), 405, "path")

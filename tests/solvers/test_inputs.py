@@ -102,3 +102,23 @@ def test_stall_is_judged_against_the_peak_of_the_feed_in_use() -> None:
     used = np.zeros(n, dtype=bool)
     used[2:6] = True  # now f = 1e4 mm/s is the feed on intervals 2-5, and q's dip is a stall beside it
     assert stalled_intervals(replace(idle, f_mask=used)).tolist() == [9, 10]
+
+
+def test_output_cap_counts_the_samples_exactly() -> None:
+    """``Options.max_samples``: a schedule of exactly that many samples is returned; one more than the cap
+    is an ``OutputTooLargeError`` naming the option, raised before the samples are built."""
+    from geometry import primitives
+    from geometry.toolpath import Toolpath
+    from solvers.errors import OutputTooLargeError
+    from solvers.pipeline import schedule
+
+    tp = Toolpath([primitives.line([0, 0, 0], [30, 10, 0])])
+    n = schedule(tp, router(), Options(method="lp")).samples.t.size
+    assert schedule(tp, router(), Options(method="lp", max_samples=n)).samples.t.size == n
+    with pytest.raises(OutputTooLargeError) as err:
+        schedule(tp, router(), Options(method="lp", max_samples=n - 1))
+    assert err.value.field == "options.max_samples" and err.value.value == n - 1
+    for bad in (0, -5, 2.5, True):
+        with pytest.raises(InvalidOptionsError) as e2:
+            Options(max_samples=bad)  # type: ignore[arg-type]
+        assert e2.value.field == "options.max_samples"
