@@ -449,3 +449,16 @@ def test_hand_over_that_scaling_cannot_make_feasible_starts_unscaled() -> None:
 SLOW_NLP_CASE_CPU_S = 80
 #: ... and wall seconds (the CPU limit is the test; this only bounds a hang on a loaded machine).
 SLOW_NLP_CASE_WALL_S = 900
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_deep_well_conditioned_dip_is_not_a_stall() -> None:
+    """Bench seed 2966 (lp and lp+nlp: 'feed stalls', the same on 4b4da00): a 9.9 m path on a machine whose
+    vmax is far above what its jmax lets it stop from (q peaks at 1.1e11, 330 m/s); at a knot with a
+    0.1 mm radius and a curvature jump (s = 6851.46 mm) the step cap holds q at 0.0217 (0.15 mm/s).  The
+    LP decelerates into it by ~1e2 a knot, but 0.0217 is 2e-13 of the peak, under STALL_Q_SHARE: every
+    knot refinement up to 1,024 intervals 'stalled', and the time table refused the piece.  Now the
+    time table takes dips that are well conditioned in their own intervals (``stalled_intervals(...,
+    conditioned=True)``); the knot refinement still treats them as stuck.  27 s of motion, limits held."""
+    out = harness.run(gen.case(2966, "bench"), "lp")
+    assert out.ok, out.describe()

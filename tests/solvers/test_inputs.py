@@ -122,3 +122,24 @@ def test_output_cap_counts_the_samples_exactly() -> None:
         with pytest.raises(InvalidOptionsError) as e2:
             Options(max_samples=bad)  # type: ignore[arg-type]
         assert e2.value.field == "options.max_samples"
+
+
+def test_a_deep_but_well_conditioned_dip_is_timed_not_refused() -> None:
+    """Bench seed 2966: q falls from ~1e11 (330 m/s) to 0.0217 (a curvature-jump cap, 0.15 mm/s) over a
+    few knots (1.3e8 -> 0.0217 over the last one): 2e-13 of its peak, under STALL_Q_SHARE, so the time
+    table refused it as a stall.  Each interval's quadratic is well conditioned there (its lowest q is a
+    large share of its own control points), so the table now times it: the flat stretch alone takes its
+    length / sqrt(q)."""
+    n = 40
+    c = np.full(n + 2, 1e11)
+    c[0], c[-1] = -c[1], -c[-2]
+    c[10:15] = [1e9, 1e7, 1e5, 1e3, 10.0]  # down by 1e2 a knot, as the LP's decelerations into the cap
+    c[15:25] = 0.0217  # q = 0.0217 on intervals 15..22 (each interval reads c_k .. c_k+2)
+    c[25:30] = [10.0, 1e3, 1e5, 1e7, 1e9]
+    prof = PieceProfile(s_start=0.0, length=float(n), d=1.0, c=c)
+    assert stalled_intervals(prof).size > 0  # (what the knot refinement still treats as stuck)
+    flat = 8.0 / math.sqrt(0.0217)
+    assert flat < PieceTiming.build(prof).duration < 1.5 * flat
+    c[19] = c[20] = 0.0217 * 1e-13  # a dip within the stretch, ill conditioned: still refused
+    with pytest.raises(ScheduleError):
+        PieceTiming.build(PieceProfile(s_start=0.0, length=float(n), d=1.0, c=c))
