@@ -954,6 +954,8 @@ def schedule_stream(
             "nlp_softer_retries": nlp_stats.softer_retries,
             "nlp_handover_shrink_steps": nlp_stats.handover_scaled,
             "nlp_handover_unscaled": nlp_stats.handover_unscaled,
+            # chains whose LP feed was kept unsolved: at the feed bound, well inside the other limits
+            "nlp_lp_kept_chains": nlp_stats.lp_kept_chains,
             # worst fine-grid utilisation (u, e, feed, ...) of any accepted NLP window
             "nlp_worst_verified_utilisation": nlp_stats.worst_verified,
             "nlp_window_times": nlp_stats.window_times,

@@ -445,7 +445,29 @@ def test_hand_over_that_scaling_cannot_make_feasible_starts_unscaled() -> None:
     assert row["nlp_fallbacks"] == 0, row
 
 
-#: CPU seconds bench seed 1885 lp+nlp may take in its worker (~37 s with the fix, over 120 s before) ...
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_chain_whose_lp_feed_sits_at_fmax_keeps_it_unsolved() -> None:
+    """Bench seed 3714 (lp+nlp): a 3.2 m path at 0.052 mm knots (61,602 control points, 357 LP windows),
+    over the bench's 120 s of CPU (~200 s; lp: ~20 s).  Not a loop: 1,376 NLP windows at ~24 Ipopt
+    iterations each (178 s in Ipopt, one shape), every one returning Fmax, where the LP's feed already
+    was on 99.9 % of the path (u <= 0.17, e <= 0.015 of their limits).  Such a chain now keeps the LP's
+    feed unsolved (``NlpRefiner._lp_at_bound``): 349 of 357 chains, 27 NLP windows, ~25 s of CPU, motion
+    15.0372 -> 15.0348 s."""
+    from bench import random_cases
+
+    w = random_cases.Worker("bench")  # RLIMIT_CPU: killed if every chain is solved again
+    try:
+        row = w.run(3714, "lp+nlp", AT_FMAX_CASE_CPU_S, SLOW_NLP_CASE_WALL_S)
+    finally:
+        w.close()
+    assert row["ok"], row
+    assert row["nlp_fallbacks"] == 0, row
+
+
+#: CPU seconds bench seed 3714 lp+nlp may take in its worker (~25-30 s with the fix, ~200 s before).
+AT_FMAX_CASE_CPU_S = 70
+#: CPU seconds bench seed 1885 lp+nlp may take in its worker (~37 s with the fix, ~8 s since chains at Fmax
+#: keep the LP feed, over 120 s before) ...
 SLOW_NLP_CASE_CPU_S = 80
 #: ... and wall seconds (the CPU limit is the test; this only bounds a hang on a loaded machine).
 SLOW_NLP_CASE_WALL_S = 900
