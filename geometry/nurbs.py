@@ -41,8 +41,10 @@ ZERO_SPEED_SHARE = 1e-9
 #: the samples' differences see (6 x amax on 1731); passed at the feed its radius allows it is a
 #: crawl (1,000 s for 4 um on 1951).  It is cut out and made a corner (``cut_sharp_turns``).
 SHARP_TURN_RADIUS_MM = 1e-3
-#: Chord (mm) cut off each side of a sharp turn's apex: the path moves by at most this much.
+#: Chord (mm) cut off each side of a sharp turn's apex, doubled while the radius of curvature at the
+#: cut is still under SHARP_TURN_RADIUS_MM, up to SHARP_TURN_CUT_MAX_MM: the path moves by at most that.
 SHARP_TURN_CUT_MM = 1e-4
+SHARP_TURN_CUT_MAX_MM = 4e-4
 #: Samples per knot span in the search for sharp turns.
 SHARP_TURN_SAMPLES = 16
 #: Knot spans searched for sharp turns at once (bounds the temporaries of a long segment).
@@ -260,26 +262,23 @@ class NurbsSegment:
             if np.linalg.norm(ends[1] - ends[0]) < 1e-3 * SHARP_TURN_CUT_MM or ub - ua <= 4.0 * np.spacing(ub):
                 break
         uc = 0.5 * (ua + ub)
-        D = self.derivatives(np.array([uc]))[:, 0]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            kappa = float(np.linalg.norm(np.cross(D[1], D[2])) / np.linalg.norm(D[1]) ** 3)
-        if not kappa * SHARP_TURN_RADIUS_MM > 1.0 and np.isfinite(kappa):
+        if not self._radius_under(uc, SHARP_TURN_RADIUS_MM):
             return None  # (tight, but a radius the schedule passes: not a near-cusp)
-        apex = D[0]
+        apex = self.points(np.array([uc]))[0]
         sides: list[float] = []
         for end in (lo, hi):
-            near, far = uc, end
-            if np.linalg.norm(self.points(np.array([far]))[0] - apex) <= SHARP_TURN_CUT_MM:
-                return None  # the cut would reach the segment's end
-            for _ in range(200):  # bisection: the point SHARP_TURN_CUT_MM (chord) from the apex
-                mid = 0.5 * (near + far)
-                if mid in (near, far):
+            # the point SHARP_TURN_CUT_MM (chord) from the apex; farther (doubling, up to SHARP_TURN_CUT_MAX_MM)
+            # while the curvature there is still a radius under SHARP_TURN_RADIUS_MM (bench seed 3010: the
+            # turn's tail at 0.1 um, a 0.5 um radius with |x_sss| ~ 1e8 /mm^2 at the new rest end, stalled it)
+            h = SHARP_TURN_CUT_MM
+            while True:
+                u = self._chord_point(uc, end, apex, h)
+                if u is None:
+                    return None  # the cut would reach the segment's end
+                if h >= SHARP_TURN_CUT_MAX_MM or not self._radius_under(u, SHARP_TURN_RADIUS_MM):
                     break
-                if np.linalg.norm(self.points(np.array([mid]))[0] - apex) < SHARP_TURN_CUT_MM:
-                    near = mid
-                else:
-                    far = mid
-            sides.append(far)
+                h *= 2.0
+            sides.append(u)
         u_a, u_b = sides
         if not (lo < u_a < uc < u_b < hi):
             return None
@@ -287,6 +286,29 @@ class NurbsSegment:
         if not float(turn_angle(tan[:1], tan[1:])[0]) > tol_rad:
             return None
         return u_a, u_b
+
+    def _chord_point(self, uc: float, end: float, apex: FloatArray, h: float) -> float | None:
+        """The parameter between uc and ``end`` whose point is h (chord) from ``apex`` (bisection), or None if
+        even ``end`` is within h."""
+        if np.linalg.norm(self.points(np.array([end]))[0] - apex) <= h:
+            return None
+        near, far = uc, end
+        for _ in range(200):
+            mid = 0.5 * (near + far)
+            if mid in (near, far):
+                break
+            if np.linalg.norm(self.points(np.array([mid]))[0] - apex) < h:
+                near = mid
+            else:
+                far = mid
+        return far
+
+    def _radius_under(self, u: float, r: float) -> bool:
+        """Whether the radius of curvature at u is under r (mm)."""
+        D = self.derivatives(np.array([u]))[:, 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            kappa = float(np.linalg.norm(np.cross(D[1], D[2])) / np.linalg.norm(D[1]) ** 3)
+        return not kappa * r <= 1.0
 
     def cut_sharp_turns(self, tol_rad: float) -> tuple[list[NurbsSegment], FloatArray]:
         """The segment with its sharp turns (``sharp_turns``) cut out: the parts between them, each

@@ -354,7 +354,7 @@ def test_corner_rest_step_is_shared_under_lp_too() -> None:
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 @pytest.mark.parametrize(("seed", "method", "turn_deg"), [
     (1731, "lp", 150.0), (1731, "lp+nlp", 150.0), (1951, "lp", 150.0), (1951, "lp+nlp", 150.0),
-    (1978, "lp+nlp", 13.0), (2053, "lp+nlp", 13.0), (2285, "lp", 11.0),
+    (1978, "lp+nlp", 13.0), (2053, "lp+nlp", 13.0), (2285, "lp", 11.0), (3010, "lp", 18.0),
 ])
 def test_turn_of_nanometre_radius_inside_a_segment_is_a_corner(seed: int, method: str, turn_deg: float) -> None:
     """Bench seeds 1731 and 1951: a turn inside a segment sharper than any knot spacing resolves.
@@ -373,6 +373,10 @@ def test_turn_of_nanometre_radius_inside_a_segment_is_a_corner(seed: int, method
     radius inside a segment too (at s = 6.388 and 5.293 mm), and pass without an NLP fallback now.
     2285 (lp, 'feed stalls' at s = 2254.40 mm of a 2.5 m path; lp+nlp ran over 120 s): an 11.9 degree one
     at 2254.54 mm; both pass now (lp+nlp in 17 s of CPU: only lp runs here).
+    3010 (lp, passed before the cut): an 18.5 degree turn whose tail, 0.1 um from the apex, still had a
+    0.5 um radius (|x_sss| ~ 1e8 /mm^2) at the new rest end: 'feed stalls' 7 um before it at every knot
+    refinement.  The cut now grows (doubling, up to SHARP_TURN_CUT_MAX_MM = 0.4 um) while the radius
+    at the cut point is under SHARP_TURN_RADIUS_MM: a 67 degree corner, both methods pass.
     Now such a turn is cut out (``NurbsSegment.cut_sharp_turns``: 0.1 um chord each side of the apex)
     and the tangent break left is a corner; and the stall test takes the peak of the feed in use."""
     case = gen.case(seed, "bench")
