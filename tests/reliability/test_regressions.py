@@ -6,6 +6,8 @@ the diagnosis, so a fix turns them into a failure-to-fail that must be looked at
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -438,13 +440,7 @@ def test_hand_over_that_scaling_cannot_make_feasible_starts_unscaled() -> None:
     started from 0.40 x a point that was still infeasible (16,264 iterations, 114 s in Ipopt, 5
     windows declared infeasible).  Such a hand-over is now used unscaled: 4,777 iterations, ~37 s of CPU,
     no fallbacks."""
-    from bench import random_cases
-
-    w = random_cases.Worker("bench")  # RLIMIT_CPU: killed if the NLP grinds again
-    try:
-        row = w.run(1885, "lp+nlp", SLOW_NLP_CASE_CPU_S, SLOW_NLP_CASE_WALL_S)
-    finally:
-        w.close()
+    row = _in_worker(1885, "lp+nlp", SLOW_NLP_CASE_CPU_S)  # killed if the NLP grinds again
     assert row["ok"], row
     assert row["nlp_fallbacks"] == 0, row
 
@@ -457,15 +453,21 @@ def test_chain_whose_lp_feed_sits_at_fmax_keeps_it_unsolved() -> None:
     was on 99.9 % of the path (u <= 0.17, e <= 0.015 of their limits).  Such a chain now keeps the LP's
     feed unsolved (``NlpRefiner._lp_at_bound``): 349 of 357 chains, 27 NLP windows, ~25 s of CPU, motion
     15.0372 -> 15.0348 s."""
-    from bench import random_cases
-
-    w = random_cases.Worker("bench")  # RLIMIT_CPU: killed if every chain is solved again
-    try:
-        row = w.run(3714, "lp+nlp", AT_FMAX_CASE_CPU_S, SLOW_NLP_CASE_WALL_S)
-    finally:
-        w.close()
+    row = _in_worker(3714, "lp+nlp", AT_FMAX_CASE_CPU_S)  # killed if every chain is solved again
     assert row["ok"], row
     assert row["nlp_fallbacks"] == 0, row
+
+
+def _in_worker(seed: int, method: str, cpu_s: float) -> dict[str, Any]:
+    """Bench ``seed`` with ``method`` run and checked in a forked bench worker limited to ``cpu_s`` seconds of
+    CPU (RLIMIT_CPU: a case that grinds again is killed and fails) and SLOW_NLP_CASE_WALL_S of wall time."""
+    from bench import random_cases
+
+    w = random_cases.Worker("bench")
+    try:
+        return w.run(seed, method, cpu_s, SLOW_NLP_CASE_WALL_S)
+    finally:
+        w.close()
 
 
 #: CPU seconds bench seed 3714 lp+nlp may take in its worker (~25-30 s with the fix, ~200 s before).
