@@ -238,7 +238,7 @@ class NurbsSegment:
             sp = np.linalg.norm(D[1], axis=2)
             with np.errstate(invalid="ignore", divide="ignore"):
                 tan = D[1] / sp[..., None]
-                kappa = np.linalg.norm(np.cross(D[1], D[2]), axis=2) / sp**3
+                kappa = curvature(D[1], D[2])
                 turn = turn_angle(tan[:, :-1], tan[:, 1:])
                 chord = np.linalg.norm(np.diff(D[0], axis=1), axis=2)
                 k_end = np.fmax(kappa[:, :-1], kappa[:, 1:])
@@ -305,10 +305,8 @@ class NurbsSegment:
 
     def _radius_under(self, u: float, r: float) -> bool:
         """Whether the radius of curvature at u is under r (mm)."""
-        D = self.derivatives(np.array([u]))[:, 0]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            kappa = float(np.linalg.norm(np.cross(D[1], D[2])) / np.linalg.norm(D[1]) ** 3)
-        return not kappa * r <= 1.0
+        D = self.derivatives(np.array([u]))
+        return not float(curvature(D[1], D[2])[0]) * r <= 1.0
 
     def cut_sharp_turns(self, tol_rad: float) -> tuple[list[NurbsSegment], FloatArray]:
         """The segment with its sharp turns (``sharp_turns``) cut out: the parts between them, each
@@ -427,6 +425,13 @@ def meet_at_midpoint(a: NurbsSegment, b: NurbsSegment) -> tuple[NurbsSegment, Nu
     Pa[-1] = mid
     Pb[0] = mid
     return replace(a, control_points=Pa), replace(b, control_points=Pb)
+
+
+def curvature(d1: FloatArray, d2: FloatArray) -> FloatArray:
+    """|C' x C''| / |C'|^3 (1/mm) from u-derivatives along the last axis (inf or NaN where C' = 0)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.linalg.norm(np.cross(d1, d2), axis=-1) / np.linalg.norm(d1, axis=-1) ** 3
+    return np.asarray(k, dtype=np.float64)
 
 
 def turn_angle(a: FloatArray, b: FloatArray) -> FloatArray:
