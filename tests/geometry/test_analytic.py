@@ -190,6 +190,29 @@ def test_offset_circle_stays_on_circle() -> None:
     np.testing.assert_array_equal(p[:, 2], 0.0)
 
 
+#: Third differences of positions sampled densely along an exact circle, in ulps of its radius: the
+#: rounding of the positions themselves and of u on a domain starting at 0 (measured <= 14).
+D3_ROUNDING_ULPS = 32
+
+
+@pytest.mark.parametrize("offset", [0.0, 1.0, 1000.0])
+def test_positions_on_a_domain_far_from_zero_are_as_fine_as_the_domain_at_zero(offset: float) -> None:
+    """Bench seed 5029: a segment on u in [-2.27, -2.25] moved its samples in steps of ulp(u) |C'| =
+    1.9e-12 mm, which a slow machine's jerk limit sees.  The circle on knots offset + 1e-3 U (|C'| =
+    6.3e4 mm) read 7.2e6 ulps at offset 1000 and 2.1e4 at offset 1 before the toolpath rebased its
+    segments' domains to 0 (``NurbsSegment.rebased``); it must read as the same curve on [0, 1e-3]."""
+    radius = 40.0
+    c = examples.circle(radius)
+    seg = NurbsSegment.create(c.degree, offset + 1e-3 * c.knots, c.control_points, c.weights)
+    tp = Toolpath([seg])
+    for where in (0.1, 0.5, 1.0):
+        s = where * tp.length - 5e-5 * np.arange(400)
+        p = tp.positions(s)
+        expected = radius * np.column_stack([np.cos(s / radius), np.sin(s / radius), np.zeros_like(s)])
+        np.testing.assert_allclose(p, expected, rtol=0, atol=POS_REL_TOL * radius)
+        assert np.abs(np.diff(p, 3, axis=0)).max() <= D3_ROUNDING_ULPS * np.spacing(radius)
+
+
 # --------------------------------------------------------------------------- random NURBS
 
 RANDOM_CASES = [(101, 2, 3), (102, 3, 5), (103, 4, 4), (104, 5, 3)]

@@ -494,10 +494,14 @@ def test_deep_well_conditioned_dip_is_not_a_stall() -> None:
 
 @pytest.mark.xfail(strict=True, reason="open: found at the end of session 7, not diagnosed")
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
-def test_open_lp_nlp_failure_of_session_7() -> None:
+def test_open_lp_nlp_failure_of_session_7(monkeypatch: pytest.MonkeyPatch) -> None:
     """Bench seed 4629 (lp+nlp), found in the last half hour of session 7 and failing the same on session 6's
     4b4da00: sampled servo error 1.052 x (axis z, s = 2.06 mm) after 2 repair rounds, a typed 422, not a
-    silent violation.  (Bench seeds 5004 and 5029 lp, 31 and 69 s, acceleration 1.09 x and jerk 2.67 x,
-    are open too; too slow for make test.)"""
+    silent violation.  Since the toolpath rebases its segments' domains to u = 0 (session 8) the seed
+    passes at 1.0068 x, by a change of rounding only (at s = 2.06 mm the old u was already fine: steps
+    of 1.3e-16 mm), so it runs here as found, without the rebasing, until it is diagnosed.  (Bench seeds
+    5004 and 5029 lp, acceleration 1.09 x and jerk 2.67 x, were the rounding of u: see
+    ``test_analytic.py::test_positions_on_a_domain_far_from_zero_are_as_fine_as_the_domain_at_zero``.)"""
+    monkeypatch.setattr(NurbsSegment, "rebased", lambda self: self)
     out = harness.run(gen.case(4629, "bench"), "lp+nlp")
     assert out.ok, out.describe()
