@@ -817,7 +817,10 @@ class NlpRefiner:
             near_lp |= k_loc == 0
         if end[0] != 0.0 or end[1] != 0.0:
             near_lp |= k_loc == n - 1
-        feed_ub = np.where(near_lp, np.maximum(feed_ub, f_lp * (1.0 + 1e-9)), feed_ub)
+        feed_lp = np.where(near_lp, f_lp * (1.0 + 1e-9), 0.0)
+        feed_ub = np.maximum(feed_ub, feed_lp)
+        # the feed rows' floor (``_row_bounds``): none until a tightening under feed_lp makes the window infeasible
+        feed_floor = np.zeros(K)
         # curvature jumps (knots, smooth junctions): f <= f_cap there, held at the two checkpoints around each.
         # At a checkpoint next to a state taken from the LP the cap is deferred (``_LpSideCaps``): added, as
         # max(f_cap, the LP's feed), once the verification finds the step at that break over its limit
@@ -861,7 +864,8 @@ class NlpRefiner:
         retries = 0
         rnd = 0
         while rnd <= MAX_CUT_ROUNDS:
-            lbg, ubg = self._row_bounds(moving, fac_u, fac_e, fac_k, sig_hi, sig_lo, feed_ub, Fs, free_rows, keep)
+            lbg, ubg = self._row_bounds(moving, fac_u, fac_e, fac_k, sig_hi, sig_lo, feed_ub, feed_floor, Fs,
+                                        free_rows, keep)
             if slots.any:
                 s_lo, s_hi = slots.bounds(self, prev)
                 lbg, ubg = np.concatenate([lbg, s_lo]), np.concatenate([ubg, s_hi])
@@ -894,6 +898,13 @@ class NlpRefiner:
             if not st.get("success", False) and status != "Solved_To_Acceptable_Level":
                 if best is not None and best[0] <= 1.0 + ACCEPT_TOL:
                     return self._accept(best, t0)
+                if rnd > 0 and not feed_floor.any() and np.any(keep & (feed_ub / Fs * fac_k < feed_lp / Fs)):
+                    # the tightening took feed rows next to the LP's state under the LP's feed, which the
+                    # fixed state may not reach: the round again with those rows at it (``_row_bounds``)
+                    feed_floor = feed_lp
+                    x = best[1] / Fs if best is not None else x0
+                    lam_g = None
+                    continue
                 if rnd > 0 and prev_fac is not None and retries < MAX_SOFTER_RETRIES:
                     # tightening made the window infeasible: retry with half of it (geometric mean)
                     retries += 1
@@ -1074,6 +1085,7 @@ class NlpRefiner:
         sig_hi: FloatArray,
         sig_lo: FloatArray,
         feed_ub: FloatArray,
+        feed_floor: FloatArray,
         Fs: float,
         free_rows: NDArray[np.bool_],
         keep: NDArray[np.bool_],
@@ -1081,7 +1093,24 @@ class NlpRefiner:
         """Row bounds in the order of ``_Shape``'s rows (scaled units).
 
         Rows at checkpoints not in ``free_rows`` are unbounded; so are the u, a
-        and f rows at checkpoints not in ``keep`` (constant there)."""
+        and f rows at checkpoints not in ``keep`` (constant there).
+
+        The feed rows hold f <= max(fac_k feed_ub, feed_floor).  ``feed_floor`` (K,) is 0 until a
+        tightening that took feed rows next to a state taken from the LP under the LP's feed made the
+        window infeasible; from then on (the same round solved again) it is the LP's feed (times
+        1 + 1e-9) at the checkpoints next to such a state, 0 elsewhere.  There the fixed state leaves f
+        little freedom: in the first interval f(tau) = (1 - tau)^2 / 2 p_a + (1 + 2 tau - 2 tau^2) / 2
+        p_a+1 + tau^2 / 2 p_a+2 with only p_a+2 free, and f >= 0 at the next knot, (p_a+1 + p_a+2) / 2
+        >= 0, bounds p_a+2 from below.  Bench seed 4629: the step cap at a curvature jump 0.3 of the way
+        into a chain's first interval (``_LpSideCaps``, 0.324 mm/s; the step's servo error, not the
+        cap, was over) tightened to MIN_BOUND_FACTOR x, 0.162 mm/s, at checkpoints where the LP's feed
+        is 0.247 and 0.220 and the fixed state (p_a, p_a+1) = (0.470, 0.157) allows no less than 0.235
+        and 0.157: Ipopt 'Infeasible_Problem_Detected', the softer retries (geometric means) tightened
+        back to it a round later, and the piece fell back to the LP's feed.  With the floor the round
+        passes, its feed at the jump 0.229 mm/s, 4 % under the LP's (the other rows still reach under it).
+        Not from the start: where a tightening under the LP's feed stays feasible it is what holds a
+        limit the LP's feed misses next to its state (bench seeds 14 and 185: with the floor in every
+        round a window stayed 1.020 and 1.0095 x over and fell back, 185's motion 5.5 % longer)."""
         lim = self.lim
         K = free_rows.size
         lo: list[FloatArray] = []
@@ -1098,7 +1127,7 @@ class NlpRefiner:
                 hi.extend([np.where(const, np.inf, fac_k), fac_k.copy(), inf.copy()])
                 lo.extend([np.where(const, -np.inf, -fac_k), -inf, -fac_k])
         lo.append(np.where(const, -np.inf, 0.0))
-        hi.append(np.where(const, np.inf, feed_ub / Fs * fac_k))
+        hi.append(np.where(const, np.inf, np.maximum(feed_ub / Fs * fac_k, feed_floor / Fs)))
         off = ~free_rows
         for lo_i, hi_i in zip(lo, hi, strict=True):
             lo_i[off] = -np.inf

@@ -340,13 +340,23 @@ def test_rows_at_knots_are_kept_once(with_aj: bool) -> None:
     feed_ub = np.full(K, 500.0)
     feed_ub[dup] = 300.0
     sig = np.ones((K, 3))
-    lo, hi = ref._row_bounds(axes, fac, np.full((K, len(axes)), 0.9), np.ones(K), sig, sig, feed_ub, Fs,
-                             np.ones(K, dtype=bool), np.ones(K, dtype=bool))
+    lo, hi = ref._row_bounds(axes, fac, np.full((K, len(axes)), 0.9), np.ones(K), sig, sig, feed_ub, np.zeros(K),
+                             Fs, np.ones(K, dtype=bool), np.ones(K, dtype=bool))
     assert lo.size == hi.size == shape.rows
     lim = ref.lim
     assert np.allclose(hi[shape.row_index[0, twin]], (lim.umax[0] * 0.5 - lim.c[0] - lim.d[0]) / lim.umax[0])
     assert np.allclose(hi[shape.row_index[-1, twin]], 300.0 / Fs)
     assert np.allclose(hi[shape.row_index[-1, kept[kept % (N + 1) != 0]]], 500.0 / Fs)
+    # next to a state taken from the LP (here the first interval) no tightening takes a feed row under the
+    # LP's feed (bench seed 4629); elsewhere the tightened bound holds
+    feed_lp = np.where(k == 0, 400.0, 0.0)
+    fac_k = np.full(K, 0.5)
+    _, hi = ref._row_bounds(axes, fac, np.full((K, len(axes)), 0.9), fac_k, sig, sig, feed_ub, feed_lp, Fs,
+                            np.ones(K, dtype=bool), np.ones(K, dtype=bool))
+    first = kept[(k[kept] == 0) & (tau[kept] < 1.0)]
+    assert np.allclose(hi[shape.row_index[-1, first]], 400.0 / Fs)
+    assert np.allclose(hi[shape.row_index[-1, kept[k[kept] >= 2]]], np.where(np.isin(kept[k[kept] >= 2], twin), 150.0,
+                                                                          250.0) / Fs)
 
 
 def test_failed_solve_is_retried_with_the_safe_settings(monkeypatch: pytest.MonkeyPatch) -> None:
