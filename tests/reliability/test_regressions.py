@@ -492,6 +492,65 @@ def test_deep_well_conditioned_dip_is_not_a_stall() -> None:
     assert out.ok, out.describe()
 
 
+#: Tails of bench paths cut off by knot insertion, so on the parameters they came with: (degree, knots,
+#: control points, weights, lp machine's (vmax, amax, jmax) per axis, the limit the samples broke).
+#: Seed 5004: the last 0.02 mm of a 231 mm closed quartic loop on the knots [-7.77704, -7.76225]
+#: (|C'| = 2.08e5 mm per unit u here; y's amax Ts^2 is 0.64 nm).
+#: Seed 5029: the last 2 um of its 13.1 mm path, a rational cubic on [-2.27452, -2.24931] (|C'| = 5.1e3 mm;
+#: x's jmax Ts^3 is 2.1 pm).
+PARAMETER_FAR_FROM_ZERO = {
+    5004: (4, [-7.762248291975086] * 5 + [-7.762248195821241] * 5,
+           [[-264.6831915901264, -296.4772714681342, 61.53445028302801],
+            [-264.6821880301651, -296.4725527633692, 61.53577235485319],
+            [-264.68118442300516, -296.46783383836066, 61.537094493680804],
+            [-264.6801807686444, -296.4631146930984, 61.53841669951396],
+            [-264.67917706708045, -296.45839532757236, 61.539738972355735]],
+           [1.0] * 5,
+           ((0.07402537275137837, 0.7736012000356062, 34.619324166458284),
+            (1.5119833021993347, 0.000638238875175182, 0.9638086773477785),
+            (0.031549208541309874, 3.5012981489958044, 457.7027101563589)),
+           "acceleration_y"),
+    5029: (3, [-2.249307428199237] * 4 + [-2.2493070394377277] * 4,
+           [[-10.768495411283112, -454.64121034561555, 0.0], [-10.76795594759849, -454.6416013089265, 0.0],
+            [-10.767416341116444, -454.6419923761135, 0.0], [-10.766876591780317, -454.64238354721755, 0.0]],
+           [0.9410040722596866, 0.9408979547304167, 0.940791832737548, 0.9406857062809412],
+           ((0.0025459131192650856, 9.727469502781801e-06, 0.002082303211928603),
+            (0.0009049559235407429, 0.004620268450822386, 4.125995665892699),
+            (0.0022259483769291235, 0.002163818350250606, 0.024963953288927095)),
+           "jerk_x"),
+}
+
+
+@pytest.mark.parametrize("seed", sorted(PARAMETER_FAR_FROM_ZERO))
+def test_sampled_positions_resolve_a_parameter_domain_far_from_zero(seed: int) -> None:
+    """Bench seeds 5004 and 5029 (lp; 'sampled acceleration 1.0931 x' and 'sampled jerk 2.6727 x after 2
+    repair rounds', the same on 4b4da00).  5004: a 231 mm closed quartic loop (one piece, 16 knot
+    intervals of 14.4 mm) on the knots [-7.777, -7.762], 3,205 s of motion on a machine with amax_y =
+    6.4e-4 mm/s^2.  At s = 231.017 mm (8 um before the rest end; radius 6.5 m, the last knot at 123.2 mm)
+    the LP decelerates at the rest acceleration, a_y = 0.755 amax_y, 2.9 um/s, and holds every limit
+    analytically.  But the samples are C(u(s)) with u a float64 near -7.762, whose ulp (8.9e-16) times
+    |y_u| = 1.96e5 mm is a 0.17 nm step of y: 0.273 x amax_y in a second difference (amax_y Ts^2 = 0.64
+    nm).  The true 2.76 ulps of u per sample^2 read as 2, 3 or 4 (0.55, 0.82, 1.093 x) at 18,208 samples
+    from s = 105.8 mm on (third differences 0.54 x jmax_y).  5029: the same at the end of a sub-segment
+    on [-2.2745, -2.2493] (|a| / w = 90): 1.8 pm steps of x, 0.89 x jmax_x in a third difference.  No
+    checkpoint, verification point or repair round could see it: the repair rounds verify the LP's
+    analytic a and j at the flagged points, within the limits, so they changed nothing.  Now each NURBS
+    sub-segment evaluated through u is rebased to a domain starting at u = 0 (``NurbsSegment.rebased``):
+    5004's steps are 0.7 pm, its sampled differences within 6e-4 x amax_y of the analytic values (1.0010
+    x after one repair round, for an analytic 1.019 x between the LP's verification points), and 5029
+    passes at jerk 0.37 x without a repair round.  These tails of the two paths, on their own knots, read
+    1.366 x (a_y) and 2.674 x (j_x) before; 11,514 and 38,270 samples.  Diagnosed and cut out by a helper
+    (the same fix as main's, found independently)."""
+    p, knots, ctrl, weights, limits, kind = PARAMETER_FAR_FROM_ZERO[seed]
+    seg = NurbsSegment.create(p, knots, ctrl, weights)
+    m = Machine(f"seed {seed}", tuple(Axis(n, AxisLimits(*lim), None)  # type: ignore[arg-type]
+                                      for n, lim in zip("xyz", limits, strict=True)))
+    assert Toolpath([seg]).subs[0].segment.domain[0] == 0.0
+    rep = _check([seg], m, "lp")
+    assert rep.ok, rep.violations
+    assert rep.utilisation[kind] <= 1.0 + 5e-3
+
+
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_feed_rows_next_to_the_lp_state_are_not_tightened_under_its_feed(monkeypatch: pytest.MonkeyPatch) -> None:
     """Bench seed 4629 (lp+nlp, found at the end of session 7, failing the same on 4b4da00): sampled servo
