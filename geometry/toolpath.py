@@ -355,7 +355,8 @@ class Toolpath:
     Attributes:
         segments: the input segments in order, as given but for gaps within ``gap_tol`` closed (``close_gaps``).
         closed_gaps: (index of the segment after the gap, gap in mm) for every gap closed.
-        subs: sub-segments after splitting at C0 knots, with their arc-length tables (``SubTables``).
+        subs: sub-segments after splitting at C0 knots, with their arc-length tables (``SubTables``); NURBS ones
+            on knots rebased to start at u = 0 (``NurbsSegment.rebased``).
         sub_kind: (S,) GENERIC, LINE or CLOTHOID per sub-segment (how it is evaluated).
         sub_origin: (S,) index of the input segment each sub-segment came from.
         offsets: (S + 1,) cumulative arc length at each sub-segment start, mm.
@@ -597,7 +598,8 @@ class Toolpath:
         return np.asarray(np.clip(k, lo_sub, hi_sub), dtype=np.int64)
 
     def locate(self, s: FloatArray, piece: Piece | None = None) -> tuple[IntArray, FloatArray]:
-        """Sub-segment index and parameter u for each arc length s (mm)."""
+        """Sub-segment index k and parameter u for each arc length s (mm): u is ``subs[k].segment``'s, whose
+        NURBS domains start at u = 0 (``NurbsSegment.rebased``), not the input segment's."""
         s = np.asarray(s, dtype=np.float64)
         k = self._sub_index(s, piece)
         x = s - self.offsets[k]
