@@ -63,6 +63,9 @@ TINY_SQRT_QSTAR = 1e-6
 VERIFY_TOL = 2e-3
 #: Verification points between consecutive checkpoints.
 VERIFY_SUBDIV = 8
+#: Verification points next to a rest end, at h 2^-k (h: the checkpoint gap there), k = 4 .. this
+#: (``WindowLP._fine``).
+REST_ZOOM_LEVELS = 40
 MAX_CUT_ROUNDS = 6
 #: Offset (mm) used to evaluate the left side of a geometry knot.
 BREAK_EPS_MM = 1e-6
@@ -786,7 +789,15 @@ class WindowLP:
         q_knots = np.concatenate([kd - BREAK_EPS_MM, kd + BREAK_EPS_MM])
         br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
         extra = self.verify[(self.verify > lo) & (self.verify < hi)]
-        return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br + BREAK_EPS_MM, q_knots, extra]))
+        # towards a rest end, where the feed goes to 0 (q ~ q'(L) (L - s)), the path's last micrometres
+        # pass in fractions of a sample: zoom in geometrically
+        zoom = 2.0 ** -np.arange(4, REST_ZOOM_LEVELS + 1)
+        rest = [np.zeros(0)]
+        if spec.start_fixed is None:
+            rest.append(lo + (s_check[1] - lo) * zoom)
+        if spec.end_rest:
+            rest.append(hi - (hi - s_check[-2]) * zoom)
+        return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br + BREAK_EPS_MM, q_knots, extra, *rest]))
 
     def _fine_geometry(self, s_check: FloatArray) -> PathSamples:
         """Geometry on the verification grid of ``s_check``, evaluated once per window."""
