@@ -378,8 +378,7 @@ class NurbsSegment:
         origin = self.knots[self.degree]
         if origin == 0.0:
             return self
-        return NurbsSegment(degree=self.degree, knots=self.knots - origin, control_points=self.control_points,
-                            weights=self.weights, name=self.name)
+        return replace(self, knots=self.knots - origin)
 
     def split_at_c0_knots(self) -> list[NurbsSegment]:
         """Split at interior knots of multiplicity p (where the curve is only C0), and at

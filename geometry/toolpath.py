@@ -400,9 +400,9 @@ class Toolpath:
             kind = segment_kind(seg)
             for part in [seg] if kind != GENERIC else self._cut_sharp_turns(seg, corner_tol_deg, cut_after, len(parts)):
                 pk = kind if kind != GENERIC else segment_kind(part)
-                if pk == GENERIC and isinstance(part, NurbsSegment):
-                    part = part.rebased()  # u as fine as the curve needs (``NurbsSegment.rebased``)
                 if pk == GENERIC:
+                    if isinstance(part, NurbsSegment):
+                        part = part.rebased()  # u as fine as the curve needs (``NurbsSegment.rebased``)
                     table = ArcLengthTable.build(part)
                     tables[len(parts)] = table
                     lengths.append(table.length)
