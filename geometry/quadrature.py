@@ -110,24 +110,37 @@ class MonotoneTable:
         x_b = np.concatenate([A[order], edges[-1:]])
         F_b = np.concatenate([[0.0], np.cumsum(np.concatenate(out_i)[order])])
         table = cls(f=f, x_b=x_b, F_b=F_b, f_b=f(x_b))
+        if guess_tol == np.inf:  # (the integral only: ``total`` and ``value``, no inverse)
+            return table
+        todo = np.ones(x_b.size - 1, dtype=bool)
         for _ in range(MAX_BISECTIONS):
-            table, refined = table._refine_for_inverse(guess_tol)
-            if not refined:
+            table, todo = table._refine_for_inverse(guess_tol, todo)
+            if not todo.any():
                 break
         return table
 
-    def _refine_for_inverse(self, guess_tol: float) -> tuple[MonotoneTable, bool]:
-        xa, xb = self.x_b[:-1], self.x_b[1:]
+    def _refine_for_inverse(
+        self, guess_tol: float, todo: NDArray[np.bool_]
+    ) -> tuple[MonotoneTable, NDArray[np.bool_]]:
+        """Split the intervals flagged in ``todo`` whose Hermite guess at the midpoint misses by more than
+        ``guess_tol``; returns the new table and the flags of its intervals to check next (the halves
+        just made: an interval that passed, or was not flagged, is unchanged and stays as it is)."""
+        j = np.flatnonzero(todo)
+        xa, xb = self.x_b[j], self.x_b[j + 1]
         xm = 0.5 * (xa + xb)
-        Fm = self.F_b[:-1] + gauss_legendre(self.f, xa, xm)
-        guess = self._hermite(Fm, np.arange(xa.size))
+        Fm = self.F_b[j] + gauss_legendre(self.f, xa, xm)
+        guess = self._hermite(Fm, j)
         bad = np.abs(guess - xm) * self.f(xm) > guess_tol
         if not bad.any():
-            return self, False
-        at = np.flatnonzero(bad) + 1
+            return self, np.zeros(todo.size, dtype=bool)
+        at = j[bad] + 1
         x_b = np.insert(self.x_b, at, xm[bad])
         F_b = np.insert(self.F_b, at, Fm[bad])
-        return MonotoneTable(self.f, x_b, F_b, np.insert(self.f_b, at, self.f(xm[bad]))), True
+        split = np.zeros(todo.size, dtype=bool)
+        split[j[bad]] = True
+        # interval i of the old table becomes one interval, or two if split: both halves are checked next
+        nxt = np.repeat(split, np.where(split, 2, 1))
+        return MonotoneTable(self.f, x_b, F_b, np.insert(self.f_b, at, self.f(xm[bad]))), nxt
 
     def _hermite(self, y: FloatArray, j: NDArray[np.intp]) -> FloatArray:
         """Cubic Hermite guess of x(F = y) inside interval j (slopes dx/dF = 1/f)."""

@@ -401,7 +401,7 @@ def solve_piece(
         if not is_stuck:
             if not floored and best is None:
                 break
-            duration = PieceTiming.build(prof).duration
+            duration = PieceTiming.build(prof, inverse=False).duration
             if best is not None and duration > FLOOR_REFINE_GAIN * best[0]:
                 break  # finer knots no longer pay
             if best is None or duration < best[0]:
@@ -909,7 +909,7 @@ def schedule_stream(
         lp_profiles.append(lp_prof)
         profiles.append(prof)
         if nlp:
-            lp_motion_time += PieceTiming.build(lp_prof).duration
+            lp_motion_time += PieceTiming.build(lp_prof, inverse=False).duration
         t_end, k_next = t_next, k_hi
         report(piece.s_end / total)
         out = _rows(seq, 0, n_rel)

@@ -123,13 +123,17 @@ class PieceProfile:
 class PieceTiming:
     profile: PieceProfile
     table: MonotoneTable
+    #: whether the table is refined for ``s_at`` (``build(inverse=True)``)
+    invertible: bool = True
 
     @property
     def duration(self) -> float:
         return self.table.total
 
     @classmethod
-    def build(cls, profile: PieceProfile) -> PieceTiming:
+    def build(cls, profile: PieceProfile, inverse: bool = True) -> PieceTiming:
+        """The time table of ``profile``; without ``inverse`` it holds the integral only (``duration``: the
+        same value), not refined for ``s_at`` (which then raises)."""
         n = profile.n_int
         q1_0 = (profile.c[1] - profile.c[0]) / profile.d
         q1_L = (profile.c[-1] - profile.c[-2]) / profile.d
@@ -149,13 +153,16 @@ class PieceTiming:
                 value={"s_start": profile.s_start, "s": float(profile.s_start + (stalls[0] + 0.5) * profile.d)},
             )
         edges = np.arange(n + 1, dtype=np.float64)
-        table = MonotoneTable.build(profile.h, edges, min_intervals=2, abs_tol=1e-16, guess_tol=TIME_GUESS_TOL_S)
+        table = MonotoneTable.build(profile.h, edges, min_intervals=2, abs_tol=1e-16,
+                                    guess_tol=TIME_GUESS_TOL_S if inverse else np.inf)
         if not np.all(np.isfinite(table.F_b)):
             raise ScheduleError("feed stalls inside the path (q reaches 0)", value=profile.s_start)
-        return cls(profile, table)
+        return cls(profile, table, inverse)
 
     def s_at(self, t_local: FloatArray) -> FloatArray:
         """Piece-local s at piece-local times (clamped to [0, duration])."""
+        if not self.invertible:
+            raise ValueError("this time table was built for its duration only (PieceTiming.build(inverse=False))")
         x = self.table.inverse(t_local)
         return self.profile.s_of_x(x)[0]
 

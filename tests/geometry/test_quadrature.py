@@ -1,0 +1,81 @@
+"""geometry.quadrature.MonotoneTable: integrals and inverses against closed forms, and the inverse
+refinement's incremental re-check against re-checking every interval."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from geometry.quadrature import MAX_BISECTIONS, MonotoneTable, gauss_legendre
+from solvers.timing import PieceProfile, PieceTiming
+
+#: F(x) = integral_0^x f against the closed form, relative (the table's rule is 1e-13)
+INTEGRAL_REL_TOL = 1e-12
+#: x(F) after the Newton step against the closed form, absolute in x
+INVERSE_ABS_TOL = 1e-11
+
+
+def _f(x: np.ndarray) -> np.ndarray:
+    """f = 1 + 0.9 sin(7 x) + 30 exp(-200 (x - 0.3)^2) > 0: smooth with a sharp bump."""
+    return np.asarray(1.0 + 0.9 * np.sin(7.0 * x) + 30.0 * np.exp(-200.0 * (x - 0.3) ** 2))
+
+
+def _F(x: np.ndarray) -> np.ndarray:
+    from scipy.special import erf
+
+    bump = 30.0 * np.sqrt(np.pi / 200.0) / 2.0 * (erf(np.sqrt(200.0) * (x - 0.3)) - erf(np.sqrt(200.0) * -0.3))
+    return np.asarray(x + 0.9 / 7.0 * (1.0 - np.cos(7.0 * x)) + bump)
+
+
+def _full_recheck(f: object, edges: np.ndarray, guess_tol: float) -> MonotoneTable:
+    """The inverse refinement as it was until session 9: every interval re-checked each round."""
+    table = MonotoneTable.build(f, edges, min_intervals=2, guess_tol=np.inf)  # type: ignore[arg-type]
+    for _ in range(MAX_BISECTIONS):
+        xa, xb = table.x_b[:-1], table.x_b[1:]
+        xm = 0.5 * (xa + xb)
+        Fm = table.F_b[:-1] + gauss_legendre(table.f, xa, xm)
+        guess = table._hermite(Fm, np.arange(xa.size))
+        bad = np.abs(guess - xm) * table.f(xm) > guess_tol
+        if not bad.any():
+            break
+        at = np.flatnonzero(bad) + 1
+        table = MonotoneTable(table.f, np.insert(table.x_b, at, xm[bad]), np.insert(table.F_b, at, Fm[bad]),
+                              np.insert(table.f_b, at, table.f(xm[bad])))
+    return table
+
+
+@pytest.mark.parametrize("guess_tol", [1e-4, 1e-7, 1e-10])
+def test_incremental_inverse_refinement_builds_the_table_of_the_full_recheck(guess_tol: float) -> None:
+    edges = np.linspace(0.0, 2.0, 5)
+    inc = MonotoneTable.build(_f, edges, min_intervals=2, guess_tol=guess_tol)
+    ref = _full_recheck(_f, edges, guess_tol)
+    assert inc.x_b.size > 2 * 4 + 1  # (the refinement split intervals)
+    np.testing.assert_array_equal(inc.x_b, ref.x_b)
+    np.testing.assert_array_equal(inc.F_b, ref.F_b)
+    np.testing.assert_array_equal(inc.f_b, ref.f_b)
+
+
+def test_integral_and_inverse_match_the_closed_form() -> None:
+    edges = np.linspace(0.0, 2.0, 5)
+    table = MonotoneTable.build(_f, edges, min_intervals=2, guess_tol=1e-7)
+    x = np.linspace(0.0, 2.0, 1001)
+    np.testing.assert_allclose(table.value(x), _F(x), rtol=INTEGRAL_REL_TOL, atol=0.0)
+    assert table.total == pytest.approx(float(_F(np.array([2.0]))[0]), rel=INTEGRAL_REL_TOL)
+    np.testing.assert_allclose(table.inverse(_F(x)), x, rtol=0.0, atol=INVERSE_ABS_TOL)
+
+
+def test_integral_only_table_has_the_same_total_and_refuses_to_invert() -> None:
+    edges = np.linspace(0.0, 2.0, 5)
+    full = MonotoneTable.build(_f, edges, min_intervals=2, guess_tol=1e-7)
+    only = MonotoneTable.build(_f, edges, min_intervals=2, guess_tol=np.inf)
+    assert only.total == full.total
+    assert only.x_b.size < full.x_b.size
+    # a piece's time table: same duration either way, and a duration-only table will not sample
+    n = 40
+    c = 100.0 + 50.0 * np.sin(np.arange(n + 2) / 3.0)
+    c[0], c[-1] = -c[1], -c[-2]  # rest at both ends
+    prof = PieceProfile(s_start=0.0, length=float(n), d=1.0, c=c)
+    timed, dur = PieceTiming.build(prof), PieceTiming.build(prof, inverse=False)
+    assert dur.duration == timed.duration
+    with pytest.raises(ValueError, match="duration only"):
+        dur.s_at(np.array([0.5 * timed.duration]))
