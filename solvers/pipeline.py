@@ -59,7 +59,7 @@ from solvers.lp import (
 )
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.nlp import V_STEP_SHARE as NLP_V_STEP_SHARE
-from solvers.nlp import NlpLimits, NlpRefiner, NlpStats
+from solvers.nlp import ChainPipeline, NlpLimits, NlpRefiner, NlpStats
 from solvers.timing import PieceProfile, PieceTiming, stalled_intervals, stuck
 
 FloatArray = NDArray[np.float64]
@@ -127,7 +127,9 @@ class Options:
         solver: "highs" or "clarabel".
         nlp_window: NLP window size in knot intervals; default 3 x nlp_overlap.
         nlp_overlap: NLP window overlap in knot intervals; default from the stopping distance.
-        nlp_workers: processes solving independent NLP chains in parallel (forked; 1: in this process).
+        nlp_workers: processes solving independent NLP chains in parallel (forked; 1: in this process);
+            with more than 1, a piece's chains are handed to them while the LP still solves its later
+            windows (``nlp.ChainPipeline``).  The feed is the same bit for bit.
         nlp_checkpoints_per_interval: N of the NLP (each interval is also checked at both knots,
             and the limits are verified between checkpoints).
         nlp_axis_velocity: also hold |v| <= the LP's vmax per axis in the NLP (off: the NLP limits
@@ -360,12 +362,16 @@ def solve_piece(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any],
     on_window: Callable[[float], None] | None = None, verify: FloatArray | None = None,
     cache: dict[tuple[int, int, int], tuple[Any, FloatArray, WindowResult]] | None = None,
+    on_lp: Callable[[FloatArray, list[int]], None] | None = None,
 ) -> tuple[PieceProfile, list[int]]:
     """Walk LP windows over one piece and assemble its control points.
 
     Returns the profile and the knots where consecutive LP windows meet.
     ``on_window(s_done)``, if given, is called after each window with the piece-local arc length (mm) fixed so far.
     ``verify``: piece-local s verified besides each window's fine grid (samples found over a limit).
+    ``on_lp(c, joins)``, if given, is called after each window but the last of the first knot plan with
+    the piece's control points so far (final up to the last join) and the joins so far
+    (``nlp.ChainPipeline.lp_progress``).
 
     Where the feed cannot move (it stalls inside the piece, or cannot leave or reach a rest end: a
     turn or a start curvature sharper than the knots resolve), the piece is solved again with
@@ -392,6 +398,7 @@ def solve_piece(
             prof, joins = _solve_windows(
                 toolpath, piece, plan, opt, lim, stats, on_window if attempt == 0 else None, verify, cache,
                 rest_floor=attempt >= KNOT_REFINEMENTS, floored=floored if floor_refine else None,
+                on_lp=on_lp if attempt == 0 else None,
             )
         except (InfeasibleError, SolverFailure):
             if best is None:  # (a refinement for a floor only: keep what moved)
@@ -425,9 +432,11 @@ def _solve_windows(
     on_window: Callable[[float], None] | None, verify: FloatArray | None,
     cache: dict[tuple[int, int, int], tuple[Any, FloatArray, WindowResult]] | None = None,
     rest_floor: bool = False, floored: list[int] | None = None,
+    on_lp: Callable[[FloatArray, list[int]], None] | None = None,
 ) -> tuple[PieceProfile, list[int]]:
     """The LP windows of ``solve_piece`` on one knot plan (``rest_floor``: ``WindowSpec.rest_floor``;
-    ``floored``, if given, gets the index of every window that holds control points at a q floor).
+    ``floored``, if given, gets the index of every window that holds control points at a q floor;
+    ``on_lp`` as in ``solve_piece``).
 
     ``cache`` (kept across calls for one piece) maps (n_int, k0, k1) to what the window inherits,
     the extra verification points inside it and its result: a window whose inputs are bit-equal
@@ -491,6 +500,10 @@ def _solve_windows(
         if on_window is not None:
             on_window(k_next * plan.d)
         c[k0 : k_next + 2] = res.c[: k_next - k0 + 2]
+        if k0 == 0:
+            c[0] = -c[1]  # (rest at the piece start, as below: set now for on_lp's first chain)
+        if on_lp is not None:
+            on_lp(c, joins)
         start = (float(res.c[k_next - k0]), float(res.c[k_next - k0 + 1]))
         prev_qstar = (k0, res.c_star)
         prev_c = (k0, res.c)
@@ -559,21 +572,23 @@ def _refine_piece(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lp_prof: PieceProfile, joins: list[int],
     nlp_lim: NlpLimits, refiners: dict[tuple[int, int], NlpRefiner], stats: NlpStats,
     on_chain: Callable[[float], None] | None = None, verify_s: FloatArray | None = None,
+    pipe: ChainPipeline | None = None,
 ) -> PieceProfile:
     """The NLP stage (spec §5-6) on one piece: its LP feed refined under the drive limits.
 
     ``refiners`` maps an NLP window shape to its refiner (compiled NLPs and the hand-over QP, whose
     warm start carries over from one piece to the next: share it along the path in order);
     ``on_chain(s_done)``, if given, is called after each NLP chain with the piece-local arc length
-    (mm) done; ``verify_s``: piece-local s verified besides the fine grid."""
-    plan = plan_piece(piece, machine, opt, lp_prof.n_int)
-    key = (plan.nlp_window, plan.nlp_overlap)
-    if key not in refiners:
-        refiners[key] = NlpRefiner(nlp_lim, opt.nlp_checkpoints_per_interval, *key, fault=opt.nlp_fault, stats=stats)
-    p, mask = refiners[key].refine(
-        _local(toolpath, piece), lp_prof.c, lp_prof.d, joins, _breaks(toolpath, piece), on_chain, opt.nlp_workers,
-        verify_s,
-    )
+    (mm) done; ``verify_s``: piece-local s verified besides the fine grid; ``pipe``: the chains
+    already handed out while the LP ran (``_chain_pipeline``; used if the LP kept its first knot plan)."""
+    if pipe is not None and verify_s is None and pipe.n_int == lp_prof.n_int and pipe.d == lp_prof.d:
+        p, mask = pipe.finish(lp_prof.c, joins, on_chain)
+    else:
+        refiner = _refiner(piece, machine, opt, lp_prof.n_int, nlp_lim, refiners, stats)
+        p, mask = refiner.refine(
+            _local(toolpath, piece), lp_prof.c, lp_prof.d, joins, _breaks(toolpath, piece), on_chain,
+            opt.nlp_workers, verify_s,
+        )
     # A refined feed that stalls between its verification points (its quadratic dips to ~0 inside a knot
     # interval: bench seeds 1978, 1987) keeps the LP's feed over that NLP span (unless the LP's stalls too):
     # a run of refined intervals starts and ends on the LP's state, so the feed stays continuous
@@ -593,6 +608,30 @@ def _refine_piece(
             "fallback": "lp feed over the span",
         })
     return replace(lp_prof, p=p, f_mask=mask)
+
+
+def _refiner(
+    piece: Piece, machine: Machine, opt: Options, n_int: int | None, nlp_lim: NlpLimits,
+    refiners: dict[tuple[int, int], NlpRefiner], stats: NlpStats,
+) -> NlpRefiner:
+    """The refiner of the piece's NLP window shape on n_int knot intervals (from ``refiners``, or new)."""
+    plan = plan_piece(piece, machine, opt, n_int)
+    key = (plan.nlp_window, plan.nlp_overlap)
+    if key not in refiners:
+        refiners[key] = NlpRefiner(nlp_lim, opt.nlp_checkpoints_per_interval, *key, fault=opt.nlp_fault, stats=stats)
+    return refiners[key]
+
+
+def _chain_pipeline(
+    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, nlp_lim: NlpLimits,
+    refiners: dict[tuple[int, int], NlpRefiner], stats: NlpStats,
+) -> ChainPipeline:
+    """NLP chains solved in opt.nlp_workers forked processes as the LP's windows make them final, on the
+    piece's first knot plan (``_refine_piece`` falls back to solving after the LP if the LP refines it)."""
+    plan = plan_piece(piece, machine, opt, None)
+    refiner = _refiner(piece, machine, opt, plan.n_int, nlp_lim, refiners, stats)
+    return ChainPipeline(refiner, _local(toolpath, piece), plan.d, plan.n_int, _breaks(toolpath, piece),
+                         opt.nlp_workers)
 
 
 def first_sample_at(t: float, Ts: float) -> int:
@@ -840,18 +879,26 @@ def schedule_stream(
         def on_window(s_done: float, s0: float = piece.s_start) -> None:
             report((s0 + lp_share * s_done) / total)
 
-        t0 = time.perf_counter()
-        lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache)
-        t_lp += time.perf_counter() - t0
-        prof = lp_prof
-        if nlp_stats is not None and nlp_lim is not None:
-            def on_chain(s_done: float, s0: float = piece.s_start, length: float = piece.length) -> None:
-                report((s0 + lp_share * length + (1.0 - lp_share) * s_done) / total)
-
+        # with NLP workers, the chains go to them while the LP still solves the later windows
+        pipe = (_chain_pipeline(toolpath, piece, machine, opt, nlp_lim, refiners, nlp_stats)
+                if nlp_stats is not None and nlp_lim is not None and opt.nlp_workers > 1 else None)
+        try:
             t0 = time.perf_counter()
-            prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
-                                 on_chain)
-            t_nlp += time.perf_counter() - t0
+            lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache,
+                                         pipe.lp_progress if pipe is not None else None)
+            t_lp += time.perf_counter() - t0
+            prof = lp_prof
+            if nlp_stats is not None and nlp_lim is not None:
+                def on_chain(s_done: float, s0: float = piece.s_start, length: float = piece.length) -> None:
+                    report((s0 + lp_share * length + (1.0 - lp_share) * s_done) / total)
+
+                t0 = time.perf_counter()
+                prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
+                                     on_chain, pipe=pipe)
+                t_nlp += time.perf_counter() - t0
+        finally:
+            if pipe is not None:
+                pipe.close()
         emit("piece_solved", i)
         verify_s = np.zeros(0)
         rounds = 0

@@ -172,13 +172,39 @@ def test_lp_nlp_needs_drive_model() -> None:
     assert sch.samples.control_signal is None
 
 
-def test_parallel_chains_give_the_same_schedule() -> None:
-    """Chains solved in 2 forked processes: bit-identical feed, same counters, limits hold."""
+def _pipeline_log(monkeypatch: pytest.MonkeyPatch) -> dict[str, list[int]]:
+    """Record, per piece, how many chains the NLP pipeline had handed out before the LP was done
+    ("early") and how many it handed out in all, re-solves included ("submitted")."""
+    from solvers import nlp
+
+    log: dict[str, list[int]] = {"early": [], "submitted": []}
+    finish, submit = nlp.ChainPipeline.finish, nlp.ChainPipeline._submit
+
+    def logged_finish(self: Any, *args: Any, **kwargs: Any) -> Any:
+        log["early"].append(len(self.sent))
+        return finish(self, *args, **kwargs)
+
+    def logged_submit(self: Any, task: Any) -> Any:
+        log["submitted"].append(task[0])
+        return submit(self, task)
+
+    monkeypatch.setattr(nlp.ChainPipeline, "finish", logged_finish)
+    monkeypatch.setattr(nlp.ChainPipeline, "_submit", logged_submit)
+    return log
+
+
+def test_parallel_chains_give_the_same_schedule(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Chains solved in 2 forked processes, handed out while the LP still solves later windows
+    (``nlp.ChainPipeline``): bit-identical feed, same counters, limits hold."""
     tp = ex.flower(2)
     m = router()
     seq = schedule(tp, m, Options(method="lp+nlp", lp_window=60))
+    log = _pipeline_log(monkeypatch)
     par = schedule(tp, m, Options(method="lp+nlp", lp_window=60, nlp_workers=2))
     assert seq.summary["windows"] >= 3
+    # chains went to the workers before the LP's last window, none was solved twice
+    assert log["early"] and log["early"][0] >= seq.summary["windows"] - 2
+    assert len(log["submitted"]) == len(set(log["submitted"])) == seq.summary["windows"]
     assert par.summary["motion_time"] == seq.summary["motion_time"]
     for a, b in zip(seq.profiles, par.profiles, strict=True):
         assert a.p is not None and b.p is not None
@@ -186,6 +212,27 @@ def test_parallel_chains_give_the_same_schedule() -> None:
     for k in ("nlp_windows", "nlp_iterations", "nlp_cut_rounds", "nlp_failures"):
         assert par.summary[k] == seq.summary[k], k
     _check_drive(m, par)
+
+
+def test_pipelined_chain_reading_past_the_final_lp_is_solved_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A chain handed out early whose sampled-check context reaches LP control points not final yet
+    (``nlp.LpNotFinal``: here every early chain, with a context of 3 s of motion) is solved again once the
+    LP is done: the same feed as solving after the LP."""
+    from solvers import nlp
+
+    monkeypatch.setattr(nlp, "CONTEXT_SAMPLES", 3000.0)
+    tp = ex.flower(2)
+    m = router()
+    seq = schedule(tp, m, Options(method="lp+nlp", lp_window=60))
+    log = _pipeline_log(monkeypatch)
+    par = schedule(tp, m, Options(method="lp+nlp", lp_window=60, nlp_workers=2))
+    assert log["early"][0] >= 1
+    # the early ones again
+    assert len(log["submitted"]) == seq.summary["windows"] + log["early"][0]
+    assert par.summary["motion_time"] == seq.summary["motion_time"]
+    for a, b in zip(seq.profiles, par.profiles, strict=True):
+        assert a.p is not None and b.p is not None
+        np.testing.assert_array_equal(a.p, b.p)
 
 
 def test_cached_shapes_give_the_same_schedule_as_fresh_ones() -> None:
