@@ -65,9 +65,15 @@ def one_shot(tp: Toolpath, m: Machine, opt: P.Options) -> tuple[P.TimeSamples, i
     nlp_lim = NlpLimits.from_machine(m, opt.nlp_axis_velocity, opt.nlp_kinematic, lim.a_step, Ts) if nlp else None
     nst = NlpStats()
 
+    # the knots a piece's solves start from (``rest_intervals``), kept for its repairs unless the first fell back
+    firsts = [P.rest_intervals(p, m, opt) for p in tp.pieces]
+
     def solve(i: int, verify_s: np.ndarray | None, refiners: dict[tuple[int, int], NlpRefiner]) -> PieceProfile:
         piece = tp.pieces[i]
-        prof, joins = P.solve_piece(tp, piece, m, opt, lim, stats, None, verify_s, caches[i])
+        fallbacks = stats.get("rest_plan_fallbacks", 0)
+        prof, joins = P.solve_piece(tp, piece, m, opt, lim, stats, None, verify_s, caches[i], None, firsts[i])
+        if verify_s is None and stats.get("rest_plan_fallbacks", 0) != fallbacks:
+            firsts[i] = None
         if nlp_lim is not None:
             prof = P._refine_piece(tp, piece, m, opt, prof, joins, nlp_lim, refiners, nst, None, verify_s)
         return prof
