@@ -1920,8 +1920,6 @@ class ChainPipeline:
         Hands out every chain whose LP control points are now final."""
         if done:
             ready, c_final = self.chains(joins), c.size
-            if self.pool is None and len(ready) - len(self.sent) < 2:
-                return  # (one chain left and no pool: ``finish`` solves it here)
         else:
             if len(joins) < 2:
                 return
@@ -1951,25 +1949,14 @@ class ChainPipeline:
     ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """``refine``'s (p, mask) on the piece's final c and joins, from the chains handed out (the rest
         handed out now)."""
-        chains = self.chains(joins)
         sent = [(A, B) for (A, B, _, _), _ in self.sent]
-        if sent != chains[: len(sent)]:  # (not the chains the LP ended with: none of them is used)
-            self.sent = []
+        if not sent or sent != self.chains(joins)[: len(sent)]:
+            # nothing handed out (the LP was one window), or not the chains the LP ended with: as after the LP
+            self.close()
+            return self.refiner.refine(self.geometry, c, self.d, joins, self.breaks, on_chain, self.workers)
+        self.lp_progress(c, joins, True)
         p = np.zeros(self.n_int + 2)
         mask = np.zeros(self.n_int, dtype=bool)
-        if not self.sent and len(chains) < 2:  # a single chain: in this process, as ``refine``
-            self.refiner.verify = np.zeros(0)
-            for A, B in chains:
-                if self.refiner._lp_at_bound(self.geometry, c, self.d, A, B, self.breaks):
-                    self.refiner.stats.lp_kept_chains += 1
-                else:
-                    for a0, b0, vals in self.refiner._spans(self.geometry, c, self.d, A, B, self.breaks):
-                        p[a0 : b0 + 2] = vals
-                        mask[a0:b0] = True
-                if on_chain is not None:
-                    on_chain(B * self.d)
-            return p, mask
-        self.lp_progress(c, joins, True)
         for (A, B, task_c, c_final), res in self.sent:
             kept, spans, st = res.get()
             if kept is None or not np.array_equal(task_c[:c_final], c[:c_final]):

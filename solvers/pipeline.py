@@ -73,8 +73,9 @@ MIN_INTERVALS = 16
 #: (``rest_intervals``): its ramps from and to rest live in its first and last knot intervals,
 #: where a quadratic q takes the acceleration from the rest step to amax linearly in s over a
 #: whole interval (the jerk-limited optimum takes micrometres: a 100 mm line on 2.27 mm knots
-#: took 1.295 s against Ruckig's 0.975 s, 1.067 s on 0.2 mm knots).  Bench seeds 0-99 against 16:
-#: motion -3.3 % (lp) and -9.8 % (lp+nlp) in the median, CPU x1.41 (lp) and x1.05 (lp+nlp).
+#: took 1.295 s against Ruckig's 0.975 s, 1.067 s on 0.2 mm knots).  Bench seeds 0-199 against
+#: 16 only: motion -3.0 % (lp) and -5.95 % (lp+nlp) in the geometric mean, none longer by more
+#: than 2 %, CPU x1.07 (lp) and x1.11 (lp+nlp).
 REST_MIN_INTERVALS = 64
 #: Turns passed at speed listed in ``diagnostics.passed_turns`` (those with the lowest feed caps).
 PASSED_TURNS_LISTED = 10
@@ -632,6 +633,8 @@ def _refine_piece(
     if pipe is not None and verify_s is None and pipe.n_int == lp_prof.n_int and pipe.d == lp_prof.d:
         p, mask = pipe.finish(lp_prof.c, joins, on_chain)
     else:
+        if pipe is not None:
+            pipe.close()  # (its chains were on other knots)
         refiner = _refiner(piece, machine, opt, lp_prof.n_int, nlp_lim, refiners, stats)
         p, mask = refiner.refine(
             _local(toolpath, piece), lp_prof.c, lp_prof.d, joins, _breaks(toolpath, piece), on_chain,
