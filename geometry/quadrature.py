@@ -130,7 +130,8 @@ class MonotoneTable:
         xm = 0.5 * (xa + xb)
         Fm = self.F_b[j] + gauss_legendre(self.f, xa, xm)
         guess = self._hermite(Fm, j)
-        bad = np.abs(guess - xm) * self.f(xm) > guess_tol
+        fm = self.f(xm)
+        bad = np.abs(guess - xm) * fm > guess_tol
         if not bad.any():
             return self, np.zeros(todo.size, dtype=bool)
         at = j[bad] + 1
@@ -140,7 +141,7 @@ class MonotoneTable:
         split[j[bad]] = True
         # interval i of the old table becomes one interval, or two if split: both halves are checked next
         nxt = np.repeat(split, np.where(split, 2, 1))
-        return MonotoneTable(self.f, x_b, F_b, np.insert(self.f_b, at, self.f(xm[bad]))), nxt
+        return MonotoneTable(self.f, x_b, F_b, np.insert(self.f_b, at, fm[bad])), nxt
 
     def _hermite(self, y: FloatArray, j: NDArray[np.intp]) -> FloatArray:
         """Cubic Hermite guess of x(F = y) inside interval j (slopes dx/dF = 1/f)."""
