@@ -763,7 +763,7 @@ def schedule(
     """
     parts: list[TimeSamples] = []
     end: ScheduleEnd | None = None
-    for item in schedule_stream(toolpath, machine, options, progress):
+    for item in schedule_stream(toolpath, machine, options, progress, block_samples=None):
         if isinstance(item, SampleBlock):
             parts.append(item.samples)
         else:
@@ -840,10 +840,77 @@ def _repair_points(seq: TimeSamples, repair: NDArray[np.bool_], last: bool) -> F
                       dtype=np.float64)
 
 
+@dataclass(frozen=True)
+class _Carry:
+    """What the re-check of the next samples needs from the ones before them (``_recheck``): the samples
+    computed and not yet released (``held``, copies: a view would keep its whole block alive), the
+    positions of the last REST_PAD released samples (``before``, None at the path start) and whether the
+    last released sample was over a limit (``left_over``)."""
+
+    held: TimeSamples | None = None
+    before: FloatArray | None = None
+    left_over: bool = False
+
+    def after(self, seq: TimeSamples, chk: _Recheck) -> _Carry:
+        """The carry once seq[0 : chk.n_released] is released."""
+        n_rel = chk.n_released
+        h = _rows(seq, n_rel, seq.t.size)
+        held = TimeSamples(
+            h.t.copy(), h.s.copy(), h.feed.copy(), h.position.copy(), h.velocity.copy(), h.acceleration.copy(),
+            h.jerk.copy(), None if h.control_signal is None else h.control_signal.copy(),
+            None if h.servo_error is None else h.servo_error.copy(),
+        )
+        if not n_rel:
+            return _Carry(held, self.before, self.left_over)
+        pre = self.before if self.before is not None else np.repeat(seq.position[:1], verify.REST_PAD, axis=0)
+        before = np.concatenate([pre, seq.position[:n_rel]])[-verify.REST_PAD:]
+        return _Carry(held, before, bool(chk.rows.over[n_rel - 1]))
+
+
+def _piece_blocks(
+    toolpath: Toolpath, piece: Piece, prof: PieceProfile, timing: PieceTiming, t0: float, k_lo: int, k_hi: int,
+    block: int, carry: _Carry, last: bool, limits: verify.Limits, lim: LimitSet, Ts: float,
+) -> Iterator[tuple[TimeSamples, _Recheck, _Carry, bool]]:
+    """The piece's own samples k_lo <= k < k_hi in blocks of ``block`` (a multiple of SAMPLE_CHUNK, so the
+    chunks of ``_sample_piece`` and hence every value are those of the piece sampled at once), each
+    re-checked after the samples held before it: yields (seq, its re-check, the carry after releasing
+    its decided samples, whether it is the piece's final block).
+
+    A block boundary is checked as a piece boundary is: the block's last HELD_SAMPLES wait for the next
+    block's, and the flags and repair points of the released samples are those of one re-check of the
+    whole piece.  The held samples' analytic flags (``_Recheck.held_over``) count only at the piece's final
+    block; inside the piece those samples are re-checked in full with the next block."""
+    starts = list(range(k_lo, k_hi, block)) or [k_lo]
+    for a in starts:
+        b = min(k_hi, a + block)
+        final = b >= k_hi
+        own = _sample_piece(toolpath, piece, prof, timing, t0, a, b, Ts)
+        seq = own if carry.held is None else concat_samples([carry.held, own])
+        del own  # (a copy in seq unless nothing was held)
+        if last and final and seq.t.size:
+            # the last sample sits exactly on the path end, at rest
+            feed, vel = seq.feed.copy(), seq.velocity.copy()
+            feed[-1] = 0.0
+            vel[-1] = 0.0
+            seq = replace(seq, feed=feed, velocity=vel)
+        chk = _recheck(seq, carry.before, carry.left_over, last and final, limits, lim, toolpath, Ts)
+        if not final:
+            chk = replace(chk, held_over=np.zeros(0, dtype=bool))
+        carry = carry.after(seq, chk)
+        yield seq, chk, carry, final
+        del seq, chk  # (before the next block is sampled)
+
+
+#: Samples of a long piece ``schedule_stream`` holds at once by default (``block_samples``): about 34 MB of
+#: columns.  A piece with more is re-checked block by block and sampled twice.
+STREAM_BLOCK_SAMPLES = 2 * SAMPLE_CHUNK
+
+
 def schedule_stream(
     toolpath: Toolpath, machine: Machine, options: Options | None = None,
     progress: Callable[[float], None] | None = None,
     events: Callable[[str, int], None] | None = None,
+    block_samples: int | None = STREAM_BLOCK_SAMPLES,
 ) -> Iterator[SampleBlock | ScheduleEnd]:
     """The schedule piece by piece: ``SampleBlock``s as soon as they are final, then one ``ScheduleEnd``.
 
@@ -870,8 +937,15 @@ def schedule_stream(
     one piece, so its rows leave at the end.  ``progress(fraction)`` as for ``schedule``; ``events(name,
     piece)``, if given, is called with "piece_start" and "piece_solved" (LP and NLP done, before sampling)
     and "block" (just before a block with samples of that piece is yielded).
+
+    Memory: ``block_samples`` bounds the samples held at once.  A piece with more own samples is sampled
+    and re-checked in blocks of that many (rounded up to whole SAMPLE_CHUNKs; ``_piece_blocks``), keeping
+    only its repair points and worst utilisation, and once it needs no more repair it is sampled again,
+    block by block, to be released: the same rows bit for bit, for one more time reconstruction of the
+    piece.  None: each piece at once (``schedule``, which keeps every sample anyway).
     """
     opt = options or Options()
+    block = None if block_samples is None else max(1, math.ceil(block_samples / SAMPLE_CHUNK)) * SAMPLE_CHUNK
     t_start = time.perf_counter()
     paused = 0.0  # time spent suspended at a yield (the consumer's), not compute
     lim = LimitSet.from_machine(
@@ -917,9 +991,7 @@ def schedule_stream(
     t_end = 0.0  # where the next piece starts, s (the cumulative sum of the piece durations)
     lp_motion_time = 0.0
     k_next = 0  # first sample of the next piece
-    held: TimeSamples | None = None  # samples computed and not yet released
-    before: FloatArray | None = None  # positions of the last REST_PAD released samples
-    left_over = False  # whether the last released sample was over a limit
+    carry = _Carry()  # what the re-check of the next samples needs from the released ones
     n_released = 0
     peaks: dict[str, float] = {}
     for piece in toolpath.pieces:
@@ -969,19 +1041,23 @@ def schedule_stream(
                     f"piece {i}, every {Ts:g} s), over the {opt.max_samples} allowed",
                     field="options.max_samples", value=opt.max_samples,
                 )
-            own = _sample_piece(toolpath, piece, prof, timing, t_end, k_next, k_hi, Ts)
-            seq = own if held is None else concat_samples([held, own])
-            del own  # (a copy in seq unless nothing was held)
-            if last and seq.t.size:
-                # the last sample sits exactly on the path end, at rest
-                feed, vel = seq.feed.copy(), seq.velocity.copy()
-                feed[-1] = 0.0
-                vel[-1] = 0.0
-                seq = replace(seq, feed=feed, velocity=vel)
-            chk = _recheck(seq, before, left_over, last, limits, lim, toolpath, Ts)
-            # (bench seed 1291: the jerk 1.29 x of a piece's last samples, found only once they were
-            # checked with the next piece, which could not repair them)
-            s_bad = _repair_points(seq, np.concatenate([chk.repair, chk.held_over]), last)
+            n_block = block if block is not None else max(1, k_hi - k_next)
+            kept: list[tuple[TimeSamples, _Recheck, _Carry, bool]] = []  # (a piece in one block)
+            bad: list[FloatArray] = []
+            worst: tuple[str, str, float, float, float] = ("", "", -np.inf, 0.0, 0.0)
+            for item in _piece_blocks(toolpath, piece, prof, timing, t_end, k_next, k_hi, n_block, carry, last,
+                                      limits, lim, Ts):
+                seq, chk, _, final = item
+                # (bench seed 1291: the jerk 1.29 x of a piece's last samples, found only once they were
+                # checked with the next piece, which could not repair them)
+                bad.append(_repair_points(seq, np.concatenate([chk.repair, chk.held_over]), last and final))
+                kind, axis, util, k = chk.rows.worst(0, chk.n_released)
+                if util > worst[2]:
+                    worst = (kind, axis, util, float(seq.s[k]), float(seq.t[k]))
+                if final and k_hi - k_next <= n_block:
+                    kept.append(item)
+                del seq, chk, item
+            s_bad = np.concatenate(bad)
             owner = np.clip(np.searchsorted(starts, s_bad, side="right") - 1, 0, n_pieces - 1)
             s_loc = s_bad[owner == i] - piece.s_start
             s_loc = s_loc[(s_loc > 0.0) & (s_loc < piece.length)]
@@ -1002,38 +1078,44 @@ def schedule_stream(
                 prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, {}, nlp_stats,
                                      None, verify_s)
         stats["sample_repairs"] = max(stats["sample_repairs"], rounds)
-        n_rel = chk.n_released
-        kind, axis, util, k = chk.rows.worst(0, n_rel)
+        kind, axis, util, s_worst, t_worst = worst
         if util > 1.0 + verify.FAIL_TOL:
             raise LimitViolationError(
                 f"the sampled {kind.replace('_', ' ')} reaches {util:.4f} x its limit after "
                 f"{rounds} repair rounds (limits are promised within {1.0 + verify.FAIL_TOL:g} x)",
-                field="toolpath", value={"s": float(seq.s[k]), "t": float(seq.t[k]), "utilisation": util},
+                field="toolpath", value={"s": s_worst, "t": t_worst, "utilisation": util},
                 axis=axis or None,
             )
         lp_profiles.append(lp_prof)
         profiles.append(prof)
         if nlp:
             lp_motion_time += PieceTiming.build(lp_prof, inverse=False).duration
+        k_lo = k_next
+        t0_piece = t_end
         t_end, k_next = t_next, k_hi
         report(piece.s_end / total)
-        out = _rows(seq, 0, n_rel)
-        held = _rows(seq, n_rel, seq.t.size)
-        if not n_rel:
-            continue
-        if drives is not None:
-            u, e = drive_outputs(drives, out.velocity, out.acceleration, out.jerk)
-            out = replace(out, control_signal=u, servo_error=e)
-        pre = before if before is not None else np.repeat(out.position[:1], verify.REST_PAD, axis=0)
-        before = np.concatenate([pre, out.position])[-verify.REST_PAD:]
-        left_over = bool(chk.rows.over[n_rel - 1])
-        _merge_peaks(peaks, _peak_utilisation(out, lim, drives, _feed_cap(lim, toolpath, out.s)))
-        block = SampleBlock(n_released, i, out)
-        n_released += n_rel
-        emit("block", i)
-        t_y = time.perf_counter()
-        yield block
-        paused += time.perf_counter() - t_y
+        # the piece held at once is released as checked; a longer one is sampled again, block by block
+        blocks = kept if kept else _piece_blocks(toolpath, piece, prof, timing, t0_piece, k_lo, k_hi, n_block,
+                                                 carry, last, limits, lim, Ts)
+        for seq, chk, carry_b, _ in blocks:
+            n_rel = chk.n_released
+            carry = carry_b
+            if not n_rel:
+                continue
+            out = _rows(seq, 0, n_rel)
+            if drives is not None:
+                u, e = drive_outputs(drives, out.velocity, out.acceleration, out.jerk)
+                out = replace(out, control_signal=u, servo_error=e)
+            _merge_peaks(peaks, _peak_utilisation(out, lim, drives, _feed_cap(lim, toolpath, out.s)))
+            released = SampleBlock(n_released, i, out)
+            n_released += n_rel
+            del seq, chk, out
+            emit("block", i)
+            t_y = time.perf_counter()
+            yield released
+            paused += time.perf_counter() - t_y
+            del released  # (the consumer's now: not held while the next block is sampled)
+        kept = []
     motion_time = t_end
     if not nlp:
         lp_motion_time = motion_time  # (with method lp the LP profiles are the sampled ones)

@@ -143,6 +143,56 @@ def test_stream_is_the_one_shot_schedule_bit_for_bit(name: str, method: str, mon
     """Blocks tile the samples in order; joined they are the one-shot pipeline's samples, bit for bit (seed 157:
     three pieces, one of them repaired after the re-check; tiny: pieces shorter than the held samples, the
     first one of 1 sample); ``schedule`` (which consumes the stream) too."""
+    _stream_vs_one_shot(name, method, monkeypatch, None)
+
+
+#: Block size for the bounded-memory tests: with SAMPLE_CHUNK at 64, blocks of 2 chunks.
+SMALL_CHUNK = 64
+SMALL_BLOCK = 100
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize(("name", "method"), [("zigzag", "lp"), ("mixed", "lp+nlp"), ("seed157", "lp"),
+                                             ("tiny", "lp")])
+def test_pieces_streamed_in_blocks_are_the_one_shot_schedule(
+    name: str, method: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Bounded memory (``block_samples``): pieces longer than a block are re-checked block by block, then sampled
+    again and released block by block; the joined blocks are still the one-shot samples bit for bit, with the
+    same repairs (seed 157), and no block holds more than one block of the piece's own samples plus the
+    samples held from before it."""
+    monkeypatch.setattr(P, "SAMPLE_CHUNK", SMALL_CHUNK)
+    calls: list[int] = []  # samples computed at once in the stream of blocks
+    sample, streamed = P._sample_piece, P.schedule_stream
+    active = [False]
+
+    def counted(*a: Any) -> P.TimeSamples:
+        out = sample(*a)
+        if active[0]:
+            calls.append(int(out.t.size))
+        return out
+
+    def watched(*a: Any, **kw: Any) -> Any:
+        active[0] = kw.get("block_samples") == SMALL_BLOCK
+        try:
+            yield from streamed(*a, **kw)
+        finally:
+            active[0] = False
+
+    monkeypatch.setattr(P, "_sample_piece", counted)
+    monkeypatch.setattr(P, "schedule_stream", watched)
+    blocks = _stream_vs_one_shot(name, method, monkeypatch, SMALL_BLOCK)
+    block = 2 * SMALL_CHUNK
+    assert max(b.n for b in blocks) <= block + P.HELD_SAMPLES
+    assert calls and max(calls) <= block
+    if name != "tiny":  # pieces of more than one block: more blocks than pieces, sampled twice
+        assert len(blocks) > len({b.piece for b in blocks})
+        assert sum(calls) > blocks[-1].k0 + blocks[-1].n
+
+
+def _stream_vs_one_shot(
+    name: str, method: str, monkeypatch: pytest.MonkeyPatch, block_samples: int | None
+) -> list[P.SampleBlock]:
     opt = P.Options(method=method)
     if name == "seed157":
         # the LP verifies its checkpoints only, so the sampled re-check finds points to repair (since
@@ -156,7 +206,7 @@ def test_stream_is_the_one_shot_schedule_bit_for_bit(name: str, method: str, mon
         assert len(tp.pieces) == 6
     else:
         tp, m = (zigzag() if name == "zigzag" else mixed()), router()
-    blocks, end = stream(tp, m, opt)
+    blocks, end = stream(tp, m, opt, block_samples=block_samples)
     assert len(blocks) > 1
     assert [b.k0 for b in blocks] == list(np.cumsum([0] + [b.n for b in blocks[:-1]]))
     assert [b.piece for b in blocks] == sorted(b.piece for b in blocks)
@@ -174,6 +224,7 @@ def test_stream_is_the_one_shot_schedule_bit_for_bit(name: str, method: str, mon
     assert {k: v for k, v in sch.summary.items() if k not in TIMINGS} == \
         {k: v for k, v in end.summary.items() if k not in TIMINGS}
     assert sch.diagnostics == end.diagnostics
+    return blocks
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")

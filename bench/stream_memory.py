@@ -1,0 +1,103 @@
+"""Peak memory of a long single-piece path, streamed vs held (issue 3: "memory stays bounded by the window
+size, not the path length: show the peak for 18.5 m and 185 m paths").
+
+The flower chained N times has no corner: it is one piece.  Each run is a fresh subprocess that builds the
+path, resets the kernel's peak-RSS mark (VmHWM) and then either
+
+- ``schedule``: the whole result in memory (what ``POST /v1/jobs`` and the Python API return; its samples
+  alone are 21 float64 columns, ~170 B a sample, so they grow with the path), or
+- ``stream``: ``schedule_stream`` with its default ``block_samples`` (what NDJSON streaming uses), each block
+  consumed (a running checksum of its positions) and dropped, as a writer to a socket or file would.
+
+Reported: the peak over the RSS before scheduling, the compute time and the motion time, and for the stream
+the samples, blocks and the largest block.  ``python -m bench.stream_memory [--loops 45 450] [--method lp+nlp]``
+writes ``bench/results/stream_memory.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from bench._common import emit, env_info, proc_status_mb, reset_hwm
+
+ROOT = Path(__file__).resolve().parents[1]
+#: The issue's resolution: 3965 control points on the 18.35 m path.
+KNOT = 4.63
+LOOPS = (45, 450)
+
+
+def child(mode: str, loops: int, method: str) -> None:
+    from geometry import examples as ex
+    from solvers.machine import router
+    from solvers.pipeline import Options, SampleBlock, schedule, schedule_stream
+
+    tp = ex.flower(loops)
+    opt = Options(method=method, knot_spacing=KNOT)
+    rss_before = proc_status_mb("VmRSS")
+    if not reset_hwm():
+        raise SystemExit("cannot reset VmHWM (/proc/self/clear_refs)")
+    t0 = time.perf_counter()
+    res: dict[str, Any] = {"mode": mode, "loops": loops, "method": method, "path_length_mm": tp.length,
+                           "pieces": len(tp.pieces), "rss_mb_before": rss_before}
+    if mode == "schedule":
+        sch = schedule(tp, router(), opt)
+        res.update(samples=int(sch.samples.t.size), motion_time=sch.summary["motion_time"],
+                   compute_time=sch.summary["compute_time"])
+    else:
+        h = hashlib.sha256()
+        n = blocks = biggest = 0
+        for item in schedule_stream(tp, router(), opt):
+            if isinstance(item, SampleBlock):
+                h.update(item.samples.position.tobytes())
+                n += item.n
+                blocks += 1
+                biggest = max(biggest, item.n)
+            else:
+                res.update(motion_time=item.summary["motion_time"], compute_time=item.summary["compute_time"])
+        res.update(samples=n, blocks=blocks, largest_block=biggest, position_sha256=h.hexdigest())
+    res["wall"] = time.perf_counter() - t0
+    res["peak_over_before_mb"] = proc_status_mb("VmHWM") - rss_before
+    print(json.dumps(res), flush=True)
+
+
+def run_child(mode: str, loops: int, method: str) -> dict[str, Any]:
+    cmd = [sys.executable, "-m", "bench.stream_memory", "--child", mode, "--loops", str(loops), "--method", method]
+    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=3600, check=False)
+    if p.returncode != 0:
+        return {"mode": mode, "loops": loops, "error": f"exit {p.returncode}: {p.stderr.strip()[-500:]}"}
+    out: dict[str, Any] = json.loads(p.stdout.strip().splitlines()[-1])
+    return out
+
+
+def main(loops: tuple[int, ...] = LOOPS, method: str = "lp+nlp") -> dict[str, Any]:
+    runs = [run_child(mode, n, method) for n in loops for mode in ("stream", "schedule")]
+    out: dict[str, Any] = {"bench": "stream_memory", "knot_spacing": KNOT, "method": method, "env": env_info(),
+                           "runs": runs}
+    for r in runs:
+        if "error" not in r:
+            print(f"{r['mode']:8s} x{r['loops']:<4d} {r['path_length_mm'] / 1e3:7.2f} m"
+                  f"  peak +{r['peak_over_before_mb']:7.1f} MB  compute {r['compute_time']:7.2f} s"
+                  f"  motion {r['motion_time']:8.2f} s  samples {r['samples']}",
+                  file=sys.stderr)
+    emit(out)
+    (ROOT / "bench" / "results" / "stream_memory.json").write_text(json.dumps(out, indent=2))
+    return out
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--child", default=None)
+    ap.add_argument("--loops", type=int, nargs="+", default=list(LOOPS))
+    ap.add_argument("--method", default="lp+nlp")
+    a = ap.parse_args()
+    if a.child:
+        child(a.child, a.loops[0], a.method)
+    else:
+        main(tuple(a.loops), a.method)
