@@ -79,3 +79,23 @@ def test_integral_only_table_has_the_same_total_and_refuses_to_invert() -> None:
     assert dur.duration == timed.duration
     with pytest.raises(ValueError, match="duration only"):
         dur.s_at(np.array([0.5 * timed.duration]))
+
+
+def test_chunked_evaluation_builds_the_same_table(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The integrand at breakpoints and midpoints is evaluated EVAL_CHUNK points at a time (bounded transients
+    on long pieces): the table is the one of evaluating every point at once, bit for bit."""
+    import geometry.quadrature as Q
+
+    edges = np.linspace(0.0, 2.0, 5)
+    whole = MonotoneTable.build(_f, edges, min_intervals=2, guess_tol=1e-10)
+    sizes: list[int] = []
+
+    def f(x: np.ndarray) -> np.ndarray:
+        sizes.append(x.size)
+        return _f(x)
+
+    monkeypatch.setattr(Q, "EVAL_CHUNK", 7)
+    chunked = MonotoneTable.build(f, edges, min_intervals=2, guess_tol=1e-10)
+    assert sizes.count(7) > 100  # (the breakpoints and midpoints, in chunks)
+    for col in ("x_b", "F_b", "f_b"):
+        assert np.array_equal(getattr(chunked, col), getattr(whole, col)), col
