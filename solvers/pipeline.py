@@ -12,7 +12,10 @@
    starts where the previous one ended), axis kinematics at each sample, and
    the sampled re-check (``solvers.verify``) with repairs of the piece.  The
    samples of a piece are released (``SampleBlock``) once they have passed it,
-   so a consumer has the first rows while later pieces are being solved.
+   so a consumer has the first rows while later pieces are being solved.  A
+   piece with more samples than ``block_samples`` is re-checked in blocks and
+   sampled again to be released in blocks (``_piece_blocks``): the samples held
+   at once are bounded by the block, not the piece.
 
 Within one piece the rows leave when the piece is done: a path without corners
 streams nothing early.  A finer grain is possible and is not built: with method
@@ -298,7 +301,8 @@ class SampleBlock:
         k0: global index of the first sample (its time is k0 Ts, s).
         piece: index of the piece whose solve released the block.  It holds that piece's samples
             except its last ``HELD_SAMPLES`` (whose differences reach into the next piece), preceded by
-            the held samples of the pieces before it.
+            the held samples of the pieces before it; a piece longer than ``block_samples`` releases
+            several blocks, each holding back its last HELD_SAMPLES for the next one.
         samples: the rows: t, s, feed, position, velocity, acceleration, jerk and, with a drive model,
             control signal and servo error (``TimeSamples``; units there).
     """
