@@ -1058,7 +1058,7 @@ def schedule_stream(
                 kind, axis, util, k = chk.rows.worst(0, chk.n_released)
                 if util > worst[2]:
                     worst = (kind, axis, util, float(seq.s[k]), float(seq.t[k]))
-                if final and k_hi - k_next <= n_block:
+                if k_hi - k_next <= n_block:  # (one block: released as checked)
                     kept.append(item)
                 del seq, chk, item
             s_bad = np.concatenate(bad)
@@ -1119,7 +1119,7 @@ def schedule_stream(
             yield released
             paused += time.perf_counter() - t_y
             del released  # (the consumer's now: not held while the next block is sampled)
-        kept = []
+        del blocks, kept  # (not held while the next piece is solved)
     motion_time = t_end
     if not nlp:
         lp_motion_time = motion_time  # (with method lp the LP profiles are the sampled ones)
