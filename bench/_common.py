@@ -6,6 +6,7 @@ import json
 import math
 import platform
 import statistics
+import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -134,3 +135,14 @@ def reset_hwm() -> bool:
         return True
     except OSError:
         return False
+
+
+def run_module(module: str, args: list[str], timeout: float) -> dict[str, Any]:
+    """``python -m module args`` from the project root in a fresh process; its last stdout line as JSON,
+    or {"error": "exit N: <end of stderr>"} if it failed."""
+    root = Path(__file__).resolve().parents[1]
+    p = subprocess.run([sys.executable, "-m", module, *args], cwd=root, capture_output=True, text=True,
+                       timeout=timeout, check=False)
+    if p.returncode != 0:
+        return {"error": f"exit {p.returncode}: {p.stderr.strip()[-500:]}"}
+    return dict(json.loads(p.stdout.strip().splitlines()[-1]))

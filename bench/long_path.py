@@ -18,13 +18,21 @@ import argparse
 import json
 import resource
 import statistics
-import subprocess
-import sys
 import time
-from pathlib import Path
 from typing import Any
 
-from bench._common import REPEATS, emit, env_info, proc_status_mb, reset_hwm, row, run_ours, summary_subset, verdict
+from bench._common import (
+    REPEATS,
+    emit,
+    env_info,
+    proc_status_mb,
+    reset_hwm,
+    row,
+    run_module,
+    run_ours,
+    summary_subset,
+    verdict,
+)
 from geometry import examples as ex
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
@@ -33,7 +41,6 @@ LOOPS = 45
 KNOT = 4.63
 #: compute / motion target (issue: <= 1 %).
 RATIO_TARGET_PCT = 1.0
-ROOT = Path(__file__).resolve().parents[1]
 CONFIGS: tuple[tuple[str, str, bool], ...] = (
     ("highs v/a", "highs", False),
     ("clarabel v/a", "clarabel", False),
@@ -90,12 +97,7 @@ def child(solver: str, jerk: bool, loops: int) -> None:
 
 
 def run_child(solver: str, jerk: bool, loops: int = LOOPS) -> dict[str, Any]:
-    cmd = [sys.executable, "-m", "bench.long_path", "--child", solver, "--jerk", str(int(jerk)),
-           "--loops", str(loops)]
-    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
-    if p.returncode != 0:
-        return {"error": f"exit {p.returncode}: {p.stderr.strip()[-500:]}"}
-    return json.loads(p.stdout.strip().splitlines()[-1])
+    return run_module("bench.long_path", ["--child", solver, "--jerk", str(int(jerk)), "--loops", str(loops)], 600)
 
 
 def main() -> dict[str, Any]:

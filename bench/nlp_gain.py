@@ -22,15 +22,12 @@ import json
 import os
 import resource
 import statistics
-import subprocess
-import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bench._common import emit, env_info, proc_status_mb, reset_hwm, row, verdict
+from bench._common import emit, env_info, proc_status_mb, reset_hwm, row, run_module, verdict
 from geometry import examples as ex
 from solvers.machine import Machine, router
 from solvers.pipeline import Options, Schedule, schedule
@@ -46,7 +43,6 @@ KNOT_ISSUE = 4.63
 #: The near-the-limit target at an explicit finer resolution (``Options.knot_spacing``, one LP
 #: window over the loop): the default's gap is the feed spline's resolution, not the windowing.
 KNOT_FINE = 0.9
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _drive_util(m: Machine, sch: Schedule) -> dict[str, float]:
@@ -138,13 +134,10 @@ def child(method: str, loops: int, knot: float | None) -> None:
 
 
 def run_child(method: str, loops: int, knot: float | None, timeout: float = 3600) -> dict[str, Any]:
-    cmd = [sys.executable, "-m", "bench.nlp_gain", "--child", method, "--loops", str(loops)]
+    args = ["--child", method, "--loops", str(loops)]
     if knot is not None:
-        cmd += ["--knot", str(knot)]
-    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
-    if p.returncode != 0:
-        return {"error": p.stderr.strip()[-500:]}
-    return dict(json.loads(p.stdout.strip().splitlines()[-1]))
+        args += ["--knot", str(knot)]
+    return run_module("bench.nlp_gain", args, timeout)
 
 
 def _cpu_s() -> float:

@@ -19,13 +19,12 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from bench._common import emit, env_info, proc_status_mb, reset_hwm
+from bench._common import emit, env_info, proc_status_mb, reset_hwm, run_module
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The issue's resolution: 3965 control points on the 18.35 m path.
@@ -68,12 +67,8 @@ def child(mode: str, loops: int, method: str) -> None:
 
 
 def run_child(mode: str, loops: int, method: str) -> dict[str, Any]:
-    cmd = [sys.executable, "-m", "bench.stream_memory", "--child", mode, "--loops", str(loops), "--method", method]
-    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=3600, check=False)
-    if p.returncode != 0:
-        return {"mode": mode, "loops": loops, "error": f"exit {p.returncode}: {p.stderr.strip()[-500:]}"}
-    out: dict[str, Any] = json.loads(p.stdout.strip().splitlines()[-1])
-    return out
+    out = run_module("bench.stream_memory", ["--child", mode, "--loops", str(loops), "--method", method], 3600)
+    return {"mode": mode, "loops": loops, **out} if "error" in out else out
 
 
 def main(loops: tuple[int, ...] = LOOPS, method: str = "lp+nlp") -> dict[str, Any]:
