@@ -10,8 +10,9 @@ path, resets the kernel's peak-RSS mark (VmHWM) and then either
   consumed (a running checksum of its positions) and dropped, as a writer to a socket or file would.
 
 Reported: the peak over the RSS before scheduling, the compute time and the motion time, and for the stream
-the samples, blocks and the largest block.  ``python -m bench.stream_memory [--loops 45 450] [--method lp+nlp]``
-writes ``bench/results/stream_memory.json``.
+the samples, blocks and the largest block.
+``python -m bench.stream_memory [--loops 45 450] [--method lp+nlp] [--modes stream schedule]`` updates
+``bench/results/stream_memory.json`` (the latest run of each method, mode and path kept).
 """
 
 from __future__ import annotations
@@ -71,18 +72,23 @@ def run_child(mode: str, loops: int, method: str) -> dict[str, Any]:
     return {"mode": mode, "loops": loops, **out} if "error" in out else out
 
 
-def main(loops: tuple[int, ...] = LOOPS, method: str = "lp+nlp") -> dict[str, Any]:
-    runs = [run_child(mode, n, method) for n in loops for mode in ("stream", "schedule")]
-    out: dict[str, Any] = {"bench": "stream_memory", "knot_spacing": KNOT, "method": method, "env": env_info(),
-                           "runs": runs}
+def main(loops: tuple[int, ...] = LOOPS, method: str = "lp+nlp",
+         modes: tuple[str, ...] = ("stream", "schedule")) -> dict[str, Any]:
+    runs = [run_child(mode, n, method) for n in loops for mode in modes]
     for r in runs:
         if "error" not in r:
             print(f"{r['mode']:8s} x{r['loops']:<4d} {r['path_length_mm'] / 1e3:7.2f} m"
                   f"  peak +{r['peak_over_before_mb']:7.1f} MB  compute {r['compute_time']:7.2f} s"
                   f"  motion {r['motion_time']:8.2f} s  samples {r['samples']}",
                   file=sys.stderr)
-    emit(out)
-    (ROOT / "bench" / "results" / "stream_memory.json").write_text(json.dumps(out, indent=2))
+    # the results file keeps every (method, mode, loops) measured, the latest of each
+    path = ROOT / "bench" / "results" / "stream_memory.json"
+    old = json.loads(path.read_text()).get("runs", []) if path.exists() else []
+    new = {(r.get("method", method), r["mode"], r["loops"]) for r in runs}
+    kept = [r for r in old if (r.get("method"), r.get("mode"), r.get("loops")) not in new]
+    out: dict[str, Any] = {"bench": "stream_memory", "knot_spacing": KNOT, "env": env_info(), "runs": kept + runs}
+    emit({**out, "runs": runs})
+    path.write_text(json.dumps(out, indent=2))
     return out
 
 
@@ -91,8 +97,9 @@ if __name__ == "__main__":
     ap.add_argument("--child", default=None)
     ap.add_argument("--loops", type=int, nargs="+", default=list(LOOPS))
     ap.add_argument("--method", default="lp+nlp")
+    ap.add_argument("--modes", nargs="+", default=["stream", "schedule"], choices=["stream", "schedule"])
     a = ap.parse_args()
     if a.child:
         child(a.child, a.loops[0], a.method)
     else:
-        main(tuple(a.loops), a.method)
+        main(tuple(a.loops), a.method, tuple(a.modes))

@@ -946,7 +946,9 @@ def schedule_stream(
     and re-checked in blocks of that many (rounded up to whole SAMPLE_CHUNKs; ``_piece_blocks``), keeping
     only its repair points and worst utilisation, and once it needs no more repair it is sampled again,
     block by block, to be released: the same rows bit for bit, for one more time reconstruction of the
-    piece.  None: each piece at once (``schedule``, which keeps every sample anyway).
+    piece.  None: each piece at once (``schedule``, which keeps every sample anyway).  A piece's time table
+    is held one segment of ``timing.TABLE_SEGMENT_INTERVALS`` knot intervals at a time (``PieceTiming``), so
+    what a corner-free piece holds grows only with its control points (a few floats per knot interval).
     """
     opt = options or Options()
     block = None if block_samples is None else max(1, math.ceil(block_samples / SAMPLE_CHUNK)) * SAMPLE_CHUNK

@@ -1,0 +1,122 @@
+"""Time tables by segments (``solvers.timing.PieceTiming``, ``TABLE_SEGMENT_INTERVALS``).
+
+A piece longer than a segment is timed segment by segment and holds one segment's table at a time (bounded
+memory for a corner-free path of any length).  Truth: the same piece timed as one table (the quadrature is
+accurate to ~1e-13 s either way, so durations and inverses agree to that, not bit for bit), and the
+schedule's own streamed and held outputs.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from geometry import examples as ex
+from geometry.quadrature import MonotoneTable
+from solvers import pipeline as P
+from solvers import timing as T
+from solvers.machine import router
+from solvers.timing import PieceProfile, PieceTiming
+
+#: Duration of a piece timed in segments vs in one table, relative (each is within ~1e-13 of the integral).
+DURATION_REL_TOL = 1e-12
+#: s(t) from segments vs one table, mm (both ~1e-12 relative; path fidelity needs 1e-3 mm).
+S_ABS_TOL = 1e-9
+#: Sampled positions of a scheduled path, segments vs one table, mm.
+POSITION_ABS_TOL = 1e-9
+
+
+def _profile(n: int = 40) -> PieceProfile:
+    c = 100.0 + 50.0 * np.sin(np.arange(n + 2) / 3.0)
+    c[0], c[-1] = -c[1], -c[-2]  # rest at both ends
+    return PieceProfile(s_start=0.0, length=float(n), d=1.0, c=c)
+
+
+@pytest.mark.parametrize("segment", [8, 7, 39])
+def test_segmented_table_is_the_one_table(segment: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    prof = _profile()
+    whole = PieceTiming.build(prof)
+    assert whole.edges.size == 2 and len(whole.held) == 1  # (40 intervals: one table, kept)
+    monkeypatch.setattr(T, "TABLE_SEGMENT_INTERVALS", segment)
+    builds: list[float] = []
+    build = MonotoneTable.build.__func__  # type: ignore[attr-defined]
+
+    def counted(cls: Any, f: Any, edges: np.ndarray, *a: Any, **kw: Any) -> MonotoneTable:
+        builds.append(float(edges[0]))
+        return build(cls, f, edges, *a, **kw)  # type: ignore[no-any-return]
+
+    monkeypatch.setattr(MonotoneTable, "build", classmethod(counted))
+    seg = PieceTiming.build(prof)
+    n_seg = -(-prof.n_int // segment)
+    assert seg.edges.size == n_seg + 1 and not seg.held  # (integral-only tables, none kept)
+    assert len(builds) == n_seg
+    assert seg.duration == pytest.approx(whole.duration, rel=DURATION_REL_TOL, abs=0.0)
+    # sorted times across every segment, the edges themselves and beyond both ends
+    t = np.sort(np.concatenate([np.linspace(-0.1, seg.duration + 0.1, 997), seg.t_edges]))
+    builds.clear()
+    s = seg.s_at(t)
+    np.testing.assert_allclose(s, whole.s_at(t), rtol=0.0, atol=S_ABS_TOL)
+    assert s[0] == 0.0 and s[-1] == prof.length
+    assert np.all(np.diff(s) >= 0.0)
+    assert sorted(builds) == builds and len(builds) == n_seg  # each segment built once, in order
+    assert len(seg.held) == 1  # one table held at a time
+    # a later call inside the held segment builds nothing
+    builds.clear()
+    seg.s_at(t[-3:])
+    assert not builds
+
+
+@pytest.mark.parametrize("method", ["lp", "lp+nlp"])
+def test_streamed_long_piece_with_segmented_tables(method: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The flower (one piece, ~150-300 knot intervals) timed in segments of 16 intervals and streamed in blocks:
+    the stream is ``schedule()`` bit for bit, and both are the one-table schedule to within the quadrature's
+    accuracy."""
+    tp, m = ex.flower(), router()
+    opt = P.Options(method=method)
+    one = P.schedule(tp, m, opt)
+    monkeypatch.setattr(T, "TABLE_SEGMENT_INTERVALS", 16)
+    monkeypatch.setattr(P, "SAMPLE_CHUNK", 256)
+    seg = P.schedule(tp, m, opt)
+    assert one.profiles[0].n_int > 4 * 16
+    blocks = [b for b in P.schedule_stream(tp, m, opt, block_samples=512) if isinstance(b, P.SampleBlock)]
+    assert len(blocks) > 2
+    joined = P.concat_samples([b.samples for b in blocks])
+    for col in ("t", "s", "feed", "position", "velocity", "acceleration", "jerk"):
+        assert np.array_equal(getattr(joined, col), getattr(seg.samples, col)), col
+    assert seg.summary["motion_time"] == pytest.approx(one.summary["motion_time"], rel=DURATION_REL_TOL, abs=0.0)
+    assert seg.samples.t.size == one.samples.t.size
+    np.testing.assert_allclose(seg.samples.position, one.samples.position, rtol=0.0, atol=POSITION_ABS_TOL)
+
+
+#: Table nodes per knot interval of a smooth, steep interval (the quadrature splits each in two, then bisects
+#: where 16-point rules disagree: a clean integrand needs no bisection there).
+CLEAN_NODES_PER_INTERVAL = 8
+
+
+def test_far_along_a_long_piece_the_time_integrand_is_not_noisy() -> None:
+    """Knot interval 59,012 of the 367 m flower's LP profile (q's control points 1612.6, 18.87, 12878.5 mm^2/s^2):
+    evaluated at s = d x and back, h(x) had a relative noise of ~1e-10 there, and the time table bisected that
+    interval into 2,081 nodes (one 8192-interval segment: 0.88 M nodes, +100 MB).  In segment-local
+    coordinates it needs the same few nodes as the same interval near the piece start."""
+    n, k = 59_100, 59_012
+    steep = np.array([1612.5898927, 18.87003261, 12878.50814352])
+    c = np.full(n + 2, 1000.0)
+    c[0], c[-1] = -c[1], -c[-2]  # rest at both ends
+    c[k : k + 3] = steep
+    d = 4.63
+    prof = PieceProfile(s_start=0.0, length=n * d, d=d, c=c)
+    seg = T.TABLE_SEGMENT_INTERVALS
+    x0 = (k // seg) * seg
+    table = T._segment_table(prof, float(x0), float(n), True)
+    in_k = np.count_nonzero(np.floor(table.x_b[:-1]) == k - x0)
+    assert in_k <= CLEAN_NODES_PER_INTERVAL
+    # the same interval near the start: the same integral
+    c2 = np.full(20 + 2, 1000.0)
+    c2[0], c2[-1] = -c2[1], -c2[-2]
+    c2[10:13] = steep
+    near = T._segment_table(PieceProfile(s_start=0.0, length=20 * d, d=d, c=c2), 0.0, 20.0, True)
+    j = np.searchsorted(table.x_b, [k - x0, k - x0 + 1])
+    i = np.searchsorted(near.x_b, [10.0, 11.0])
+    assert table.F_b[j[1]] - table.F_b[j[0]] == pytest.approx(near.F_b[i[1]] - near.F_b[i[0]], rel=DURATION_REL_TOL)
