@@ -88,6 +88,10 @@ def test_streamed_long_piece_with_segmented_tables(method: str, monkeypatch: pyt
     assert seg.summary["motion_time"] == pytest.approx(one.summary["motion_time"], rel=DURATION_REL_TOL, abs=0.0)
     assert seg.samples.t.size == one.samples.t.size
     np.testing.assert_allclose(seg.samples.position, one.samples.position, rtol=0.0, atol=POSITION_ABS_TOL)
+    # the binding checkpoints, evaluated SAMPLE_CHUNK at a time: those of evaluating all at once
+    assert one.summary["checkpoints"] > 3 * 256
+    assert seg.diagnostics["binding"] == one.diagnostics["binding"]
+    assert any(v["count"] for v in one.diagnostics["binding"].values())
 
 
 #: Table nodes per knot interval of a smooth, steep interval (the quadrature splits each in two, then bisects
