@@ -66,9 +66,15 @@ def evaluate(
     # absolute error of ~1e-16 of them (a relative noise of ~1e-7 in q), and the time quadrature
     # (1 / sqrt(q) to 1e-13) bisected that noise into millions of intervals (bench seed 163: 1.85 M
     # nodes, 3.8 GB).  The basis form is accurate relative to q itself.
-    u = 1.0 - t
-    q = 0.5 * (c0 * u * u + c1 * (1.0 + 2.0 * t * u) + c2 * t * t)
+    q = value(c0, c1, c2, t)
     return q, (a1 + a2 * t) / d, a2 / (d * d)
+
+
+def value(c0: FloatArray, c1: FloatArray, c2: FloatArray, t: FloatArray) -> FloatArray:
+    """The uniform quadratic B-spline at t in [0, 1] of a knot interval with control points c0, c1, c2, in the
+    basis form (non-negative weights: accurate relative to the value itself; see ``evaluate``)."""
+    u = 1.0 - t
+    return np.asarray(0.5 * (c0 * u * u + c1 * (1.0 + 2.0 * t * u) + c2 * t * t), dtype=np.float64)
 
 
 def integral_weights(k0: int, k1: int, d: float, col0: int, ncols: int) -> FloatArray:

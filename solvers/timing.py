@@ -116,14 +116,12 @@ class PieceProfile:
         xl = np.clip(np.asarray(xl, dtype=np.float64), -float(x0), float(n - x0))
         k = np.clip(np.floor(xl).astype(np.int64) + x0, 0, n - 1)
         t = xl - (k - x0)  # (exact: small whole numbers)
-        u = 1.0 - t
-        w = (0.5 * u * u, 0.5 + t * u, 0.5 * t * t)  # the quadratic B-spline basis on [0, 1]
-        sdot = np.sqrt(np.maximum(w[0] * c[k] + w[1] * c[k + 1] + w[2] * c[k + 2], 0.0))
+        sdot = np.sqrt(np.maximum(bspline.value(c[k], c[k + 1], c[k + 2], t), 0.0))
         if self.p is not None and self.f_mask is not None:
             use = self.f_mask[k]
             if use.any():
                 p, ku = self.p, k[use]
-                sdot[use] = w[0][use] * p[ku] + w[1][use] * p[ku + 1] + w[2][use] * p[ku + 2]
+                sdot[use] = bspline.value(p[ku], p[ku + 1], p[ku + 2], t[use])
         x = xl + x0
         q1_0 = (c[1] - c[0]) / d
         q2_0 = (c[0] - 2 * c[1] + c[2]) / d**2
@@ -142,9 +140,9 @@ class PieceProfile:
 #: Knot intervals per time-table segment.  A piece with more intervals has its table built segment by
 #: segment: the build keeps each segment's duration only, and ``s_at`` builds the table of a segment when its
 #: times are asked for, holding one segment's table at a time.  So a corner-free piece of any length holds
-#: a bounded table (~600 B per knot interval of it: 8192 intervals ~5 MB; a 183.5 m piece at 4.63 mm
-#: knots has 39,635 intervals, 24 MB whole) at the price of building the segments again to sample them.
-#: A piece of at most this many intervals keeps its one table (no second build).
+#: a bounded table (~4 nodes, ~100 B, per knot interval: ~0.8 MB per segment) and bounded transients while
+#: one is built, at the price of building the segments again to sample them.  A piece of at most this many
+#: intervals keeps its one table (no second build).
 TABLE_SEGMENT_INTERVALS = 8192
 
 
@@ -230,9 +228,6 @@ class PieceTiming:
             raise ValueError("this time table was built for its duration only (PieceTiming.build(inverse=False))")
         t_local = np.asarray(t_local, dtype=np.float64)
         n_seg = self.edges.size - 1
-        if n_seg == 1:
-            x = self._segment(0).inverse(t_local)
-            return self.profile.s_of_x(x)[0]
         j = np.clip(np.searchsorted(self.t_edges, t_local, side="right") - 1, 0, n_seg - 1)
         x = np.empty(t_local.shape)
         # (consecutive runs of one segment: sorted times build each table once)
