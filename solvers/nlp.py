@@ -576,8 +576,7 @@ class NlpRefiner:
         n_int = c.size - 2
         p = np.zeros(n_int + 2)
         mask = np.zeros(n_int, dtype=bool)
-        knots = [1] + [k for k in joins if 1 < k < n_int - 1] + [n_int - 1]
-        chains = [(A, B) for A, B in itertools.pairwise(knots) if B - A >= 2]
+        chains = chain_spans(n_int, joins)
         # chains whose LP feed is already the NLP's answer keep it (mask False, no spans)
         kept = [self._lp_at_bound(geometry, c, d, A, B, breaks) for A, B in chains]
         self.stats.lp_kept_chains += sum(kept)
@@ -1310,6 +1309,13 @@ class NlpRefiner:
         return x0
 
 
+def chain_spans(n_int: int, joins: list[int]) -> list[tuple[int, int]]:
+    """The NLP chains (A, B) of a piece on n_int knot intervals whose LP windows meet at ``joins``: knot
+    intervals [A, B) from the LP's state at knot A to its state at B, between the rest intervals."""
+    knots = [1] + [k for k in joins if 1 < k < n_int - 1] + [n_int - 1]
+    return [(A, B) for A, B in itertools.pairwise(knots) if B - A >= 2]
+
+
 def _lp_state(c: FloatArray, d: float, k: int) -> tuple[float, float]:
     """f control points (p_k, p_{k+1}) reproducing the LP's feed and its slope at knot k.
 
@@ -1912,8 +1918,7 @@ class ChainPipeline:
 
     def chains(self, joins: list[int]) -> list[tuple[int, int]]:
         """The chains of ``refine`` for these joins."""
-        knots = [1] + [k for k in joins if 1 < k < self.n_int - 1] + [self.n_int - 1]
-        return [(A, B) for A, B in itertools.pairwise(knots) if B - A >= 2]
+        return chain_spans(self.n_int, joins)
 
     def lp_progress(self, c: FloatArray, joins: list[int], done: bool = False) -> None:
         """After each LP window: the piece's c as far as solved, the joins so far, and whether the LP is done.

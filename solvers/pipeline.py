@@ -62,8 +62,8 @@ from solvers.lp import (
 )
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.nlp import V_STEP_SHARE as NLP_V_STEP_SHARE
-from solvers.nlp import ChainPipeline, NlpLimits, NlpRefiner, NlpStats
-from solvers.timing import PieceProfile, PieceTiming, stalled_intervals, stuck
+from solvers.nlp import ChainPipeline, NlpLimits, NlpRefiner, NlpStats, chain_spans
+from solvers.timing import PieceProfile, PieceTiming, interval_times, stalled_intervals, stuck
 
 FloatArray = NDArray[np.float64]
 
@@ -107,6 +107,11 @@ FLOOR_REFINE_GAIN = 0.99
 #: ``Options.knot_spacing`` is kept: the 45-loop flower at 4.63 mm went from 22 to 67 LP windows,
 #: 4 % less motion for ~3 x the compute)
 FLOOR_REFINE_MAX_INTERVALS = 1024
+#: A refined span (``_slower_spans``) whose time exceeds the LP feed's over it by more than this share keeps
+#: the LP's feed.  The NLP starts from the LP's feed (admissible for its limits) and minimises time, so a
+#: slower span is a feed collapsing between its checkpoints, where its objective does not look (the
+#: envside2 experiment on bench seed 1987: ~1 mm/s for 0.45 s, motion 0.37 -> 0.75 s, without a stall).
+SLOWER_SPAN_TOL = 1e-3
 #: Rounds of re-solving pieces whose samples exceed a limit (``solvers.verify``) before giving up.
 SAMPLE_REPAIR_ROUNDS = 2
 #: Under lp+nlp the LP holds the acceleration step at a curvature jump to REST_SHARE of the servo-error
@@ -662,7 +667,38 @@ def _refine_piece(
             "reason": "the refined feed stalls inside a knot interval", "status": "stall",
             "fallback": "lp feed over the span",
         })
+    # A refined span slower than the LP's feed over it (SLOWER_SPAN_TOL) keeps the LP's feed too
+    for lo, hi, t_f, t_lp in _slower_spans(lp_prof, p, mask, joins):
+        mask[lo:hi] = False
+        stats.failures.append({
+            "nlp_window": -1, "s_range": [lo * lp_prof.d, hi * lp_prof.d],
+            "reason": f"the refined feed takes {t_f:.6g} s over the span, the lp feed {t_lp:.6g} s",
+            "status": "slower than lp", "fallback": "lp feed over the span",
+        })
     return replace(lp_prof, p=p, f_mask=mask)
+
+
+def _slower_spans(
+    lp_prof: PieceProfile, p: FloatArray, mask: NDArray[np.bool_], joins: list[int]
+) -> list[tuple[int, int, float, float]]:
+    """Refined spans (lo, hi, refined time, LP time; knot intervals [lo, hi), s) slower than the LP's feed.
+
+    A span is a run of refined intervals cut at the chains' ends (``solvers.nlp.chain_spans``): each
+    refined run starts and ends on the LP's state (``NlpRefiner._spans``: the chain's ends, a bridge's
+    join, the knots around a window kept on the LP feed), and so does each chain inside a run, so reverting
+    one keeps the feed and its slope continuous (p at its ends reproduces q and q' there).  Times are the
+    integrals of d / f and d / sqrt(q) over each interval (``interval_times``: exact for the quadratics)."""
+    on = np.flatnonzero(mask)
+    if not on.size:
+        return []
+    cut = np.zeros(mask.size + 1, dtype=bool)
+    cut[[A for A, _ in chain_spans(lp_prof.n_int, joins)]] = True
+    first = np.flatnonzero(cut[on] | np.concatenate([[True], np.diff(on) > 1]))
+    t_f = np.add.reduceat(interval_times(replace(lp_prof, p=p, f_mask=mask), on), first)
+    t_lp = np.add.reduceat(interval_times(lp_prof, on), first)
+    last = np.append(first[1:], on.size) - 1
+    slow = np.flatnonzero(~(t_f <= (1.0 + SLOWER_SPAN_TOL) * t_lp))
+    return [(int(on[first[j]]), int(on[last[j]]) + 1, float(t_f[j]), float(t_lp[j])) for j in slow]
 
 
 def _refiner(

@@ -299,3 +299,103 @@ def _interval_min(c: FloatArray, k: NDArray[np.int64]) -> FloatArray:
     tv = np.clip(tv, 0.0, 1.0)
     qv = q0 + tv * (a1 + 0.5 * a2 * tv)
     return np.asarray(np.minimum(np.minimum(q0, q1), qv), dtype=np.float64)
+
+
+
+def interval_times(profile: PieceProfile, k: NDArray[np.int64], refined: bool = True) -> FloatArray:
+    """Time to cross each of the knot intervals k (inside the piece: 1 <= k <= n_int - 2), s, with the feed
+    in use there (``refined``: f where ``f_mask``, else q; not ``refined``: q everywhere); inf where the feed
+    reaches 0.
+
+    On f's intervals the integral of d / f is exact (``_inverse_quadratic_integral``): a dip between the
+    NLP's checkpoints is a peak of 1 / f far narrower than any fixed quadrature's node spacing.  On q's, the
+    integral of d / sqrt(q) is exact too (``_inverse_sqrt_quadratic_integral``)."""
+    k = np.asarray(k, dtype=np.int64)
+    d = profile.d
+    out = np.empty(k.size)
+    use_f = np.zeros(k.size, dtype=bool)
+    if refined and profile.p is not None and profile.f_mask is not None:
+        use_f = profile.f_mask[k]
+    kf = k[use_f]
+    if kf.size:
+        assert profile.p is not None
+        out[use_f] = d * _inverse_quadratic_integral(profile.p[kf], profile.p[kf + 1], profile.p[kf + 2])
+    kq = k[~use_f]
+    if kq.size:
+        c = profile.c
+        out[~use_f] = d * _inverse_sqrt_quadratic_integral(c[kq], c[kq + 1], c[kq + 2])
+    return out
+
+
+def _inverse_quadratic_integral(p0: FloatArray, p1: FloatArray, p2: FloatArray) -> FloatArray:
+    """Integral over t in [0, 1] of 1 / f(t), f = A t^2 + B t + C the quadratic B-spline with control points
+    p0, p1, p2 (elementwise); inf where f reaches 0 on [0, 1].
+
+    With X = 2 C + B and D = 4 A C - B^2:  (2 / sqrt(D)) atan2(sqrt(D), X) if D > 0 (no real root), and
+    (2 / R) atanh(R / X), R = sqrt(-D), if D < 0 (real roots, both off [0, 1] iff X > R: X^2 + D =
+    4 f(0) f(1)); both tend to 2 / X as D -> 0.  Where f has its minimum inside (A > 0, vertex t_v in
+    (0, 1)) D is taken as 4 A f(t_v), accurate however deep the dip (4 A C - B^2 cancels there)."""
+    C = 0.5 * (p0 + p1)
+    B = p1 - p0
+    A = 0.5 * (p0 - 2.0 * p1 + p2)
+    X = 2.0 * C + B
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        tv = np.where(A > 0.0, -B / np.where(A > 0.0, 2.0 * A, 1.0), -1.0)
+        inside = (tv > 0.0) & (tv < 1.0)
+        D = np.where(inside, 4.0 * A * (C + tv * (B + A * tv)), 4.0 * A * C - B * B)
+        root = np.sqrt(np.abs(D))
+        z = np.where(root > 0.0, root / np.where(X != 0.0, np.abs(X), 1.0), 0.0)
+        pos = 2.0 * np.arctan2(root, X) / np.where(root > 0.0, root, 1.0)
+        # atanh(z) / z -> 1 as z -> 0 (z small: 1 + z^2 / 3 to double precision)
+        ratio = np.where(z > 1e-4, np.arctanh(np.minimum(z, 1.0)) / np.where(z > 0.0, z, 1.0), 1.0 + z * z / 3.0)
+        neg = 2.0 * ratio / X
+        out = np.where(D > 0.0, pos, np.where(root > 0.0, neg, 2.0 / X))
+        ok = (C > 0.0) & (A + B + C > 0.0) & ((D > 0.0) | (X > root))
+    return np.asarray(np.where(ok, out, np.inf), dtype=np.float64)
+
+
+def _inverse_sqrt_quadratic_integral(c0: FloatArray, c1: FloatArray, c2: FloatArray) -> FloatArray:
+    """Integral over t in [0, 1] of 1 / sqrt(q(t)), q = A t^2 + B t + C the quadratic B-spline with control
+    points c0, c1, c2 (elementwise); inf where q reaches 0 on [0, 1].  With q0 = q(0), q1 = q(1) and the
+    vertex t_v = -B / (2 A):
+
+    - A > 0, t_v in (0, 1), m = q(t_v) > 0: (asinh(w (1 - t_v)) + asinh(w t_v)) / sqrt(A), w = sqrt(A / m);
+    - A > 0, t_v <= 0 (B >= 0): log1p((S1 - S0) / S0) / sqrt(A), S = 2 sqrt(A q) + 2 A t + B, with
+      S1 - S0 = 2 sqrt(A) (A + B) / (sqrt(q0) + sqrt(q1)) + 2 A; t_v >= 1: the same on q(1 - t);
+    - A < 0: atan2(sqrt(-A) ((1 - t_v) sqrt(q0) + t_v sqrt(q1)), sqrt(q0 q1) + A t_v (1 - t_v)) / sqrt(-A)
+      (t = t_v + r sin(theta)), with t_v (A + B) for t_v (q1 - q0);
+    - A = 0: 2 / (sqrt(q0) + sqrt(q1)).
+
+    Each form is free of cancellation in its range and they meet as A -> 0."""
+    C = 0.5 * (c0 + c1)
+    B = c1 - c0
+    A = 0.5 * (c0 - 2.0 * c1 + c2)
+    q0 = C
+    q1 = A + B + C
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        r0 = np.sqrt(np.maximum(q0, 0.0))
+        r1 = np.sqrt(np.maximum(q1, 0.0))
+        nz = np.where(A != 0.0, A, 1.0)
+        tv = -B / (2.0 * nz)
+        ra = np.sqrt(np.abs(A))
+        ra_nz = np.where(ra > 0.0, ra, 1.0)
+        # A > 0, vertex inside
+        inside = (A > 0.0) & (tv > 0.0) & (tv < 1.0)
+        m = C + tv * (B + A * tv)
+        w = np.sqrt(np.where(inside & (m > 0.0), A / np.where(m > 0.0, m, 1.0), 0.0))
+        t_in = np.where(m > 0.0, (np.arcsinh(w * (1.0 - tv)) + np.arcsinh(w * tv)) / ra_nz, np.inf)
+        # A > 0, monotone: from the low end (t_v <= 0), or mirrored (t_v >= 1: q(1 - t) has B' = -(2 A + B))
+        left = B >= 0.0
+        Bm = np.where(left, B, -(2.0 * A + B))
+        s_lo = np.where(left, r0, r1)  # sqrt(q) at the low end
+        s0 = 2.0 * ra * s_lo + Bm
+        dS = 2.0 * ra * (A + Bm) / (r0 + r1) + 2.0 * A
+        t_mono = np.log1p(dS / s0) / ra_nz
+        # A < 0
+        num = ra * (r0 + tv * (A + B) / (r0 + r1))
+        den = r0 * r1 + A * tv * (1.0 - tv)
+        t_cc = np.arctan2(num, den) / ra_nz
+        t_lin = 2.0 / (r0 + r1)
+        out = np.where(A > 0.0, np.where(inside, t_in, t_mono), np.where(A < 0.0, t_cc, t_lin))
+        ok = (q0 > 0.0) & (q1 > 0.0) & np.isfinite(out)
+    return np.asarray(np.where(ok, out, np.inf), dtype=np.float64)

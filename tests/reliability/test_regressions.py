@@ -432,6 +432,56 @@ def test_refined_feed_stalling_between_verification_points_keeps_the_lp_feed(see
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_refined_span_slower_than_the_lp_keeps_the_lp_feed(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A refined feed can collapse between the NLP's checkpoints without stalling (the envside2 experiment on
+    bench seed 1987: ~1 mm/s for 0.45 s near s = 548 mm, motion 0.37 -> 0.75 s, no fallback), so a refined
+    span slower than the LP's feed over it keeps the LP's feed (``solvers.pipeline._slower_spans``).  Made
+    here by construction: bench seed 6's first piece has three NLP chains in one run of refined intervals;
+    the middle chain's free control points (all but the two LP states at each end) are scaled down smoothly
+    to half in its middle: a feed still continuous, positive and within the limits (it passes the checks
+    without the guard): 4.48 s over the chain against the LP feed's 3.17 s, motion 13.83 -> 15.14 s.  That chain
+    alone must fall back (one "slower than lp" fallback over exactly its knots), the samples there must be
+    the LP's feed, the chains either side keep the NLP's, and the samples pass the checks."""
+    from solvers import bspline
+    from solvers.nlp import NlpRefiner, chain_spans
+
+    refine = NlpRefiner.refine
+    slowed: list[tuple[int, int, float, np.ndarray]] = []  # (A, B, d, the LP's c) of each chain slowed
+
+    def slowing(self: NlpRefiner, geometry: Any, c: Any, d: float, joins: list[int], *args: Any,
+                **kwargs: Any) -> Any:
+        p, mask = refine(self, geometry, c, d, joins, *args, **kwargs)
+        chains = chain_spans(c.size - 2, joins)
+        if len(chains) >= 3:
+            A, B = chains[len(chains) // 2]
+            assert mask[chains[0][0] : chains[-1][1]].all()  # (one run of refined intervals)
+            p = p.copy()
+            i = np.arange(A + 2, B)
+            p[i] *= 1.0 - 0.5 * np.sin(np.pi * (i - A - 1) / (B - A - 1)) ** 2  # (down to half, smoothly)
+            slowed.append((A, B, d, np.array(c)))
+        return p, mask
+
+    monkeypatch.setattr(NlpRefiner, "refine", slowing)
+    case = gen.case(6, "bench")
+    sch = schedule(case.toolpath(), case.machine, Options(method="lp+nlp", sample_period=harness.TS))
+    assert slowed
+    A, B, d, c = slowed[-1]  # (the first piece starts at s = 0)
+    falls = sch.diagnostics["nlp_fallbacks"]
+    assert [(f["status"], f["s_range"]) for f in falls] == [("slower than lp", [A * d, B * d])], falls
+    smp = sch.samples
+    piece = case.toolpath().pieces[0]
+    lp_feed = np.sqrt(bspline.evaluate(c, np.clip(smp.s, 0.0, piece.length), d)[0])
+    inside = (smp.s >= A * d) & (smp.s <= B * d)
+    assert inside.sum() > 1000
+    np.testing.assert_allclose(smp.feed[inside], lp_feed[inside], rtol=1e-12)
+    around = (smp.s > 2 * d) & (smp.s < piece.length - 2 * d) & ~inside
+    assert np.max(np.abs(smp.feed[around] / lp_feed[around] - 1.0)) > 1e-3  # (still the NLP's feed)
+    rep = checker.check(case.segments, gen.limits_of(case.machine), harness.TS, smp.t, smp.feed, smp.position,
+                        kinematic=False, drive=True)
+    assert rep.ok, rep.violations
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_hand_over_that_scaling_cannot_make_feasible_starts_unscaled() -> None:
     """Bench seed 1885 (lp+nlp): a 5.4 m path at 0.41 mm knots, 304 NLP windows, over the bench's 120 s of
     CPU (lp: 4 s).  The LP's feed sits at Fmax, so in 296 windows the hand-over stayed over a limit
