@@ -490,6 +490,9 @@ class NlpStats:
     lp_kept_chains: int = 0
     #: worst fine-grid utilisation of any accepted window (<= 1 + ACCEPT_TOL)
     worst_verified: float = 0.0
+    #: refined spans slower than the LP's feed that kept the NLP's feed: the LP's is over an NLP limit there
+    #: (``NlpRefiner.lp_worst``; ``solvers.pipeline._refine_piece``)
+    slower_kept: int = 0
 
 
 #: NLP shapes kept per thread across schedules (each ~0.3-0.6 s of CasADi/Ipopt set-up; a shape
@@ -619,6 +622,42 @@ class NlpRefiner:
         if any(float(np.max(util.pop(k))) > 1.0 + VERIFY_TOL for k in ("feed", "velocity") if k in util):
             return False
         return all(float(np.max(u)) <= LP_KEPT_UTIL for u in util.values())
+
+    def lp_worst(self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray) -> float:
+        """The LP feed's worst utilisation of the NLP's limits over knots [A, B): verified as a window's feed
+        is (fine grid refined at turns and fast changes, the steps at curvature jumps, the sampled u and e;
+        ``self.verify`` as set for the piece).  lp+nlp's LP holds the drive limits through its own proxies
+        and leaves part of them to the NLP (at a curvature jump its step alone may take V_STEP_SHARE of
+        emax, the e either side is the NLP's to hold: bench seed 4629, 1.11 x in the model), so its feed is
+        not admissible everywhere."""
+        s0, s1 = A * d, B * d
+        lim = self.lim
+        fine = self._fine_points(s0, s1, d, breaks)
+        fine, g = _refine_turns(geometry, fine, geometry(fine))
+        br, f_cap = self._step_caps(geometry, s0, s1, breaks)
+
+        def verify() -> tuple[kinematics.FeedDerivs, dict[str, FloatArray]]:
+            fd = kinematics.from_q(*bspline.evaluate(c, fine, d))
+            util = lim.utilisation(g, fd)
+            if br.size:
+                at = _find(fine, br + BREAK_EPS_MM)
+                ok_at = at >= 0
+                step = np.zeros(fine.size)
+                step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
+                util["step"] = step
+                if lim.sample_period is not None:
+                    self._step_servo_error(g, fd, _find(fine, br - BREAK_EPS_MM), at, util)
+            return fd, util
+
+        fd, util = verify()
+        for _ in range(REFINE_LEVELS):
+            mids = _fast_cells(fine, util)
+            if mids.size == 0 or fine.size + mids.size > REFINE_MAX_POINTS:
+                break
+            fine, g = _merge(fine, g, mids, geometry(mids))
+            fd, util = verify()
+        self._sampled(fine, g, fd, util)
+        return max(float(np.max(u)) for u in util.values())
 
     def _record(self, a: int, b: int, d: float, window: int, reason: str, status: str, fallback: str) -> None:
         self.stats.failures.append({
@@ -1861,6 +1900,7 @@ def _merge_stats(into: NlpStats, st: NlpStats) -> None:
     into.handover_scaled += st.handover_scaled
     into.handover_unscaled += st.handover_unscaled
     into.lp_kept_chains += st.lp_kept_chains
+    into.slower_kept += st.slower_kept
     into.worst_verified = max(into.worst_verified, st.worst_verified)
     into.window_times.extend(st.window_times)
     into.failures.extend({**f, "nlp_window": base + f["nlp_window"]} for f in st.failures)

@@ -62,6 +62,7 @@ from solvers.lp import (
 )
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.nlp import V_STEP_SHARE as NLP_V_STEP_SHARE
+from solvers.nlp import VERIFY_TOL as NLP_VERIFY_TOL
 from solvers.nlp import ChainPipeline, NlpLimits, NlpRefiner, NlpStats, chain_spans
 from solvers.timing import PieceProfile, PieceTiming, interval_times, stalled_intervals, stuck
 
@@ -639,16 +640,15 @@ def _refine_piece(
     ``on_chain(s_done)``, if given, is called after each NLP chain with the piece-local arc length
     (mm) done; ``verify_s``: piece-local s verified besides the fine grid; ``pipe``: the chains
     already handed out while the LP ran (``_chain_pipeline``; used if the LP kept its first knot plan)."""
+    geometry, breaks = _local(toolpath, piece), _breaks(toolpath, piece)
     if pipe is not None and verify_s is None and pipe.n_int == lp_prof.n_int and pipe.d == lp_prof.d:
+        refiner = pipe.refiner
         p, mask = pipe.finish(lp_prof.c, joins, on_chain)
     else:
         if pipe is not None:
             pipe.close()  # (its chains were on other knots)
         refiner = _refiner(piece, machine, opt, lp_prof.n_int, nlp_lim, refiners, stats)
-        p, mask = refiner.refine(
-            _local(toolpath, piece), lp_prof.c, lp_prof.d, joins, _breaks(toolpath, piece), on_chain,
-            opt.nlp_workers, verify_s,
-        )
+        p, mask = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain, opt.nlp_workers, verify_s)
     # A refined feed that stalls between its verification points (its quadratic dips to ~0 inside a knot
     # interval: bench seeds 1978, 1987) keeps the LP's feed over that NLP span (unless the LP's stalls too):
     # a run of refined intervals starts and ends on the LP's state, so the feed stays continuous
@@ -667,8 +667,14 @@ def _refine_piece(
             "reason": "the refined feed stalls inside a knot interval", "status": "stall",
             "fallback": "lp feed over the span",
         })
-    # A refined span slower than the LP's feed over it (SLOWER_SPAN_TOL) keeps the LP's feed too
+    # A refined span slower than the LP's feed over it (SLOWER_SPAN_TOL) keeps the LP's feed too, where that
+    # feed is within the NLP's limits over the span (``NlpRefiner.lp_worst``: lp+nlp's LP leaves part of the
+    # drive limits to the NLP, which may have to be slower there)
+    refiner.verify = np.zeros(0) if verify_s is None else np.asarray(verify_s, dtype=np.float64)
     for lo, hi, t_f, t_lp in _slower_spans(lp_prof, p, mask, joins):
+        if refiner.lp_worst(geometry, lp_prof.c, lp_prof.d, lo, hi, breaks) > 1.0 + NLP_VERIFY_TOL:
+            stats.slower_kept += 1
+            continue
         mask[lo:hi] = False
         stats.failures.append({
             "nlp_window": -1, "s_range": [lo * lp_prof.d, hi * lp_prof.d],
@@ -1197,6 +1203,7 @@ def schedule_stream(
             "nlp_handover_unscaled": nlp_stats.handover_unscaled,
             # chains whose LP feed was kept unsolved: at the feed bound, well inside the other limits
             "nlp_lp_kept_chains": nlp_stats.lp_kept_chains,
+            "nlp_slower_kept_spans": nlp_stats.slower_kept,
             # worst fine-grid utilisation (u, e, feed, ...) of any accepted NLP window
             "nlp_worst_verified_utilisation": nlp_stats.worst_verified,
             "nlp_window_times": nlp_stats.window_times,

@@ -29,6 +29,8 @@ class Outcome:
     error: str | None = None
     samples: int = 0
     nlp_fallbacks: int = 0
+    #: each NLP fallback's status (``diagnostics.nlp_fallbacks``)
+    nlp_fallback_statuses: list[str] = field(default_factory=list)
 
     def describe(self) -> str:
         what = self.error or "; ".join(self.violations)
@@ -51,5 +53,6 @@ def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None 
         before_check(int(smp.t.size))
     rep = checker.check(case.segments, gen.limits_of(m), TS, smp.t, smp.feed, smp.position,
                         kinematic=method == "lp", drive=method == "lp+nlp")
-    fallbacks = len(sch.diagnostics.get("nlp_fallbacks", []))
-    return Outcome(case.seed, method, rep.ok, rep.violations, rep.utilisation, None, int(smp.t.size), fallbacks)
+    fallbacks = sch.diagnostics.get("nlp_fallbacks", [])
+    return Outcome(case.seed, method, rep.ok, rep.violations, rep.utilisation, None, int(smp.t.size), len(fallbacks),
+                   [f["status"] for f in fallbacks])
