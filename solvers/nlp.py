@@ -631,23 +631,13 @@ class NlpRefiner:
         emax, the e either side is the NLP's to hold: bench seed 4629, 1.11 x in the model), so its feed is
         not admissible everywhere."""
         s0, s1 = A * d, B * d
-        lim = self.lim
         fine = self._fine_points(s0, s1, d, breaks)
         fine, g = _refine_turns(geometry, fine, geometry(fine))
         br, f_cap = self._step_caps(geometry, s0, s1, breaks)
 
         def verify() -> tuple[kinematics.FeedDerivs, dict[str, FloatArray]]:
             fd = kinematics.from_q(*bspline.evaluate(c, fine, d))
-            util = lim.utilisation(g, fd)
-            if br.size:
-                at = _find(fine, br + BREAK_EPS_MM)
-                ok_at = at >= 0
-                step = np.zeros(fine.size)
-                step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
-                util["step"] = step
-                if lim.sample_period is not None:
-                    self._step_servo_error(g, fd, _find(fine, br - BREAK_EPS_MM), at, util)
-            return fd, util
+            return fd, self._fine_utilisation(fine, g, fd, br, f_cap)
 
         fd, util = verify()
         for _ in range(REFINE_LEVELS):
@@ -658,6 +648,22 @@ class NlpRefiner:
             fd, util = verify()
         self._sampled(fine, g, fd, util)
         return max(float(np.max(u)) for u in util.values())
+
+    def _fine_utilisation(
+        self, fine: FloatArray, g: PathSamples, fd: kinematics.FeedDerivs, br: FloatArray, f_cap: FloatArray
+    ) -> dict[str, FloatArray]:
+        """Utilisation of every NLP limit on the fine grid at feed ``fd``, with the feed's share of its cap
+        just past each curvature jump at ``br`` ("step") and the servo error of the step across it."""
+        util = self.lim.utilisation(g, fd)
+        if br.size:
+            at = _find(fine, br + BREAK_EPS_MM)
+            ok_at = at >= 0
+            step = np.zeros(fine.size)
+            step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
+            util["step"] = step
+            if self.lim.sample_period is not None:
+                self._step_servo_error(g, fd, _find(fine, br - BREAK_EPS_MM), at, util)
+        return util
 
     def _record(self, a: int, b: int, d: float, window: int, reason: str, status: str, fallback: str) -> None:
         self.stats.failures.append({
@@ -885,16 +891,7 @@ class NlpRefiner:
 
         def verify(pw: FloatArray) -> tuple[kinematics.FeedDerivs, dict[str, FloatArray]]:
             fd = kinematics.from_f(*bspline.evaluate(pw, fine, d, col0=a, k_lo=a, k_hi=b - 1))
-            util = lim.utilisation(g_fine, fd)
-            if br.size:
-                at = _find(fine, br + BREAK_EPS_MM)
-                ok_at = at >= 0
-                step = np.zeros(fine.size)
-                step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
-                util["step"] = step
-                if lim.sample_period is not None:
-                    self._step_servo_error(g_fine, fd, _find(fine, br - BREAK_EPS_MM), at, util)
-            return fd, util
+            return fd, self._fine_utilisation(fine, g_fine, fd, br, f_cap)
 
         x = x0
         # with lam_x: the dual point the solve starts from (the previous round's, or the previous window's)
