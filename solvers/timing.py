@@ -302,27 +302,22 @@ def _interval_min(c: FloatArray, k: NDArray[np.int64]) -> FloatArray:
 
 
 
-def interval_times(profile: PieceProfile, k: NDArray[np.int64], refined: bool = True) -> FloatArray:
+def interval_times(profile: PieceProfile, k: NDArray[np.int64]) -> FloatArray:
     """Time to cross each of the knot intervals k (inside the piece: 1 <= k <= n_int - 2), s, with the feed
-    in use there (``refined``: f where ``f_mask``, else q; not ``refined``: q everywhere); inf where the feed
-    reaches 0.
+    in use there (f where ``f_mask``, else q); inf where the feed reaches 0.
 
     On f's intervals the integral of d / f is exact (``_inverse_quadratic_integral``): a dip between the
     NLP's checkpoints is a peak of 1 / f far narrower than any fixed quadrature's node spacing.  On q's, the
     integral of d / sqrt(q) is exact too (``_inverse_sqrt_quadratic_integral``)."""
     k = np.asarray(k, dtype=np.int64)
-    d = profile.d
+    d, c, p = profile.d, profile.c, profile.p
     out = np.empty(k.size)
-    use_f = np.zeros(k.size, dtype=bool)
-    if refined and profile.p is not None and profile.f_mask is not None:
-        use_f = profile.f_mask[k]
-    kf = k[use_f]
-    if kf.size:
-        assert profile.p is not None
-        out[use_f] = d * _inverse_quadratic_integral(profile.p[kf], profile.p[kf + 1], profile.p[kf + 2])
+    use_f = np.zeros(k.size, dtype=bool) if p is None or profile.f_mask is None else profile.f_mask[k]
+    if p is not None and use_f.any():
+        kf = k[use_f]
+        out[use_f] = d * _inverse_quadratic_integral(p[kf], p[kf + 1], p[kf + 2])
     kq = k[~use_f]
     if kq.size:
-        c = profile.c
         out[~use_f] = d * _inverse_sqrt_quadratic_integral(c[kq], c[kq + 1], c[kq + 2])
     return out
 

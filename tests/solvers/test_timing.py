@@ -159,9 +159,10 @@ def test_interval_times_are_the_time_integrals() -> None:
     for _ in range(3):
         prof = _dipping_profile(rng)
         k = np.arange(1, prof.n_int - 1)
+        # f on every interval (``_dipping_profile``), then q alone (the same profile without f)
         for refined, cp, power in ((True, prof.p, 1.0), (False, prof.c, 0.5)):
             assert cp is not None
-            got = T.interval_times(prof, k, refined=refined)
+            got = T.interval_times(prof if refined else replace(prof, p=None, f_mask=None), k)
             for j, kk in enumerate(k):
                 a, b, e = cp[kk], cp[kk + 1], cp[kk + 2]
                 A, B, C = 0.5 * (a - 2.0 * b + e), b - a, 0.5 * (a + b)
@@ -186,4 +187,4 @@ def test_interval_times_are_the_time_integrals() -> None:
     assert T.interval_times(dip, np.array([9, 10, 11]))[1] == np.inf
     c = prof.c.copy()
     c[21] = -c[20]
-    assert np.all(T.interval_times(replace(prof, c=c), np.array([19, 20]), refined=False) == np.inf)
+    assert np.all(T.interval_times(replace(prof, c=c, p=None, f_mask=None), np.array([19, 20])) == np.inf)
