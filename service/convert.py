@@ -140,7 +140,7 @@ def control_point_count(req: ScheduleRequest) -> int:
 
 def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) -> None:
     """Raise a 413 ServiceError when the work certainly exceeds ``budget`` (estimates are lower bounds)."""
-    intervals = sum(plan_piece(p, machine, opts).n_int for p in tp.pieces)
+    intervals = sum(plan_piece(p, machine, opts, toolpath=tp).n_int for p in tp.pieces)
     if intervals > budget.max_intervals:
         raise too_large(
             f"{intervals} knot intervals exceed the {budget.max_intervals} allowed in {budget.where}",

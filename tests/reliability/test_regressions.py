@@ -426,12 +426,18 @@ def test_curvature_jump_next_to_the_lp_state_of_an_nlp_window(monkeypatch: pytes
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 @pytest.mark.parametrize("seed", [1987])
-def test_refined_feed_stalling_between_verification_points_keeps_the_lp_feed(seed: int) -> None:
+def test_refined_feed_stalling_between_verification_points_keeps_the_lp_feed(
+    seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Bench seeds 1978 and 1987 (lp+nlp, found at the end of session 6, failing on d0e4978 too): the NLP's
     feed passed its verification points but its quadratic dipped to ~0 inside a knot interval (piece 1 of
     1978, interval 5), and the time table refused the piece ("feed stalls").  Now such an NLP span keeps
     the LP's feed (recorded in the NLP fallbacks); the LP's feed there does not stall.  (1978 has no
-    such span any more: its sharp turn is a corner, ``test_turn_of_nanometre_radius_inside_a_segment_is_a_corner``.)"""
+    such span any more: its sharp turn is a corner, ``test_turn_of_nanometre_radius_inside_a_segment_is_a_corner``.)
+    Runs on the knots it was found on: the default knot count phased to the curvature peaks (session 12,
+    ``pipeline.phase_intervals``) gives 1987 knots without such a span (it passes without a fallback)."""
+    import solvers.pipeline
+    monkeypatch.setattr(solvers.pipeline, "PHASE_SEARCH", 0.0)
     out = harness.run(gen.case(seed, "bench"), "lp+nlp")
     assert out.ok, out.describe()
     assert out.nlp_fallbacks >= 1
