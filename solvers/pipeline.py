@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 import time
+import weakref
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
@@ -102,6 +103,9 @@ PHASE_PEAK_SHARPEST = 4.0
 #: (PHASE_GRID points per interval) would grow with the piece.
 PHASE_MAX_INTERVALS = 2048
 PHASE_GRID = 8
+#: phase_intervals' result per toolpath (weakly held) and (piece index, n0): a piece is planned by the
+#: LP's first plan, the NLP chain pipeline and the service's budget check (~5 ms a scan on the flower)
+_PHASE_CACHE: weakref.WeakKeyDictionary[Toolpath, dict[tuple[int, int], int]] = weakref.WeakKeyDictionary()
 #: Overlap safety factor over the stopping distance (spec §6).
 OVERLAP_SAFETY = 2.0
 DEFAULT_LP_WINDOW = 200
@@ -389,6 +393,15 @@ def phase_intervals(toolpath: Toolpath, piece: Piece, n0: int) -> int:
     and the highest score wins (ties: the count nearest n0)."""
     if n0 > PHASE_MAX_INTERVALS or n0 < REST_MIN_INTERVALS:  # (shorter pieces are solved on REST_MIN_INTERVALS)
         return n0
+    memo = _PHASE_CACHE.setdefault(toolpath, {})
+    key = (piece.index, n0)
+    if key not in memo:
+        memo[key] = _phase_search(toolpath, piece, n0)
+    return memo[key]
+
+
+def _phase_search(toolpath: Toolpath, piece: Piece, n0: int) -> int:
+    """``phase_intervals`` without its cache."""
     L = piece.length
     s = np.linspace(0.0, L, PHASE_GRID * n0 + 1)
     kap = np.linalg.norm(toolpath.evaluate(piece.s_start + s).d2, axis=1)
