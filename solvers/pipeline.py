@@ -93,7 +93,12 @@ KNOT_SPACING_PER_STOP = 0.1
 #: on knots (180) 3.1390 s, the plain default (177, phases 0.1-0.9) 3.1159 s; per valley against a
 #: 4x finer full-horizon NLP: 44 ms lost at phase 0.1, 26 at 0.9, 10 at 0.3, 8 at 0.7, 4 at 0.5.
 #: So the default knot count is chosen among n0 (1 +- PHASE_SEARCH) to put the peaks, weighted by
-#: curvature, nearest mid-interval (``phase_intervals``), on pieces of at most PHASE_MAX_INTERVALS.
+#: curvature, nearest mid-interval (``phase_intervals``), on pieces of 64 to PHASE_MAX_INTERVALS
+#: intervals, under lp+nlp only.  Method lp gains too on the flower (4.4649 -> 4.4255 s), but on the 35
+#: of bench seeds 0-299 whose knots it moves, lp's motion was 1.2 % longer in the geometric mean (seeds
+#: 148 and 272 +30 %): lp refines the knots of many random pieces (stalls, floors), and doubling the
+#: count puts a mid-interval peak on a knot.  lp+nlp (which refines rarely): 0.45 % shorter, none
+#: failed, nlp fallbacks 5 and 5, worst +3.3 % (seed 188), best -3.1 % (seed 58).
 PHASE_SEARCH = 0.03
 PHASE_PEAK_RADIUS = 4.0
 #: Peaks sharper than this (radius under d / PHASE_PEAK_SHARPEST: a turn the knots cannot resolve
@@ -367,12 +372,12 @@ def plan_piece(
 ) -> WindowPlan:
     """Knots and window sizes of one piece; ``n_int`` overrides the knot count (a refined piece).  With
     ``toolpath`` and the default knot spacing, the knot count is phased to the piece's curvature peaks
-    (``phase_intervals``)."""
+    (``phase_intervals``; method lp+nlp only, see PHASE_SEARCH)."""
     D = machine.stopping_distance()
     d_target = opt.knot_spacing if opt.knot_spacing is not None else KNOT_SPACING_PER_STOP * D
     if n_int is None:
         n_int = max(MIN_INTERVALS, math.ceil(piece.length / d_target - 1e-9))
-        if toolpath is not None and opt.knot_spacing is None:
+        if toolpath is not None and opt.knot_spacing is None and opt.method == "lp+nlp":
             n_int = phase_intervals(toolpath, piece, n_int)
     d = piece.length / n_int
     overlap = opt.lp_overlap if opt.lp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
