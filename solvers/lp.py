@@ -119,6 +119,21 @@ COL_SCALE_MIN_BASIS = 0.1
 COL_SCALE_FLOOR = 1e-12
 #: An axis whose path-derivative coefficients are all below this is not moving.
 AXIS_EPS = 1e-12
+#: Knot intervals next to a rest end whose acceleration and jerk rows are the drive's control signal and
+#: servo error (lp+nlp, ``LimitSet.rest_drive``): the rest interval, whose feed the LP keeps (the NLP's
+#: travel time is singular at rest), and the next, the first of the NLP chain, which starts from the LP's
+#: state at its far knot.  Flower (one loop, phased knots 2.33 mm): the LP's x acceleration was capped by
+#: the router's amax 500 mm/s^2 there while the servo error admits ~936; motion 3.0652 s with none,
+#: 3.0426 s with the rest interval (its second control point then met interval 1's amax rows), 3.0144 s
+#: with two, 3.0136 s with three.
+REST_DRIVE_INTERVALS = 2
+#: Share of emax the LP's rows next to a rest end give the servo error (lp+nlp, ``WindowLP._rest_drive_rows``).
+REST_DRIVE_SHARE = 0.99
+#: Next to a rest end (lp+nlp) the feed is capped where b |x_s| F or Kv |x_s| F would take more than this
+#: share of umax or of the servo error's share (``WindowLP._rest_feed_cap``): the rows at that feed stay feasible.
+REST_FEED_BUDGET = 0.5
+#: |x_s| under which the sign of an axis's velocity counts as unknown (both signs of the friction term).
+REST_SIGN_EPS = 0.02
 
 GeometryFn = Callable[[FloatArray], PathSamples]
 
@@ -198,6 +213,10 @@ class LimitSet:
     #: output sample period Ts (s) when the acceleration and jerk rows next to a tangent break are
     #: coupled to the feed there (method lp, ``WindowLP._vstep_coupling``), else None (the cap only)
     v_step_period: float | None = None
+    #: the drive model (``Machine.drive_arrays``) whose control signal and servo error replace the
+    #: acceleration and jerk rows in the knot intervals next to a rest end (lp+nlp without the NLP's
+    #: kinematic rows: those intervals keep the LP's feed, ``WindowLP._rest_drive_rows``), or None
+    rest_drive: dict[str, FloatArray] | None = None
 
     @classmethod
     def from_machine(
@@ -217,7 +236,8 @@ class LimitSet:
                    sample_period if jerk and not rest_from_drive else None,
                    v_step_limit(m, sample_period, jerk, rest_from_drive, kinematic,
                                 V_STEP_SHARE_DRIVE if rest_from_drive else V_STEP_SHARE),
-                   None if rest_from_drive else sample_period)
+                   None if rest_from_drive else sample_period,
+                   m.drive_arrays() if rest_from_drive and not kinematic and m.has_drives else None)
 
 
 def v_step_limit(
@@ -411,10 +431,19 @@ class WindowLP:
         rows.add(A, lo, hi)
 
     def _stage1_rows(self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray | None) -> None:
-        B0, B1, _ = self._mats(g.s)
         ub = velocity_bound(g, self.lim)
         if qstar is not None:
             ub = np.minimum(ub, np.maximum(qstar, 0.0))
+        rest = self._rest_mask(g.s)
+        if rest.any():
+            gr = g.subset(rest)
+            ub_r = np.minimum(ub[rest], self._rest_feed_cap(gr) ** 2)
+            self._add(rows, self._mats(gr.s)[0], np.zeros(ub_r.size), ub_r / Q, gr.s)
+            self._rest_drive_rows(rows, gr, Q, np.sqrt(ub_r), None)
+            g, ub = g.subset(~rest), ub[~rest]
+            if g.s.size == 0:
+                return
+        B0, B1, _ = self._mats(g.s)
         self._add(rows, B0, np.zeros(ub.size), ub / Q, g.s)
         for ax in range(3):
             if not _moving(g, ax):
@@ -424,7 +453,82 @@ class WindowLP:
             self._add(rows, A, -one, one, g.s)
             self._add_coupled(rows, A, g.s, self._vstep_coupling(g.s, ax, self.lim.amax[ax], V_KERNEL_A, 1))
 
+    def _rest_mask(self, s: FloatArray) -> NDArray[np.bool_]:
+        """Points s (K,) in the REST_DRIVE_INTERVALS knot intervals next to a rest end of the piece, where the
+        drive's rows replace the acceleration and jerk rows (``LimitSet.rest_drive``)."""
+        spec = self.spec
+        out = np.zeros(s.size, dtype=bool)
+        if self.lim.rest_drive is None:
+            return out
+        k = REST_DRIVE_INTERVALS
+        if spec.start_fixed is None:
+            out |= s < (spec.k0 + k) * spec.d
+        if spec.end_rest:
+            out |= s > (spec.k1 - k) * spec.d
+        return out
+
+    def _rest_feed_cap(self, g: PathSamples) -> FloatArray:
+        """Largest feed F (K,) at points g next to a rest end for which, on every axis, b |x_s| F <=
+        REST_FEED_BUDGET umax and Kv |x_s| F <= REST_FEED_BUDGET REST_DRIVE_SHARE emax."""
+        dr = self.lim.rest_drive
+        assert dr is not None  # (only called where _rest_mask found points)
+        xs = np.abs(g.d1)
+        with np.errstate(divide="ignore"):
+            fu = np.where(xs * dr["b"] > 0, REST_FEED_BUDGET * dr["umax"] / (xs * dr["b"]), np.inf)
+            fe = np.where(xs * dr["Kv"] > 0, REST_FEED_BUDGET * REST_DRIVE_SHARE * dr["emax"] / (xs * dr["Kv"]), np.inf)
+        return np.asarray(np.minimum(np.min(fu, axis=1), np.min(fe, axis=1)), dtype=np.float64)
+
+    def _rest_drive_rows(self, rows: _Rows, g: PathSamples, Q: float, R: FloatArray, qstar: FloatArray | None) -> None:
+        r"""Control signal and servo error rows at points g next to a rest end (lp+nlp: those knot intervals
+        keep the LP's feed, so they hold the NLP's limits, not the LP's v, a, j caps).
+
+        With a = x_ss q + x_s q' / 2 and X = x_sss q + 1.5 x_ss q' + 0.5 x_s q'' (both linear in c), the
+        true v = x_s r and j = r X with r = sqrt(q) in [0, R] (q <= R^2 is a row), so
+
+            u(r) = M a + b x_s r + c + d sigma,   e(r) = Ka a + r (Kv x_s + Kj X)
+
+        are linear in r: |u| <= umax and |e| <= E = REST_DRIVE_SHARE emax hold for every r in [0, R] if
+        they hold at r = 0 and r = R, four linear rows per axis (sigma = sign(x_s), both signs where
+        |x_s| < REST_SIGN_EPS).  Without qstar (stage 1) X is left out of e(R) (stage 1 is v + a), with
+        it (stage 2: ``_jerk_rows``) R = sqrt(q*) >= r."""
+        dr = self.lim.rest_drive
+        assert dr is not None
+        B0, B1, B2 = self._mats(g.s)
+        for ax in range(3):
+            if not _moving(g, ax):
+                continue
+            xs = g.d1[:, ax]
+            A = (sp.diags(g.d2[:, ax]) @ B0 + sp.diags(0.5 * xs) @ B1) * Q
+            unsure = np.abs(xs) < REST_SIGN_EPS
+            sg_hi = np.where(unsure, 1.0, np.sign(xs))
+            sg_lo = np.where(unsure, -1.0, np.sign(xs))
+            um, E = dr["umax"][ax], REST_DRIVE_SHARE * dr["emax"][ax]
+            cf = dr["c"][ax]
+            if qstar is None:
+                one = np.ones(g.s.size)
+                self._add(rows, A * (dr["Ka"][ax] / E), -one, one, g.s)
+                self._add(rows, A * (dr["M"][ax] / um), (-um - cf - dr["d"][ax] * sg_lo) / um,
+                          (um - cf - dr["d"][ax] * sg_hi) / um, g.s)
+                vr = dr["b"][ax] * xs * R
+                self._add(rows, A * (dr["M"][ax] / um), (-um - cf - dr["d"][ax] * sg_lo - vr) / um,
+                          (um - cf - dr["d"][ax] * sg_hi - vr) / um, g.s)
+                er = dr["Kv"][ax] * xs * R
+                self._add(rows, A * (dr["Ka"][ax] / E), (-E - er) / E, (E - er) / E, g.s)
+            else:
+                X = (sp.diags(g.d3[:, ax]) @ B0 + sp.diags(1.5 * g.d2[:, ax]) @ B1 + sp.diags(0.5 * xs) @ B2) * Q
+                er = dr["Kv"][ax] * xs * R
+                self._add(rows, (A * dr["Ka"][ax] + sp.diags(R * dr["Kj"][ax]) @ X) / E, (-E - er) / E,
+                          (E - er) / E, g.s)
+
     def _jerk_rows(self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray) -> None:
+        rest = self._rest_mask(g.s)
+        if rest.any():
+            gr = g.subset(rest)
+            R = np.sqrt(np.minimum(np.maximum(qstar[rest], 0.0), self._rest_feed_cap(gr) ** 2))
+            self._rest_drive_rows(rows, gr, Q, R, qstar[rest])
+            g, qstar = g.subset(~rest), qstar[~rest]
+            if g.s.size == 0:
+                return
         keep = np.sqrt(np.maximum(qstar, 0.0)) > TINY_SQRT_QSTAR * np.sqrt(Q)
         if not keep.any():
             return
@@ -884,10 +988,23 @@ class WindowLP:
         return chat, (rounds, added, int(viol.sum()))
 
     def _violations(self, c: FloatArray, g: PathSamples, c_star: FloatArray | None) -> NDArray[np.bool_]:
-        f, _, a, j = axis_kinematics(g, *self._eval(c, g.s))
+        f, v, a, j = axis_kinematics(g, *self._eval(c, g.s))
         tol = 1.0 + VERIFY_TOL
         bad = f * f > velocity_bound(g, self.lim) * tol**2
         lim = self.lim
+        rest = self._rest_mask(g.s)
+        if rest.any():  # next to a rest end: the drive's u and e (``_rest_drive_rows``), not a and j
+            dr = lim.rest_drive
+            assert dr is not None
+            gr = g.subset(rest)
+            unsure = np.abs(gr.d1) < REST_SIGN_EPS
+            uu = dr["M"] * a[rest] + dr["b"] * v[rest] + dr["c"]
+            u_worst = np.where(unsure, np.abs(uu) + dr["d"], np.abs(uu + dr["d"] * np.sign(gr.d1)))
+            e = dr["Kv"] * v[rest] + dr["Ka"] * a[rest] + (dr["Kj"] * j[rest] if c_star is not None else 0.0)
+            bad[rest] |= np.any(u_worst > dr["umax"] * tol, axis=1) | np.any(np.abs(e) > dr["emax"] * tol, axis=1)
+            bad[rest] |= f[rest] > self._rest_feed_cap(gr) * tol
+            a = np.where(rest[:, None], 0.0, a)
+            j = np.where(rest[:, None], 0.0, j)
         aa = np.abs(a)
         for ax in range(3):  # + the impulse of velocity steps nearby
             aa[:, ax] += lim.amax[ax] * self._vstep_seen(c, g.s, ax, lim.amax[ax], V_KERNEL_A, 1)
