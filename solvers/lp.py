@@ -121,8 +121,7 @@ COL_SCALE_FLOOR = 1e-12
 AXIS_EPS = 1e-12
 #: Knot intervals next to a rest end whose acceleration and jerk rows are the drive's control signal and
 #: servo error (lp+nlp, ``LimitSet.rest_drive``): the rest interval, whose feed the LP keeps (the NLP's
-#: travel time is singular at rest), and the next, the first of the NLP chain, which starts from the LP's
-#: state at its far knot.  Flower (one loop, phased knots 2.33 mm): the LP's x acceleration was capped by
+#: travel time is singular at rest; the NLP chain starts from the LP's state at its far knot).  Flower (one loop, phased knots 2.33 mm): the LP's x acceleration was capped by
 #: the router's amax 500 mm/s^2 there while the servo error admits ~936; motion 3.0652 s with none,
 #: 3.0426 s with the rest interval alone (its second control point then meets interval 1's amax rows),
 #: 3.0144 s with two, 3.0136 s with three.  One: with two, bench seeds 0-59 (lp+nlp) had 23 NLP fallbacks
@@ -493,7 +492,8 @@ class WindowLP:
         are linear in r: |u| <= umax and |e| <= E = REST_DRIVE_SHARE emax hold for every r in [0, R] if
         they hold at r = 0 and r = R, four linear rows per axis (sigma = sign(x_s), both signs where
         |x_s| < REST_SIGN_EPS).  Without qstar (stage 1) X is left out of e(R) (stage 1 is v + a), with
-        it (stage 2: ``_jerk_rows``) R = sqrt(q*) >= r."""
+        it (stage 2: ``_jerk_rows``) R = sqrt(q*) >= r.  (Stage 2 re-adds stage 1's rows, so its e(R) row
+        without X stays too: a little conservative, not needed for the bound.)"""
         dr = self.lim.rest_drive
         assert dr is not None
         B0, B1, B2 = self._mats(g.s)
