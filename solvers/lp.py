@@ -135,8 +135,10 @@ REST_DRIVE_SHARE = 0.99
 #: Next to a rest end (lp+nlp) the feed is capped where b |x_s| F or Kv |x_s| F would take more than this
 #: share of umax or of the servo error's share (``WindowLP._rest_feed_cap``): the rows at that feed stay feasible.
 REST_FEED_BUDGET = 0.5
-#: |x_s| under which the sign of an axis's velocity counts as unknown (both signs of the friction term).
-REST_SIGN_EPS = 0.02
+#: |x_s| under which the sign of an axis's velocity counts as unknown (both signs of the friction term):
+#: the LP's rows next to a rest end and the NLP's rows (``solvers.nlp``) share it, so the LP's state there
+#: is taken with the same friction signs by the NLP window that starts from it.
+SIGN_EPS = 0.02
 
 GeometryFn = Callable[[FloatArray], PathSamples]
 
@@ -492,7 +494,7 @@ class WindowLP:
 
         are linear in r: |u| <= umax and |e| <= E = REST_DRIVE_SHARE emax hold for every r in [0, R] if
         they hold at r = 0 and r = R, four linear rows per axis (sigma = sign(x_s), both signs where
-        |x_s| < REST_SIGN_EPS).  Without qstar (stage 1) X is left out of e(R) (stage 1 is v + a), with
+        |x_s| < SIGN_EPS).  Without qstar (stage 1) X is left out of e(R) (stage 1 is v + a), with
         it (stage 2: ``_jerk_rows``) R = sqrt(q*) >= r.  (Stage 2 re-adds stage 1's rows, so its e(R) row
         without X stays too: a little conservative, not needed for the bound.)"""
         dr = self.lim.rest_drive
@@ -503,7 +505,7 @@ class WindowLP:
                 continue
             xs = g.d1[:, ax]
             A = (sp.diags(g.d2[:, ax]) @ B0 + sp.diags(0.5 * xs) @ B1) * Q
-            unsure = np.abs(xs) < REST_SIGN_EPS
+            unsure = np.abs(xs) < SIGN_EPS
             sg_hi = np.where(unsure, 1.0, np.sign(xs))
             sg_lo = np.where(unsure, -1.0, np.sign(xs))
             um, E = dr["umax"][ax], REST_DRIVE_SHARE * dr["emax"][ax]
@@ -1001,7 +1003,7 @@ class WindowLP:
             dr = lim.rest_drive
             assert dr is not None
             gr = g.subset(rest)
-            unsure = np.abs(gr.d1) < REST_SIGN_EPS
+            unsure = np.abs(gr.d1) < SIGN_EPS
             uu = dr["M"] * a[rest] + dr["b"] * v[rest] + dr["c"]
             u_worst = np.where(unsure, np.abs(uu) + dr["d"], np.abs(uu + dr["d"] * np.sign(gr.d1)))
             e = dr["Kv"] * v[rest] + dr["Ka"] * a[rest] + (dr["Kj"] * j[rest] if c_star is not None else 0.0)

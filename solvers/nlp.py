@@ -81,14 +81,12 @@ from scipy.ndimage import maximum_filter1d
 
 from geometry.toolpath import PathSamples
 from solvers import bspline, kinematics
-from solvers.lp import V_KERNEL_A, V_KERNEL_JC, step_cap, tangent_jump
+from solvers.lp import SIGN_EPS, V_KERNEL_A, V_KERNEL_JC, step_cap, tangent_jump
 from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
 GeometryFn = Callable[[FloatArray], PathSamples]
 
-#: |x_s| below which the friction sign is taken both ways.
-SIGN_EPS = 0.02
 #: Share of the sampled e and u budgets the impulse of a velocity step (a tangent break passed at speed)
 #: may take (``solvers.lp.v_step_limit``): the impulse is verified on top of e and u either side and a
 #: violation tightens the rows and the feed cap there (``NlpRefiner._step_servo_error``), so the NLP
