@@ -162,11 +162,19 @@ LP_KEPT_FEED_GAP = 1e-4
 LP_KEPT_UTIL = 0.9
 
 
+#: CPU seconds one Ipopt solve may take (its own clock, all threads).  Normal solves take 0.02-0.5 s; on a
+#: few windows whose solve fails anyway MUMPS's numerical pivoting (delayed pivots: dense fronts) made each
+#: iteration ~0.3 s: bench seed 25 (lp+nlp) spent 91 s in one re-solve that ran its 300 iterations to
+#: Maximum_Iterations_Exceeded, 97 of the case's 99 s; the safe retry then took 0.8 s.
+MAX_SOLVE_CPU_S = 5.0
 IPOPT_OPTIONS: dict[str, Any] = {
     "ipopt.print_level": 0,
     "ipopt.sb": "yes",
     "print_time": False,
     "ipopt.max_iter": 300,
+    # a solve that runs past this much CPU stops (status Maximum_CpuTime_Exceeded) and is handled as any
+    # failed solve (MAX_SOLVE_CPU_S)
+    "ipopt.max_cpu_time": MAX_SOLVE_CPU_S,
     # (1e-7 before: 1e-6 saves 10 % of the iterations on the 18.35 m path at 4.63 mm knots, motion -0.06 %;
     # the limits are verified on the fine grid whatever Ipopt reports; 1e-5 cost 0.2 % motion on the flower)
     "ipopt.tol": 1e-6,

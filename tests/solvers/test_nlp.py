@@ -423,6 +423,25 @@ def test_failed_solve_is_retried_with_the_safe_settings(monkeypatch: pytest.Monk
     _check_drive(m, sch)
 
 
+def test_solve_stops_at_its_cpu_time_cap(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ipopt stops a solve at MAX_SOLVE_CPU_S (``ipopt.max_cpu_time``) and the window goes on as after any failed
+    solve: with the fast solver's cap at 1 us every fast solve stops, the safe retry (its own cap) solves each
+    one, and the schedule has no fallback and holds the drive limits.  (Without the option reaching Ipopt no
+    solve would fail and there would be no retry.)"""
+    from solvers import nlp
+
+    assert nlp.IPOPT_WARM_OPTIONS["ipopt.max_cpu_time"] == nlp.IPOPT_SAFE_OPTIONS["ipopt.max_cpu_time"]
+    made = _capture_stats(monkeypatch)
+    monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)  # shapes built here stay here
+    monkeypatch.setattr(nlp, "IPOPT_WARM_OPTIONS", {**nlp.IPOPT_WARM_OPTIONS, "ipopt.max_cpu_time": 1e-6})
+    m = router()
+    sch = schedule(ex.flower(1), m, Options(method="lp+nlp"))
+    st = made[-1]
+    assert sch.diagnostics["nlp_fallbacks"] == []
+    assert st.safe_retries == st.windows + st.cut_rounds > 0
+    _check_drive(m, sch)
+
+
 #: Context time against the analytic s / F of a constant feed: the trapezoid is exact there.
 CONTEXT_TIME_RTOL = 1e-12
 
