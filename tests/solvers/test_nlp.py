@@ -406,34 +406,19 @@ def test_rows_at_knots_are_kept_once(with_aj: bool) -> None:
                                                                           250.0) / Fs)
 
 
-def test_failed_solve_is_retried_with_the_safe_settings(monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize(("option", "value"), [("ipopt.max_iter", 2), ("ipopt.max_cpu_time", 1e-6)])
+def test_failed_solve_is_retried_with_the_safe_settings(monkeypatch: pytest.MonkeyPatch, option: str,
+                                                         value: float) -> None:
     """A solve that fails with the fast, warm-started settings is retried once with Ipopt's cold start and
-    IPOPT_SAFE_OPTIONS before the window counts as failed: with the fast solver capped at 2 iterations
-    every solve fails, and the schedule still has no fallback."""
+    IPOPT_SAFE_OPTIONS before the window counts as failed: with the fast solver capped at 2 iterations, or
+    at 1 us of CPU (the cap MAX_SOLVE_CPU_S is ``ipopt.max_cpu_time``: if it did not reach Ipopt no solve
+    would stop and there would be no retry), every solve fails, and the schedule still has no fallback."""
     from solvers import nlp
 
+    assert nlp.IPOPT_SAFE_OPTIONS[option] == nlp.IPOPT_WARM_OPTIONS[option] == nlp.IPOPT_OPTIONS[option]
     made = _capture_stats(monkeypatch)
     monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)  # shapes built here stay here
-    monkeypatch.setattr(nlp, "IPOPT_WARM_OPTIONS", {**nlp.IPOPT_WARM_OPTIONS, "ipopt.max_iter": 2})
-    m = router()
-    sch = schedule(ex.flower(1), m, Options(method="lp+nlp"))
-    st = made[-1]
-    assert sch.diagnostics["nlp_fallbacks"] == []
-    assert st.safe_retries == st.windows + st.cut_rounds > 0
-    _check_drive(m, sch)
-
-
-def test_solve_stops_at_its_cpu_time_cap(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Ipopt stops a solve at MAX_SOLVE_CPU_S (``ipopt.max_cpu_time``) and the window goes on as after any failed
-    solve: with the fast solver's cap at 1 us every fast solve stops, the safe retry (its own cap) solves each
-    one, and the schedule has no fallback and holds the drive limits.  (Without the option reaching Ipopt no
-    solve would fail and there would be no retry.)"""
-    from solvers import nlp
-
-    assert nlp.IPOPT_WARM_OPTIONS["ipopt.max_cpu_time"] == nlp.IPOPT_SAFE_OPTIONS["ipopt.max_cpu_time"]
-    made = _capture_stats(monkeypatch)
-    monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)  # shapes built here stay here
-    monkeypatch.setattr(nlp, "IPOPT_WARM_OPTIONS", {**nlp.IPOPT_WARM_OPTIONS, "ipopt.max_cpu_time": 1e-6})
+    monkeypatch.setattr(nlp, "IPOPT_WARM_OPTIONS", {**nlp.IPOPT_WARM_OPTIONS, option: value})
     m = router()
     sch = schedule(ex.flower(1), m, Options(method="lp+nlp"))
     st = made[-1]
