@@ -126,9 +126,10 @@ AXIS_EPS = 1e-12
 #: the router's amax 500 mm/s^2 there while the servo error admits ~936; motion 3.0652 s with none,
 #: 3.0426 s with the rest interval alone (its second control point then meets interval 1's amax rows),
 #: 3.0144 s with two, 3.0136 s with three.  One: with two, bench seeds 0-59 (lp+nlp) had 23 NLP fallbacks
-#: instead of 3 ('Infeasible_Problem_Detected': the chain's first window from a state at the edge of the
-#: drive's limits, also with REST_DRIVE_SHARE 0.9) and seed 54 took 1.74 x the motion time; with one,
-#: seeds 10, 13, 15, 51, 54 have no fallback and are as fast or faster than without the rows.
+#: instead of 3 ('Infeasible_Problem_Detected', also with REST_DRIVE_SHARE 0.9: the LP's state at knot 1,
+#: inside its limits, is one the NLP's f spline, f'' constant per interval, cannot continue from after a
+#: steep ramp; README "The rest zones", branch restshift) and seed 54 took 1.74 x the motion time; with
+#: one, seeds 10, 13, 15, 51, 54 have no fallback and are as fast or faster than without the rows.
 REST_DRIVE_INTERVALS = 1
 #: Share of emax the LP's rows next to a rest end give the servo error (lp+nlp, ``WindowLP._rest_drive_rows``).
 REST_DRIVE_SHARE = 0.99
