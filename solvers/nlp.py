@@ -167,6 +167,28 @@ LP_KEPT_UTIL = 0.9
 #: iteration ~0.3 s: bench seed 25 (lp+nlp) spent 91 s in one re-solve that ran its 300 iterations to
 #: Maximum_Iterations_Exceeded, 97 of the case's 99 s; the safe retry then took 0.8 s.
 MAX_SOLVE_CPU_S = 5.0
+#: The NLP shapes the rest intervals too: a chain that starts (ends) at a rest end of the piece solves its
+#: first (last) window with the rest interval's q as the quadratic from rest to the f spline's state at the
+#: inner knot (``_Shape._rest_rows``), so that state is the NLP's to choose instead of the LP's (whose rest
+#: interval holds the drive's rows only conservatively, and whose state the f spline may not be able to
+#: continue: README "The rest zones").  If such a window fails, the chain is solved again from (to) the
+#: LP's state at the inner knot, as without.
+REST_ENDS = True
+#: Pieces on fewer knot intervals keep the LP's rest intervals.
+REST_ENDS_MIN_INTERVALS = 4
+#: Gauss-Legendre nodes and weights on [0, 1] for a rest interval's travel time (``_Shape._rest_rows``).
+REST_GL: tuple[FloatArray, FloatArray] = (
+    0.5 * np.polynomial.legendre.leggauss(16)[1], 0.5 * (np.polynomial.legendre.leggauss(16)[0] + 1.0)
+)
+#: Floor of the scaled q under a square root in a rest interval (q is 0 at rest itself).
+REST_Q_FLOOR = 1e-20
+#: A rest interval's control point next to rest may fall to this share of the LP's (its acceleration at
+#: rest; keeps the travel time's integrand finite) and not rise above the LP's (the LP sized the step at
+#: rest for the sampled servo error: ``solvers.lp``'s rest rows).
+REST_C_FLOOR = 1e-3
+#: ... and its upper bound is this share of the LP's: Ipopt meets a row's bound to its tolerance (a
+#: random corner read 1.9e-6 over a bound of the LP's value), so the step at rest stays within the LP's.
+REST_C_CEIL = 1.0 - 1e-5
 IPOPT_OPTIONS: dict[str, Any] = {
     "ipopt.print_level": 0,
     "ipopt.sb": "yes",
@@ -346,8 +368,10 @@ class _Shape:
     per moving axis; rows as above (x_sss exact, so e_hi = e_lo) and f, per slot.
     """
 
-    def __init__(self, n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool = False) -> None:
+    def __init__(self, n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool = False,
+                 head: bool = False, tail: bool = False) -> None:
         self.n, self.N, self.axes, self.with_aj, self.slotted = n, N, axes, with_aj, slotted
+        self.head, self.tail = head, tail
         k, tau = checkpoint_layout(n, N)
         K = k.size
         self.K = K
@@ -378,7 +402,15 @@ class _Shape:
         f2 = Fs * inv_d * inv_d * ca.mtimes(ca.DM(B2), x)
         kept, _, _ = knot_twins(n, N)
         sel = [int(i) for i in kept]
-        rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj, sel)
+        rest_time: Any = 0.0
+        rest_rows: list[Any] = []
+        if head or tail:
+            # the rest intervals in q (``rest_cps``): their checkpoints' rows, feed and travel time from the
+            # q the state at the inner knot gives; interval 0's f (p_0) and interval n-1's (p_n+1) are unused
+            fh, rows, rest_time, rest_rows = self._rest_rows(x, Fs, inv_d, fh, f, f1, f2, xs, xss, xsss_hi,
+                                                             xsss_lo, coef, with_aj, sel)
+        else:
+            rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj, sel)
         rows.append(fh[sel])
         # row_index[block, checkpoint]: the row of that block at that checkpoint (-1: none)
         reduced = ([True, False, False] + ([True, False, False] if with_aj else [])) * na + [True]
@@ -402,11 +434,15 @@ class _Shape:
             sf2 = Fs * inv_d * inv_d * (c0 - 2 * c1 + c2)
             rows += self._axis_rows(sf, sf1, sf2, sxs, sxss, sxsss, sxsss, coef, with_aj)
             rows.append(sfh)
+        # the rest intervals' control points next to rest (their acceleration at rest), after every other row
+        rows += rest_rows
         g = ca.vertcat(*rows)
-        obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh)
+        obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh) + rest_time
         self._problem = {"x": x, "p": P, "f": obj, "g": g}
         self.rows = int(g.size1())
         self.base_rows = nxt
+        #: rows after the slots: one per rest end (``_rest_rows``)
+        self.n_rest = len(rest_rows)
         self.solver = ca.nlpsol("feed_nlp", "ipopt", self._problem, IPOPT_WARM_OPTIONS)
         self._safe_solver: Any = None
         # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
@@ -427,6 +463,85 @@ class _Shape:
         if self._safe_solver is None:
             self._safe_solver = ca.nlpsol("feed_nlp_safe", "ipopt", self._problem, IPOPT_SAFE_OPTIONS)
         return self._safe_solver
+
+    def _rest_rows(self, x: Any, Fs: Any, inv_d: Any, fh: Any, f: Any, f1: Any, f2: Any, xs: list[Any],
+                   xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any], coef: list[Any], with_aj: bool,
+                   sel: list[int]) -> tuple[Any, list[Any], Any, list[Any]]:
+        r"""Rows, scaled feed and travel time of a window whose first (``head``) or last (``tail``) knot interval
+        is a rest interval of the piece, its feed sqrt(q) from the quadratic q that starts (ends) at rest and
+        meets the f spline's value and slope at the inner knot (``rest_cps``).
+
+        With q's control points c_0, c_1, c_2 on the interval (c_0 = -c_1 at the start), in unit tau:
+        q = (c_0 (1 - tau)^2 + c_1 (1 + 2 tau - 2 tau^2) + c_2 tau^2) / 2, and in time
+        sdot = sqrt(q), sddot = q' / 2, sdddot = sqrt(q) q'' / 2 (finite at rest, where 1/f is not).
+        Travel time: with tau = w^2, q = w^2 (2 c_1 + (c_2 - 3 c_1) w^2 / 2) and the integral of d / sqrt(q)
+        over the interval is 2 d times that of 1 / sqrt(2 c_1 + (c_2 - 3 c_1) w^2 / 2) over w in [0, 1]
+        (REST_GL Gauss-Legendre nodes; mirrored for the tail); in the objective's units (times / L, f scaled
+        by Fs) that is 2 / n times the node sum.  Extra rows (one per rest end): c_1 (the control point
+        next to rest, 2 c_1 / d = q' there), whose bounds hold the acceleration at rest.
+
+        Returns (scaled feed at every checkpoint, the base rows with the rest intervals' checkpoints
+        replaced, the travel time term, the extra rows)."""
+        n, N, K = self.n, self.N, self.K
+        full = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj)
+        fh_parts = [fh[i] for i in range(K)]
+        full_parts = [[blk[i] for i in range(K)] for blk in full]
+        rest_time: Any = 0.0
+        extra: list[Any] = []
+        wq, xq = REST_GL
+        tau = np.linspace(0.0, 1.0, N + 1)
+        for is_rest, k, inner in ((self.head, 0, 1), (self.tail, n - 1, n - 1)):
+            if not is_rest:
+                continue
+            fk = 0.5 * (x[inner] + x[inner + 1])
+            near = fk * (3.0 * x[inner] - x[inner + 1]) / 2.0   # f^2 - f f' d at the inner knot
+            far = fk * (3.0 * x[inner + 1] - x[inner]) / 2.0    # f^2 + f f' d
+            c0, c1, c2 = (-near, near, far) if k == 0 else (near, far, -far)
+            c_rest, c_in = (c1, c2) if k == 0 else (c1, c0)   # next to rest, and the inner one
+            extra.append(c_rest)
+            rest_time = rest_time + (2.0 / n) * sum(
+                float(wi) / ca.sqrt(ca.fmax(2.0 * c_rest + 0.5 * (c_in - 3.0 * c_rest) * float(xi) ** 2, REST_Q_FLOOR))
+                for wi, xi in zip(wq, xq, strict=True)
+            )
+            a1, a2 = c1 - c0, c0 - 2.0 * c1 + c2
+            for j, t in enumerate(tau):
+                i = k * (N + 1) + j
+                qh = 0.5 * (c0 * (1 - t) ** 2 + c1 * (1 + 2 * t - 2 * t * t) + c2 * t * t)
+                r = ca.sqrt(ca.fmax(qh, REST_Q_FLOOR))
+                sd = Fs * r
+                sdd = 0.5 * Fs * Fs * inv_d * (a1 + a2 * t)
+                sddd = 0.5 * sd * Fs * Fs * inv_d * inv_d * a2
+                vals = self._axis_rows_t(sd, sdd, sddd, [v[i] for v in xs], [v[i] for v in xss],
+                                         [v[i] for v in xsss_hi], [v[i] for v in xsss_lo], coef, with_aj)
+                for blk, val in zip(full_parts, vals, strict=True):
+                    blk[i] = val
+                fh_parts[i] = r
+        reduced = ([True, False, False] + ([True, False, False] if with_aj else [])) * len(xs)
+        rows = [ca.vertcat(*(blk[i] for i in sel)) if red else ca.vertcat(*blk)
+                for blk, red in zip(full_parts, reduced, strict=True)]
+        return ca.vertcat(*fh_parts), rows, rest_time, extra
+
+    @staticmethod
+    def _axis_rows_t(sd: Any, sdd: Any, sddd: Any, xs: list[Any], xss: list[Any], xsss_hi: list[Any],
+                     xsss_lo: list[Any], coef: list[Any], with_aj: bool) -> list[Any]:
+        """``_axis_rows`` at one point from the feed's time derivatives (sdot, sddot, sdddot)."""
+        rows = []
+        for i in range(len(xs)):
+            v = xs[i] * sd
+            a = xss[i] * sd * sd + xs[i] * sdd
+            j_rest = 3.0 * xss[i] * sd * sdd + xs[i] * sddd
+            j_hi = xsss_hi[i] * sd * sd * sd + j_rest
+            j_lo = xsss_lo[i] * sd * sd * sd + j_rest
+            cf = coef[i]
+            rows.append(cf[0] * a + cf[1] * v)
+            e_va = cf[2] * v + cf[3] * a
+            rows.append(e_va + cf[4] * j_hi)
+            rows.append(e_va + cf[4] * j_lo)
+            if with_aj:
+                rows.append(cf[6] * a)
+                rows.append(cf[7] * j_hi)
+                rows.append(cf[7] * j_lo)
+        return rows
 
     @staticmethod
     def _axis_rows(f: Any, f1: Any, f2: Any, xs: list[Any], xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any],
@@ -499,6 +614,8 @@ class NlpStats:
     #: refined spans slower than the LP's feed that kept the NLP's feed: the LP's is over an NLP limit there
     #: (``NlpRefiner.lp_worst``; ``solvers.pipeline._refine_piece``)
     slower_kept: int = 0
+    #: windows that solved a rest interval (``REST_ENDS``) and failed, solved again from (to) the LP's state
+    rest_retries: int = 0
 
 
 #: NLP shapes kept per thread across schedules (each ~0.3-0.6 s of CasADi/Ipopt set-up; a shape
@@ -507,18 +624,19 @@ SHAPE_CACHE_SIZE = 16
 _SHAPE_CACHE = threading.local()
 
 
-def _cached_shape(n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool) -> _Shape:
+def _cached_shape(n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool, head: bool = False,
+                  tail: bool = False) -> _Shape:
     """The shape for this key from this thread's LRU cache, built on a miss.  Per thread: a CasADi
     Function's call and the OSQP hand-over fit hold state, so two threads never share one."""
-    cache: OrderedDict[tuple[int, int, tuple[int, ...], bool, bool], _Shape] | None = getattr(
+    cache: OrderedDict[tuple[int, int, tuple[int, ...], bool, bool, bool, bool], _Shape] | None = getattr(
         _SHAPE_CACHE, "shapes", None
     )
     if cache is None:
         cache = _SHAPE_CACHE.shapes = OrderedDict()
-    key = (n, N, axes, with_aj, slotted)
+    key = (n, N, axes, with_aj, slotted, head, tail)
     shape = cache.get(key)
     if shape is None:
-        shape = cache[key] = _Shape(n, N, axes, with_aj, slotted)
+        shape = cache[key] = _Shape(n, N, axes, with_aj, slotted, head, tail)
         while len(cache) > SHAPE_CACHE_SIZE:
             cache.popitem(last=False)
     else:
@@ -544,20 +662,21 @@ class NlpRefiner:
         self.window = window
         self.overlap = overlap
         self.fault = fault
-        self.shapes: dict[tuple[int, tuple[int, ...], bool], _Shape] = {}
+        self.shapes: dict[tuple[int, tuple[int, ...], bool, bool, bool], _Shape] = {}
         self.stats = stats if stats is not None else NlpStats()
         #: piece-local s verified besides the fine grid (set per piece by ``refine``)
         self.verify: FloatArray = np.zeros(0)
         #: how many leading LP control points are final while a chain is solved (``ChainPipeline``; None: all)
         self.c_final: int | None = None
-        #: the last solve's window start, size, moving axes, lam_g (rows without cut slots) and lam_x: the
-        #: next window of the chain (``prev`` given) starts from them
-        self._duals: tuple[int, int, tuple[int, ...], FloatArray, FloatArray] | None = None
+        #: the last solve's window start, size, moving axes, lam_g (rows without cut slots), lam_x and its
+        #: shape's row_index: the next window of the chain (``prev`` given) starts from them
+        self._duals: tuple[int, int, tuple[int, ...], FloatArray, FloatArray, NDArray[np.int64]] | None = None
 
-    def _shape(self, n: int, axes: tuple[int, ...], slotted: bool = False) -> _Shape:
-        key = (n, axes, slotted)
+    def _shape(self, n: int, axes: tuple[int, ...], slotted: bool = False, head: bool = False,
+               tail: bool = False) -> _Shape:
+        key = (n, axes, slotted, head, tail)
         if key not in self.shapes:
-            self.shapes[key] = _cached_shape(n, self.N, axes, self.lim.amax is not None, slotted)
+            self.shapes[key] = _cached_shape(n, self.N, axes, self.lim.amax is not None, slotted, head, tail)
         return self.shapes[key]
 
     # ----- a piece -------------------------------------------------------------------
@@ -572,7 +691,9 @@ class NlpRefiner:
         workers: int = 1,
         verify: FloatArray | None = None,
     ) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """f control points (n_int + 2,) and the mask of knot intervals that use them.
+        """f control points (n_int + 2,) and the mask of knot intervals that use them.  The mask is True on
+        a rest interval (the first or last) the NLP solved: its q is then ``rest_cps`` of the f control
+        points at its inner knot (``rest_profile`` makes the piece's profile of it).
 
         ``c``: the LP's q control points over the piece; ``joins``: knots where LP
         windows meet (chains end and start there); ``breaks``: piece-local s of
@@ -611,8 +732,9 @@ class NlpRefiner:
         on the chain's fine grid (and the verified points in it) it is within LP_KEPT_FEED_GAP of the NLP's
         feed bound, over it (or the axis speeds over theirs) by at most VERIFY_TOL, every other limit of the
         NLP (model and sampled) is used at most LP_KEPT_UTIL, and no break in the chain has a step cap."""
+        A, B = max(A, 1), min(B, c.size - 3)  # (the rest intervals: the LP's feed is not at a bound there)
         s0, s1 = A * d, B * d
-        if self._step_caps(geometry, s0, s1, breaks)[0].size:
+        if B <= A or self._step_caps(geometry, s0, s1, breaks)[0].size:
             return False
         fine = self._fine_points(s0, s1, d, breaks)
         g = geometry(fine)
@@ -696,11 +818,19 @@ class NlpRefiner:
             except LpNotFinal:
                 raise
             except NlpFailure as exc:
+                if a0 == 0:  # the chain from the rest end (``_window``) failed: from the LP's state at knot 1
+                    self.stats.rest_retries += 1
+                    a0 = 1
+                    continue
                 skip = min(B, a0 + max(2, self.window - self.overlap))
                 self._record(a0, skip, d, exc.window, exc.reason, exc.status, "lp feed kept on this span")
                 a0 = skip
                 continue
             except Exception as exc:
+                if a0 == 0:
+                    self.stats.rest_retries += 1
+                    a0 = 1
+                    continue
                 skip = min(B, a0 + max(2, self.window - self.overlap))
                 self._record(a0, skip, d, self.stats.windows - 1, f"{type(exc).__name__}: {exc}", "exception",
                              "lp feed kept on this span")
@@ -723,23 +853,43 @@ class NlpRefiner:
         """
         out = np.zeros(B - A + 2)
         a = A
-        start: tuple[float, ...] = _lp_state(c, d, A)
-        end = _lp_state(c, d, B)
+        n_int = c.size - 2
+        # (from / to a rest end the window solves the rest interval: ``_window``)
+        start: tuple[float, ...] = () if A == 0 else _lp_state(c, d, A)
+        end = (0.0, 0.0) if B == n_int else _lp_state(c, d, B)
         prev: FloatArray | None = None
         last: tuple[int, int, tuple[float, ...], FloatArray | None, tuple[int, FloatArray] | None] | None = None
         W, P = self.window, self.overlap
         while True:
-            b = B if B - a <= W else a + W
-            if b == B:
-                commit = B
+            # windows and commits on the grid of the chain between the rest intervals (knots 1 .. n_int - 1),
+            # a rest interval added to the first (last) window: solving the rest intervals changes the motion
+            # next to them, not where every later window of the chain starts (bench: a shifted grid moved a
+            # join of the 18.35 m path's first chain onto a petal valley, +118 ms)
+            ga, gb = max(a, 1), min(B, n_int - 1)
+            b = gb if gb - ga <= W else ga + W
+            if b == gb:
+                b = commit = B
             else:
-                commit = a + W - P
-                if B - commit < W:
-                    commit = max(B - W, a + 1)
+                commit = ga + W - P
+                if gb - commit < W:
+                    commit = max(gb - W, ga + 1)
             left = (A, out[: a - A + 2].copy()) if a > A else None
             try:
-                sol = self._window(geometry, c, d, a, b, commit, start, end if b == B else (0.0, 0.0), breaks, prev,
-                                   left)
+                try:
+                    sol = self._window(geometry, c, d, a, b, commit, start, end if b == B else (0.0, 0.0), breaks,
+                                       prev, left)
+                except LpNotFinal:
+                    raise
+                except Exception:
+                    if not (b == B == n_int and B - 1 - a >= 2):
+                        raise
+                    # the window that solved the rest interval at the piece's end failed: to the LP's state
+                    # at its inner knot instead
+                    self.stats.rest_retries += 1
+                    B = b = commit = n_int - 1
+                    end = _lp_state(c, d, B)
+                    out = out[: B - A + 2]
+                    sol = self._window(geometry, c, d, a, b, commit, start, end, breaks, prev, left)
             except Exception as exc:
                 if last is None or isinstance(exc, LpNotFinal):
                     raise
@@ -790,18 +940,22 @@ class NlpRefiner:
         (None: the LP's feed is the motion before a).
         Limits are verified over [a, commit + 1] (one interval past the
         commit, which the next window inherits whole).
+        A window from the piece's start (a = 0: ``start`` is empty) or to its end (b = n_int: ``end`` is
+        ignored) solves that rest interval too, in q (``_Shape._rest_rows``); p_0 (p_b+1) is then unused, 0.
         """
         t0 = time.perf_counter()
         index = self.stats.windows
         self.stats.windows += 1
         lim, N = self.lim, self.N
         n = b - a
+        n_int = c.size - 2
+        head, tail = a == 0, b == n_int
         k_loc, tau = checkpoint_layout(n, N)
         s_chk = (a + k_loc + tau) * d
         fine = self._fine_points(a * d, min(b, commit + VERIFY_PAST_COMMIT) * d, d, breaks)
         # the motion around the window for the sampled check: before a (the chain so far, or the LP), and
         # after b when the chain ends there (inside a chain the next window checks what follows)
-        joins_lp = end[0] != 0.0 or end[1] != 0.0
+        joins_lp = not tail and (end[0] != 0.0 or end[1] != 0.0)
         ctx = _Context.around(c, d, a * d, fine[-1] if joins_lp else None, left, lim.sample_period, self.c_final)
         # every point the set-up evaluates, in one call (a call costs ~0.6 ms on top of ~2 us a point)
         br_near = breaks[(breaks > (a - 1) * d) & (breaks < (b + 1) * d)]
@@ -810,29 +964,53 @@ class NlpRefiner:
             br_near + BREAK_EPS_MM, fine, ctx.points(),
         ]))
         ctx_motion = ctx.motion(geometry)
+        if (head or tail) and lim.sample_period is not None:
+            ctx_motion = _standing(ctx_motion, head, tail, lim.sample_period)
         g = geometry(s_chk)
         xsss_hi, xsss_lo = _third_derivative_envelope(geometry, g, k_loc, tau, a, d, N, breaks)
         moving = tuple(
             ax for ax in range(3) if np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS
         )
-        shape = self._shape(n, moving)
+        shape = self._shape(n, moving, head=head, tail=tail)
         base_rows = shape.rows
         K = shape.K
         q_lp = bspline.evaluate(c, s_chk, d)[0]
         f_lp = np.sqrt(np.maximum(q_lp, 0.0))
         Fs = max(float(np.max(f_lp)), *(abs(x) for x in start), 1e-6) * 1.5
         fixed = {i: x / Fs for i, x in enumerate(start)}
-        fixed.update({n: end[0] / Fs, n + 1: end[1] / Fs})
-        x0 = shape.handover(f_lp / Fs, fixed)
+        fit: dict[int, float] = {}  # the hand-over starts the rest intervals from the LP's state at their inner knot
+        rest_lo: list[float] = []
+        rest_hi: list[float] = []
+        if head:
+            fixed[0] = 0.0
+            fit = {i + 1: x / Fs for i, x in enumerate(_lp_state(c, d, 1))}
+        if tail:
+            fixed[n + 1] = 0.0
+            fit.update({n - 1 + i: x / Fs for i, x in enumerate(_lp_state(c, d, n_int - 1))})
+        else:
+            fixed.update({n: end[0] / Fs, n + 1: end[1] / Fs})
+        for on, c_lp in ((head, c[1]), (tail, c[n_int])):
+            if on:
+                if not c_lp > 0.0:
+                    self.stats.window_times.append(time.perf_counter() - t0)
+                    raise NlpFailure("the LP feed does not leave or reach the rest end", index, "rest")
+                rest_lo.append(REST_C_FLOOR * c_lp / Fs**2)
+                rest_hi.append(REST_C_CEIL * c_lp / Fs**2)
+        x0 = shape.handover(f_lp / Fs, {**fixed, **fit})
         if prev is not None:
             m = min(prev.size, n + 2) - self.overlap // 2
             x0[:m] = prev[:m] / Fs
-        x0 = self._shrink_to_feasible(x0, fixed, g, k_loc, tau, d, Fs)
+        if head or tail:
+            x0 = self._shrink_to_feasible(x0, fixed, g, lambda pw: _window_feed(pw, s_chk, a, b, d, head, tail), Fs)
+        else:
+            x0 = self._shrink_to_feasible(x0, fixed, g, lambda pw: kinematics.from_f(*eval_f(pw, k_loc, tau, d)), Fs)
         # parameters
         ds = np.where((tau == 0.0) | (tau == 1.0), d / (2 * N), d / N)
         in_commit = k_loc < commit - a
+        # (a rest interval's travel time is its own term of the objective: ``_Shape._rest_rows``)
+        rest_chk = (head & (k_loc == 0)) | (tail & (k_loc == n - 1))
         L = n * d
-        wt = np.where(in_commit, ds / L, 0.0)
+        wt = np.where(in_commit & ~rest_chk, ds / L, 0.0)
         wf = np.where(in_commit, 0.0, LAMBDA_TAIL * ds / L)
         coefs = []
         for ax in moving:
@@ -891,12 +1069,15 @@ class NlpRefiner:
             lp_side = _LpSideCaps.at(br, f_cap, kc, near_lp, f_lp)
         floor_u, floor_e = self._inherited_floor(prev, g, xsss_hi, xsss_lo, k_loc, tau, d, moving)
         fine, g_fine = _refine_turns(geometry, fine, geometry(fine))
-        # cut slots may sit where a free control point acts, off the fixed states at the window ends
-        slot_lo = (a + (1 if len(start) == 3 else 0)) * d
-        slots = _Slots(n, a, d, moving, slot_lo + BREAK_EPS_MM, b * d - BREAK_EPS_MM, 0.5 * d / N)
+        # cut slots may sit where a free control point acts, off the fixed states at the window ends (and
+        # off the rest intervals, whose feed is not the f spline's)
+        slot_lo = (a + (1 if len(start) == 3 or head else 0)) * d
+        slot_hi = (b - (1 if tail else 0)) * d
+        slots = _Slots(n, a, d, moving, slot_lo + BREAK_EPS_MM, slot_hi - BREAK_EPS_MM, 0.5 * d / N)
+        rest_span = (d if head else -math.inf, (b - 1) * d if tail else math.inf)
 
         def verify(pw: FloatArray) -> tuple[kinematics.FeedDerivs, dict[str, FloatArray]]:
-            fd = kinematics.from_f(*bspline.evaluate(pw, fine, d, col0=a, k_lo=a, k_hi=b - 1))
+            fd = _window_feed(pw, fine, a, b, d, head, tail)
             return fd, self._fine_utilisation(fine, g_fine, fd, br, f_cap)
 
         x = x0
@@ -916,6 +1097,8 @@ class NlpRefiner:
             if slots.any:
                 s_lo, s_hi = slots.bounds(self, prev)
                 lbg, ubg = np.concatenate([lbg, s_lo]), np.concatenate([ubg, s_hi])
+            if shape.n_rest:
+                lbg, ubg = np.concatenate([lbg, rest_lo]), np.concatenate([ubg, rest_hi])
             if self.fault is not None:
                 self.fault(index)
             p_all = np.concatenate([pvec, slots.params()]) if slots.any else pvec
@@ -966,7 +1149,7 @@ class NlpRefiner:
             x = np.asarray(res["x"], dtype=np.float64).ravel()
             lam_g = np.asarray(res["lam_g"], dtype=np.float64).ravel()
             lam_x = np.asarray(res["lam_x"], dtype=np.float64).ravel()
-            self._duals = (a, n, moving, lam_g[:base_rows].copy(), lam_x.copy())
+            self._duals = (a, n, moving, lam_g[:base_rows].copy(), lam_x.copy(), shape.row_index)
             if not np.all(np.isfinite(x)):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("Ipopt returned a non-finite point", index, status)
@@ -979,8 +1162,14 @@ class NlpRefiner:
                     break
                 fine, g_fine = _merge(fine, g_fine, mids, geometry(mids))
                 fd, util = verify(pw)
-            self._sampled(fine, g_fine, fd, util, ctx_motion)  # (after the refinement: its utilisations are spread)
-            if np.any(fd[0] <= 0.0):
+            # (after the refinement: its utilisations are spread)
+            self._sampled(fine, g_fine, fd, util, ctx_motion, rest_span)
+            inside = np.ones(fine.size, dtype=bool)  # (the feed is 0 at a rest end itself)
+            if head:
+                inside &= fine > 0.0
+            if tail:
+                inside &= fine < b * d
+            if np.any(fd[0][inside] <= 0.0):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("feed reaches zero inside the window", index, "nonpositive feed")
             worst = max(float(np.max(u)) for u in util.values())
@@ -1000,8 +1189,9 @@ class NlpRefiner:
             had_slots = slots.any
             util = slots.place(fine, g_fine, util)
             if slots.any and not had_slots:  # the window's shape with slot rows: the same rows, then the slots'
-                shape = self._shape(n, moving, slotted=True)
-                lam_g = np.concatenate([lam_g, np.zeros(shape.rows - lam_g.size)])
+                shape = self._shape(n, moving, slotted=True, head=head, tail=tail)
+                cut = lam_g.size - shape.n_rest
+                lam_g = np.concatenate([lam_g[:cut], np.zeros(shape.rows - lam_g.size), lam_g[cut:]])
             self._tighten(util, fine, a * d, d, moving, fac_u, fac_e, fac_k)
             fac_k[added] = prev_fac[2][added]  # (a cap just added is not tightened: its overshoot was without it)
             # bounds of constant rows stay as they are (tightening them could only make the window infeasible)
@@ -1022,18 +1212,23 @@ class NlpRefiner:
         self, a: int, n: int, moving: tuple[int, ...], shape: _Shape
     ) -> tuple[FloatArray | None, FloatArray | None]:
         """The previous window's last dual point (rows without cut slots) moved to this window's checkpoints,
-        or (None, None) if that window had another shape.  Rows and variables past its end start at 0."""
+        or (None, None) if that window moved other axes (another row layout) or does not overlap this one.
+        Rows and variables past its end start at 0, and so do a rest end's rows.  The windows may differ in
+        size (a chain's last window, one that solves a rest interval: ``_chain``)."""
         dd = self._duals
-        if dd is None or dd[1] != n or dd[2] != moving or not 0 < a - dd[0] < n:
+        if dd is None or dd[2] != moving or not 0 < a - dd[0] < dd[1]:
             return None, None
         adv = a - dd[0]
         sh = adv * (self.N + 1)
-        dst, src = shape.row_index[:, : shape.K - sh], shape.row_index[:, sh:]
+        src_index = dd[5]
+        m = min(shape.K, src_index.shape[1] - sh)
+        dst, src = shape.row_index[:, :m], src_index[:, sh : sh + m]
         ok = (dst >= 0) & (src >= 0)
-        lam_g = np.zeros(shape.base_rows)
+        lam_g = np.zeros(shape.rows)
         lam_g[dst[ok]] = dd[3][src[ok]]
         lam_x = np.zeros(n + 2)
-        lam_x[: n + 2 - adv] = dd[4][adv:]
+        kx = min(n + 2, dd[1] + 2 - adv)
+        lam_x[:kx] = dd[4][adv : adv + kx]
         return lam_g, lam_x
 
     def _inherited_floor(
@@ -1241,7 +1436,7 @@ class NlpRefiner:
 
     def _sampled(
         self, fine: FloatArray, g: PathSamples, fd: kinematics.FeedDerivs, util: dict[str, FloatArray],
-        ctx: _ContextMotion | None = None,
+        ctx: _ContextMotion | None = None, rest_span: tuple[float, float] = (-math.inf, math.inf),
     ) -> None:
         """u and e as the finite differences of the positions sampled at Ts see them, at every sample phase.
 
@@ -1257,13 +1452,24 @@ class NlpRefiner:
         there: ``util["sampled_control_signal"]``, ``util["sampled_servo_error"]`` (F, 3).
 
         ``ctx``: the motion just outside the window (``_Context``), read by the differences of the centres
-        near the window's ends (without it those within 2 Ts of an end are not checked)."""
+        near the window's ends (without it those within 2 Ts of an end are not checked).  Outside
+        ``rest_span`` (the rest intervals of a window that solves them) the time of a step of the grid is
+        2 ds / (f_0 + f_1), exact for a constant sddot as at rest, where the trapezoid of 1 / f is not."""
         lim = self.lim
         Ts = lim.sample_period
         if Ts is None or fine.size < 3:
             return
         f = fd[0]
-        t = np.concatenate([[0.0], np.cumsum(np.diff(fine) * 0.5 * (1.0 / f[:-1] + 1.0 / f[1:]))])
+        if rest_span[0] > fine[0] or rest_span[1] < fine[-1]:
+            dsf = np.diff(fine)
+            mean_v = (fine[1:] <= rest_span[0]) | (fine[:-1] >= rest_span[1])
+            with np.errstate(divide="ignore"):
+                dt = np.where(mean_v, 2.0 * dsf / (f[:-1] + f[1:]), dsf * 0.5 * (1.0 / f[:-1] + 1.0 / f[1:]))
+            if not np.all(np.isfinite(dt)):
+                return
+            t = np.concatenate([[0.0], np.cumsum(dt)])
+        else:
+            t = np.concatenate([[0.0], np.cumsum(np.diff(fine) * 0.5 * (1.0 / f[:-1] + 1.0 / f[1:]))])
         v, acc, _ = kinematics.axis_kinematics(g, *fd)
         t_fine = t
         if ctx is not None:
@@ -1323,9 +1529,7 @@ class NlpRefiner:
         x0: FloatArray,
         fixed: dict[int, float],
         g: PathSamples,
-        k_loc: NDArray[np.int64],
-        tau: FloatArray,
-        d: float,
+        feed: Callable[[FloatArray], kinematics.FeedDerivs],
         Fs: float,
     ) -> FloatArray:
         """Scale the free control points down until the hand-over meets the limits at the checkpoints.
@@ -1339,7 +1543,7 @@ class NlpRefiner:
         free[list(fixed)] = False
         x = x0.copy()
         for step in range(HANDOVER_MAX_STEPS + 1):
-            fd = kinematics.from_f(*eval_f(x * Fs, k_loc, tau, d))
+            fd = feed(x * Fs)
             util = self.lim.utilisation(g, fd)
             if max(float(np.max(u)) for u in util.values()) <= 1.0 and np.all(fd[0] >= 0):
                 return x
@@ -1353,8 +1557,10 @@ class NlpRefiner:
 
 def chain_spans(n_int: int, joins: list[int]) -> list[tuple[int, int]]:
     """The NLP chains (A, B) of a piece on n_int knot intervals whose LP windows meet at ``joins``: knot
-    intervals [A, B) from the LP's state at knot A to its state at B, between the rest intervals."""
-    knots = [1] + [k for k in joins if 1 < k < n_int - 1] + [n_int - 1]
+    intervals [A, B) from the LP's state at knot A to its state at B, or from and to the piece's rest ends
+    (REST_ENDS, on at least REST_ENDS_MIN_INTERVALS intervals; else between the rest intervals)."""
+    ends = REST_ENDS and n_int >= REST_ENDS_MIN_INTERVALS
+    knots = [0 if ends else 1] + [k for k in joins if 1 < k < n_int - 1] + [n_int if ends else n_int - 1]
     return [(A, B) for A, B in itertools.pairwise(knots) if B - A >= 2]
 
 
@@ -1371,6 +1577,56 @@ def _lp_state(c: FloatArray, d: float, k: int) -> tuple[float, float]:
     f = math.sqrt(q)
     f1 = q1 / (2.0 * f)
     return f - 0.5 * f1 * d, f + 0.5 * f1 * d
+
+
+def rest_cps(p_in: float, p_out: float, d: float, head: bool) -> FloatArray:
+    r"""q's three control points on a rest interval from the f spline's (p_k, p_{k+1}) at its inner knot k.
+
+    With f = (p_k + p_{k+1}) / 2 and f' d = p_{k+1} - p_k there, q must meet f^2 and (f^2)' = 2 f f' at the
+    inner knot and vanish at rest: the control points either side of the inner knot are f^2 -+ f f' d,
+    and the one past rest is minus its neighbour (q = 0 at rest, q' = 2 c / d there, c the control point
+    next to rest).  Head (knot 1 of the piece): (c_0, c_1, c_2); tail (knot n_int - 1): (c_{n-1}, c_n, c_{n+1})."""
+    f = 0.5 * (p_in + p_out)
+    near, far = f * (3.0 * p_in - p_out) / 2.0, f * (3.0 * p_out - p_in) / 2.0
+    return np.array([-near, near, far] if head else [near, far, -far])
+
+
+def rest_profile(
+    c: FloatArray, p: FloatArray, mask: NDArray[np.bool_], d: float
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """The LP's q control points with the rest intervals the NLP solved (``mask`` True on a rest interval:
+    ``refine``'s output) replaced by ``rest_cps``, and the mask with them off (a rest interval's feed is
+    always q: ``solvers.timing.PieceProfile``)."""
+    c, mask = c.copy(), mask.copy()
+    n_int = mask.size
+    if mask[0]:
+        c[:3] = rest_cps(float(p[1]), float(p[2]), d, True)
+        mask[0] = False
+    if mask[-1]:
+        c[-3:] = rest_cps(float(p[n_int - 1]), float(p[n_int]), d, False)
+        mask[-1] = False
+    return c, mask
+
+
+def _window_feed(
+    pw: FloatArray, s: FloatArray, a: int, b: int, d: float, head: bool, tail: bool
+) -> kinematics.FeedDerivs:
+    """(sdot, sddot, sdddot) at piece-local s of a window's control points pw (p_a .. p_b+1) over knot
+    intervals [a, b): f, and the rest intervals' q (``rest_cps``) on the first (``head``, a = 0) or last
+    (``tail``, b = n_int) interval."""
+    fd = kinematics.from_f(*bspline.evaluate(pw, s, d, col0=a, k_lo=a, k_hi=b - 1))
+    if not (head or tail):
+        return fd
+    f, sdd, sddd = (x.copy() for x in fd)
+    ends = []
+    if head:
+        ends.append((s < (a + 1) * d, a, rest_cps(pw[1], pw[2], d, True)))
+    if tail:
+        ends.append((s > (b - 1) * d, b - 1, rest_cps(pw[-3], pw[-2], d, False)))
+    for sel, k, cq in ends:
+        if sel.any():
+            f[sel], sdd[sel], sddd[sel] = kinematics.from_q(*bspline.evaluate(cq, s[sel], d, k_lo=k, k_hi=k, col0=k))
+    return f, sdd, sddd
 
 
 class _Slots:
@@ -1648,6 +1904,21 @@ class _ContextMotion:
         )
 
 
+def _standing(ctx: _ContextMotion | None, head: bool, tail: bool, Ts: float) -> _ContextMotion:
+    """``ctx`` with the machine standing at rest before a window from the piece's start (``head``) and
+    after one to its end (``tail``): CONTEXT_SAMPLES sample periods of v = a = 0."""
+    t = (CONTEXT_STEP * Ts) * np.arange(1, math.ceil(CONTEXT_SAMPLES / CONTEXT_STEP) + 1, dtype=np.float64)
+    zero = np.zeros((t.size, 3))
+    empty_t, empty = np.zeros(0), np.zeros((0, 3))
+    lt, lv, la = (ctx.left_t, ctx.left_v, ctx.left_acc) if ctx is not None else (empty_t, empty, empty)
+    rt, rv, ra = (ctx.right_t, ctx.right_v, ctx.right_acc) if ctx is not None else (empty_t, empty, empty)
+    if head:
+        lt, lv, la = -t[::-1], zero, zero
+    if tail:
+        rt, rv, ra = t, zero, zero
+    return _ContextMotion(lt, lv, la, rt, rv, ra)
+
+
 @dataclass(frozen=True)
 class _Context:
     r"""The feed just outside an NLP window, fixed while the window is solved (piece-local s, mm).
@@ -1680,6 +1951,11 @@ class _Context:
         if Ts is None:
             return _Context(*none, *none)
         length = (c.size - 2) * d
+        if left is not None and left[0] == 0:
+            # the chain solved the rest interval: its q (``rest_cps``), and f from knot 1 on
+            c = c.copy()
+            c[:3] = rest_cps(float(left[1][1]), float(left[1][2]), d, True)
+            left = (1, left[1][1:])
 
         def feed(s: FloatArray) -> kinematics.FeedDerivs:
             f, f1, f2 = kinematics.from_q(*bspline.evaluate(c, s, d))
@@ -1904,6 +2180,7 @@ def _merge_stats(into: NlpStats, st: NlpStats) -> None:
     into.handover_unscaled += st.handover_unscaled
     into.lp_kept_chains += st.lp_kept_chains
     into.slower_kept += st.slower_kept
+    into.rest_retries += st.rest_retries
     into.worst_verified = max(into.worst_verified, st.worst_verified)
     into.window_times.extend(st.window_times)
     into.failures.extend({**f, "nlp_window": base + f["nlp_window"]} for f in st.failures)

@@ -64,8 +64,15 @@ from solvers.lp import (
 from solvers.machine import AXES, Machine, drive_outputs
 from solvers.nlp import V_STEP_SHARE as NLP_V_STEP_SHARE
 from solvers.nlp import VERIFY_TOL as NLP_VERIFY_TOL
-from solvers.nlp import ChainPipeline, NlpLimits, NlpRefiner, NlpStats, chain_spans
-from solvers.timing import PieceProfile, PieceTiming, interval_times, stalled_intervals, stuck
+from solvers.nlp import ChainPipeline, NlpLimits, NlpRefiner, NlpStats, chain_spans, rest_profile
+from solvers.timing import (
+    PieceProfile,
+    PieceTiming,
+    interval_times,
+    rest_interval_times,
+    stalled_intervals,
+    stuck,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -718,10 +725,22 @@ def _refine_piece(
             pipe.close()  # (its chains were on other knots)
         refiner = _refiner(piece, machine, opt, lp_prof.n_int, nlp_lim, refiners, stats)
         p, mask = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain, opt.nlp_workers, verify_s)
+    # the rest intervals the NLP solved (``solvers.nlp.REST_ENDS``) as q control points; a span reverted to
+    # the LP's feed below takes the LP's rest interval next to it back too
+    c, mask = rest_profile(lp_prof.c, p, mask, lp_prof.d)
+    n_int = lp_prof.n_int
+
+    def revert(lo: int, hi: int) -> None:
+        mask[lo:hi] = False
+        if lo == 1:
+            c[:3] = lp_prof.c[:3]
+        if hi == n_int - 1:
+            c[-3:] = lp_prof.c[-3:]
+
     # A refined feed that stalls between its verification points (its quadratic dips to ~0 inside a knot
     # interval: bench seeds 1978, 1987) keeps the LP's feed over that NLP span (unless the LP's stalls too):
     # a run of refined intervals starts and ends on the LP's state, so the feed stays continuous
-    stalled = stalled_intervals(replace(lp_prof, p=p, f_mask=mask))
+    stalled = stalled_intervals(replace(lp_prof, c=c, p=p, f_mask=mask))
     for k in stalled if stalled.size and not stuck(lp_prof) else ():
         if not mask[k]:
             continue
@@ -730,7 +749,7 @@ def _refine_piece(
             lo -= 1
         while hi < mask.size and mask[hi]:
             hi += 1
-        mask[lo:hi] = False
+        revert(lo, hi)
         stats.failures.append({
             "nlp_window": -1, "s_range": [lo * lp_prof.d, hi * lp_prof.d],
             "reason": "the refined feed stalls inside a knot interval", "status": "stall",
@@ -740,38 +759,49 @@ def _refine_piece(
     # feed is within the NLP's limits over the span (``NlpRefiner.lp_worst``: lp+nlp's LP leaves part of the
     # drive limits to the NLP, which may have to be slower there)
     refiner.verify = np.zeros(0) if verify_s is None else np.asarray(verify_s, dtype=np.float64)
-    for lo, hi, t_f, t_lp in _slower_spans(lp_prof, p, mask, joins):
+    for lo, hi, t_f, t_lp in _slower_spans(lp_prof, replace(lp_prof, c=c, p=p, f_mask=mask), joins):
         if refiner.lp_worst(geometry, lp_prof.c, lp_prof.d, lo, hi, breaks) > 1.0 + NLP_VERIFY_TOL:
             stats.slower_kept += 1
             continue
-        mask[lo:hi] = False
+        revert(lo, hi)
         stats.failures.append({
             "nlp_window": -1, "s_range": [lo * lp_prof.d, hi * lp_prof.d],
             "reason": f"the refined feed takes {t_f:.6g} s over the span, the lp feed {t_lp:.6g} s",
             "status": "slower than lp", "fallback": "lp feed over the span",
         })
-    return replace(lp_prof, p=p, f_mask=mask)
+    return replace(lp_prof, c=c, p=p, f_mask=mask)
 
 
-def _slower_spans(
-    lp_prof: PieceProfile, p: FloatArray, mask: NDArray[np.bool_], joins: list[int]
-) -> list[tuple[int, int, float, float]]:
+def _slower_spans(lp_prof: PieceProfile, prof: PieceProfile, joins: list[int]) -> list[tuple[int, int, float, float]]:
     """Refined spans (lo, hi, refined time, LP time; knot intervals [lo, hi), s) slower than the LP's feed.
 
     A span is a run of refined intervals cut at the chains' ends (``solvers.nlp.chain_spans``): each
     refined run starts and ends on the LP's state (``NlpRefiner._spans``: the chain's ends, a bridge's
     join, the knots around a window kept on the LP feed), and so does each chain inside a run, so reverting
     one keeps the feed and its slope continuous (p at its ends reproduces q and q' there).  Times are the
-    integrals of d / f and d / sqrt(q) over each interval (``interval_times``: exact for the quadratics)."""
+    integrals of d / f and d / sqrt(q) over each interval (``interval_times``: exact for the quadratics).
+    ``prof``: the refined profile; a span next to a rest interval the NLP solved (its q differs from the
+    LP's) counts that interval too (``rest_interval_times``), as it goes back to the LP's with the span."""
+    mask = prof.f_mask
+    if mask is None:
+        return []
     on = np.flatnonzero(mask)
     if not on.size:
         return []
     cut = np.zeros(mask.size + 1, dtype=bool)
     cut[[A for A, _ in chain_spans(lp_prof.n_int, joins)]] = True
     first = np.flatnonzero(cut[on] | np.concatenate([[True], np.diff(on) > 1]))
-    t_f = np.add.reduceat(interval_times(replace(lp_prof, p=p, f_mask=mask), on), first)
+    t_f = np.add.reduceat(interval_times(prof, on), first)
     t_lp = np.add.reduceat(interval_times(lp_prof, on), first)
     last = np.append(first[1:], on.size) - 1
+    rest_f, rest_lp = rest_interval_times(prof), rest_interval_times(lp_prof)
+    for j, k, same in ((0, 1, np.array_equal(prof.c[:3], lp_prof.c[:3])),
+                       (-1, lp_prof.n_int - 2, np.array_equal(prof.c[-3:], lp_prof.c[-3:]))):
+        at = first if j == 0 else last
+        hit = np.flatnonzero(on[at] == k)
+        if not same and hit.size:
+            t_f[hit] += rest_f[j]
+            t_lp[hit] += rest_lp[j]
     slow = np.flatnonzero(~(t_f <= (1.0 + SLOWER_SPAN_TOL) * t_lp))
     return [(int(on[first[j]]), int(on[last[j]]) + 1, float(t_f[j]), float(t_lp[j])) for j in slow]
 
@@ -1273,6 +1303,8 @@ def schedule_stream(
             # chains whose LP feed was kept unsolved: at the feed bound, well inside the other limits
             "nlp_lp_kept_chains": nlp_stats.lp_kept_chains,
             "nlp_slower_kept_spans": nlp_stats.slower_kept,
+            # windows that solved a rest interval and failed, solved again from (to) the LP's state next to it
+            "nlp_rest_retries": nlp_stats.rest_retries,
             # worst fine-grid utilisation (u, e, feed, ...) of any accepted NLP window
             "nlp_worst_verified_utilisation": nlp_stats.worst_verified,
             "nlp_window_times": nlp_stats.window_times,

@@ -17,6 +17,7 @@ relative and the sampled feed does not fluctuate.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import partial
 
@@ -320,6 +321,31 @@ def interval_times(profile: PieceProfile, k: NDArray[np.int64]) -> FloatArray:
     if kq.size:
         out[~use_f] = d * _inverse_sqrt_quadratic_integral(c[kq], c[kq + 1], c[kq + 2])
     return out
+
+
+def rest_interval_times(profile: PieceProfile) -> tuple[float, float]:
+    r"""Time to cross the first and the last knot interval (from and to rest), s.
+
+    On the first, c_0 = -c_1 and q(t) = 2 c_1 t + (c_2 - 3 c_1) t^2 / 2 (t in [0, 1]); with t = w^2 the
+    time d * integral dt / sqrt(q) is 2 d * integral_0^1 dw / sqrt(A + B w^2), A = 2 c_1, B = (c_2 - 3 c_1) / 2:
+    2 d asinh(sqrt(B / A)) / sqrt(B) if B > 0, 2 d asin(sqrt(-B / A)) / sqrt(-B) if B < 0 (A + B = q(1) > 0),
+    2 d / sqrt(A) if B = 0; the last interval mirrored.  inf if the feed does not leave (reach) rest."""
+    c, d = profile.c, profile.d
+    out = []
+    for c1, c2 in ((c[1], c[2]), (c[-2], c[-3])):
+        A, B = 2.0 * float(c1), 0.5 * (float(c2) - 3.0 * float(c1))
+        if not (A > 0.0 and A + B > 0.0):
+            out.append(math.inf)
+            continue
+        z = B / A
+        if abs(z) < 1e-8:
+            val = 1.0 - z / 6.0
+        elif z > 0.0:
+            val = math.asinh(math.sqrt(z)) / math.sqrt(z)
+        else:
+            val = math.asin(math.sqrt(-z)) / math.sqrt(-z)
+        out.append(2.0 * d * val / math.sqrt(A))
+    return out[0], out[1]
 
 
 def _inverse_quadratic_integral(p0: FloatArray, p1: FloatArray, p2: FloatArray) -> FloatArray:

@@ -12,6 +12,7 @@ import pytest
 
 from geometry import examples as ex
 from solvers import lp as LP
+from solvers import nlp as NLP
 from solvers.lp import LimitSet
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
@@ -34,6 +35,9 @@ def _end_times(sch: object, L: float) -> tuple[float, float]:
 
 
 def test_flower_rest_ends_are_faster_and_within_the_drive_limits(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the LP's rows (where the rest intervals keep the LP's feed: ``solvers.nlp.REST_ENDS`` off; with it the
+    # NLP's rest windows start from this LP feed, and a failed one falls back to it)
+    monkeypatch.setattr(NLP, "REST_ENDS", False)
     tp, m = ex.flower(1), router()
     L = tp.length
     on = schedule(tp, m, Options())

@@ -1,0 +1,176 @@
+"""The NLP's rest intervals (``solvers.nlp.REST_ENDS``): a chain from (to) a rest end solves the rest
+interval too, as the quadratic q from rest to the f spline's state at the inner knot.
+
+Independent truth: the B-spline algebra of q (value and slope at the inner knot, zero at rest), scipy's
+adaptive quadrature for the rest interval's travel time, numpy's kinematics for the CasADi rows, and the
+finite differences of the sampled positions for the drive limits (``tests.fdcheck``).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from geometry import examples as ex
+from solvers import bspline, kinematics, nlp
+from solvers.machine import router
+from solvers.pipeline import Options, schedule
+from solvers.timing import PieceProfile, rest_interval_times
+from tests.solvers.test_nlp import _assert_seams_continuous, _capture_stats, _check_drive
+
+#: q's value and slope at the inner knot against f^2 and 2 f f' (relative).
+STATE_RTOL = 1e-12
+#: Rest-interval time against scipy's adaptive quadrature (relative).
+TIME_RTOL = 1e-9
+#: The NLP's control point next to rest against the LP's (its bound is REST_C_CEIL of it).
+REST_STEP_RTOL = 1e-9
+#: CasADi rows against numpy (relative to the row's scale; sqrt(q) is floored at sqrt(REST_Q_FLOOR) Fs at rest).
+ROW_RTOL = 1e-9
+
+
+@pytest.mark.parametrize("head", [True, False])
+def test_rest_cps_meet_rest_and_the_inner_state(head: bool) -> None:
+    """``rest_cps``: q = 0 at the rest end, and q = f^2, q' = 2 f f' at the inner knot, where f and f' are
+    those of the f spline's control points (p_k, p_k+1): f = (p_k + p_k+1) / 2, f' = (p_k+1 - p_k) / d."""
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        d = float(rng.uniform(0.3, 5.0))
+        p_in, p_out = rng.uniform(5.0, 200.0, 2)
+        f, f1 = 0.5 * (p_in + p_out), (p_out - p_in) / d
+        c = nlp.rest_cps(p_in, p_out, d, head)
+        s_rest, s_in = (0.0, d) if head else (d, 0.0)
+        q_rest = bspline.evaluate(c, np.array([s_rest]), d, k_lo=0, k_hi=0)[0][0]
+        q, q1, _ = (x[0] for x in bspline.evaluate(c, np.array([s_in]), d, k_lo=0, k_hi=0))
+        assert abs(q_rest) <= 1e-12 * f * f
+        assert q == pytest.approx(f * f, rel=STATE_RTOL)
+        assert q1 == pytest.approx(2.0 * f * f1, rel=STATE_RTOL, abs=1e-12 * f * f / d)
+
+
+def test_rest_interval_times_match_quadrature() -> None:
+    """The closed form of ``rest_interval_times`` (asinh, asin, or 2 d / sqrt(A)) against scipy's quad of
+    d / sqrt(q) over both rest intervals, with the acceleration rising (B > 0), falling (B < 0) or constant."""
+    d = 1.7
+    for p_in, p_out in ((40.0, 80.0), (60.0, 45.0), (30.0, 50.0)):
+        head, tail = nlp.rest_cps(p_in, p_out, d, True), nlp.rest_cps(p_out, p_in, d, False)
+        c = np.concatenate([head, np.full(4, 2000.0), tail])
+        prof = PieceProfile(s_start=0.0, length=(c.size - 2) * d, d=d, c=c)
+        n = prof.n_int
+
+        def inv(s: float, c: np.ndarray = c) -> float:
+            return 1.0 / float(np.sqrt(max(bspline.evaluate(c, np.array([s]), d)[0][0], 0.0)))
+
+        t0 = quad(inv, 0.0, d, epsabs=0, epsrel=1e-12, limit=200)[0]
+        t1 = quad(inv, (n - 1) * d, n * d, epsabs=0, epsrel=1e-12, limit=200)[0]
+        got = rest_interval_times(prof)
+        assert got[0] == pytest.approx(t0, rel=TIME_RTOL)
+        assert got[1] == pytest.approx(t1, rel=TIME_RTOL)
+    # a rest interval whose feed does not leave rest takes forever
+    c = np.concatenate([[0.0, 0.0, 100.0], np.full(4, 2000.0), [100.0, 0.0, 0.0]])
+    assert rest_interval_times(PieceProfile(0.0, 7 * d, d, c)) == (np.inf, np.inf)
+
+
+def test_rest_rows_are_the_q_kinematics() -> None:
+    """``_Shape`` with a head and a tail: its rows at the rest intervals' checkpoints are u, e of the feed
+    sqrt(q), q from ``rest_cps`` of the free control points at the inner knots, evaluated here with numpy
+    (``kinematics.from_q``, ``axis_kinematics``); its extra rows are the control points next to rest, and
+    its objective's rest term is the rest intervals' time (``rest_interval_times``) over the window's length."""
+    n, N, axes = 6, 4, (0, 1)
+    shape = nlp._Shape(n, N, axes, False, head=True, tail=True)
+    assert shape.n_rest == 2
+    k, tau = nlp.checkpoint_layout(n, N)
+    K = k.size
+    rng = np.random.default_rng(11)
+    d, Fs = 1.5, 120.0
+    s = (k + tau) * d
+    geo = {name: np.column_stack([np.sin(s + i), np.cos(0.7 * s + i)]) for i, name in enumerate(("d1", "d2", "d3"))}
+    coef = rng.uniform(0.5, 1.5, (len(axes), 8))
+    x = np.concatenate([[0.0], rng.uniform(0.3, 0.6, n), [0.0]])
+    p = np.concatenate([
+        [Fs, 1 / d], *geo["d1"].T, *geo["d2"].T, *geo["d3"].T, *geo["d3"].T, np.zeros(K), np.zeros(K),
+        coef.ravel(),
+    ])
+    fn = ca.Function("g", [shape._problem["x"], shape._problem["p"]], [shape._problem["g"], shape._problem["f"]])
+    g_ca, obj = fn(x, p)
+    g = np.asarray(g_ca).ravel()
+    pw = x * Fs
+    rest = (k == 0) | (k == n - 1)
+    # independent: q of each rest interval (all its checkpoints, both ends included) from its control
+    # points, through bspline and from_q
+    c_head, c_tail = nlp.rest_cps(pw[1], pw[2], d, True), nlp.rest_cps(pw[n - 1], pw[n], d, False)
+    fd = tuple(np.zeros(K) for _ in range(3))
+    for sel, cq, kk in ((k == 0, c_head, 0), (k == n - 1, c_tail, n - 1)):
+        ref = kinematics.from_q(*bspline.evaluate(cq, s[sel], d, k_lo=kk, k_hi=kk, col0=kk))
+        for o, v in zip(fd, ref, strict=True):
+            o[sel] = v
+    # the verification's feed (``_window_feed``) is the same inside the rest intervals
+    inside = rest & (tau > 0) & (tau < 1)
+    for got, want in zip(nlp._window_feed(pw, s[inside], 0, n, d, True, True), fd, strict=True):
+        np.testing.assert_allclose(got, want[inside], rtol=1e-12, atol=1e-9)
+    from geometry.toolpath import PathSamples
+
+    z = np.zeros((K, 1))
+    gs = PathSamples(s=s, position=np.zeros((K, 3)), d1=np.hstack([geo["d1"], z]), d2=np.hstack([geo["d2"], z]),
+                     d3=np.hstack([geo["d3"], z]))
+    v, acc, j = kinematics.axis_kinematics(gs, *fd)
+    for m in range(len(axes)):
+        u = coef[m, 0] * acc[:, m] + coef[m, 1] * v[:, m]
+        e = coef[m, 2] * v[:, m] + coef[m, 3] * acc[:, m] + coef[m, 4] * j[:, m]
+        blk = m * 3
+        idx = np.flatnonzero(rest & (shape.row_index[blk] >= 0))
+        np.testing.assert_allclose(g[shape.row_index[blk, idx]], u[idx], rtol=ROW_RTOL, atol=ROW_RTOL * np.abs(u).max())
+        idx = np.flatnonzero(rest)
+        np.testing.assert_allclose(g[shape.row_index[blk + 1, idx]], e[idx], rtol=ROW_RTOL,
+                                   atol=ROW_RTOL * np.abs(e).max())
+    np.testing.assert_allclose(g[-2:], [c_head[1] / Fs**2, c_tail[1] / Fs**2], rtol=1e-12)
+    # with zero time weights on the checkpoints the objective is the rest intervals' time x Fs / (n d)
+    c = np.concatenate([c_head, np.full(n - 4, 1.0), c_tail])
+    t_rest = sum(rest_interval_times(PieceProfile(0.0, n * d, d, c)))
+    assert float(obj) == pytest.approx(t_rest * Fs / (n * d), rel=1e-6)
+
+
+def test_nlp_solves_the_rest_intervals(monkeypatch: pytest.MonkeyPatch) -> None:
+    """One flower loop: with REST_ENDS the NLP moves the state at knots 1 and n_int - 1 (the rest intervals'
+    q differs from the LP's, their acceleration at rest within the LP's), the motion is shorter than with
+    the LP's rest intervals (same run), feed and tangential acceleration are continuous at every knot, and
+    the drive limits hold in the finite differences of the samples."""
+    tp, m = ex.flower(1), router()
+    monkeypatch.setattr(nlp, "REST_ENDS", False)
+    off = schedule(tp, m, Options(method="lp+nlp"))
+    monkeypatch.setattr(nlp, "REST_ENDS", True)
+    on = schedule(tp, m, Options(method="lp+nlp"))
+    lp_c, c = off.profiles[0].c, on.profiles[0].c
+    assert not np.allclose(c[:3], lp_c[:3]) and not np.allclose(c[-3:], lp_c[-3:])
+    assert 0 < c[1] <= lp_c[1] * (1 + REST_STEP_RTOL) and 0 < c[-2] <= lp_c[-2] * (1 + REST_STEP_RTOL)
+    assert c[0] == -c[1] and c[-1] == -c[-2]
+    assert on.summary["nlp_rest_retries"] == 0 and on.diagnostics["nlp_fallbacks"] == []
+    assert on.summary["motion_time"] < off.summary["motion_time"]
+    _assert_seams_continuous(on)
+    _check_drive(m, on)
+
+
+def test_failed_rest_window_is_solved_again_from_the_lp_state(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The chain's first window, from rest, fails: the chain is solved again from the LP's state at knot 1
+    (counted in ``nlp_rest_retries``, not a fallback), so the first rest interval is the LP's again, and
+    the limits hold."""
+    tp, m = ex.flower(1), router()
+    monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)
+    monkeypatch.setattr(nlp, "REST_ENDS", False)
+    off = schedule(tp, m, Options(method="lp+nlp"))
+    monkeypatch.setattr(nlp, "REST_ENDS", True)
+    made = _capture_stats(monkeypatch)
+
+    def fault(index: int) -> None:
+        if index == 0:
+            raise RuntimeError("injected")
+
+    sch = schedule(tp, m, Options(method="lp+nlp", nlp_fault=fault))
+    assert sch.summary["nlp_rest_retries"] == made[-1].rest_retries == 1
+    assert sch.diagnostics["nlp_fallbacks"] == []
+    np.testing.assert_array_equal(sch.profiles[0].c[:3], off.profiles[0].c[:3])
+    assert not np.allclose(sch.profiles[0].c[-3:], off.profiles[0].c[-3:])  # the end's still the NLP's
+    _assert_seams_continuous(sch)
+    _check_drive(m, sch)
