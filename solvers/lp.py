@@ -120,8 +120,9 @@ COL_SCALE_FLOOR = 1e-12
 #: An axis whose path-derivative coefficients are all below this is not moving.
 AXIS_EPS = 1e-12
 #: Knot intervals next to a rest end whose acceleration and jerk rows are the drive's control signal and
-#: servo error (lp+nlp, ``LimitSet.rest_drive``): the rest interval, whose feed the LP keeps (the NLP's
-#: travel time is singular at rest; the NLP chain starts from the LP's state at its far knot).
+#: servo error (lp+nlp, ``LimitSet.rest_drive``): the rest interval.  Since session 14 the NLP solves it
+#: too (``solvers.nlp.REST_ENDS``): this LP feed is where its rest windows start from, and what a failed
+#: one keeps (a chain then starts from the LP's state at the interval's far knot).
 #: Flower (one loop, phased knots 2.33 mm): the LP's x acceleration was capped by
 #: the router's amax 500 mm/s^2 there while the servo error admits ~936; motion 3.0652 s with none,
 #: 3.0426 s with the rest interval alone (its second control point then meets interval 1's amax rows),
