@@ -177,9 +177,8 @@ REST_ENDS = True
 #: Pieces on fewer knot intervals keep the LP's rest intervals.
 REST_ENDS_MIN_INTERVALS = 4
 #: Gauss-Legendre nodes and weights on [0, 1] for a rest interval's travel time (``_Shape._rest_rows``).
-REST_GL: tuple[FloatArray, FloatArray] = (
-    0.5 * np.polynomial.legendre.leggauss(16)[1], 0.5 * (np.polynomial.legendre.leggauss(16)[0] + 1.0)
-)
+_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(16)
+REST_GL: tuple[FloatArray, FloatArray] = (0.5 * _GL_WEIGHTS, 0.5 * (_GL_NODES + 1.0))
 #: Floor of the scaled q under a square root in a rest interval (q is 0 at rest itself).
 REST_Q_FLOOR = 1e-20
 #: A rest interval's control point next to rest may fall to this share of the LP's (its acceleration at
@@ -817,23 +816,17 @@ class NlpRefiner:
                 b0, vals = self._chain(geometry, c, d, a0, B, breaks)
             except LpNotFinal:
                 raise
-            except NlpFailure as exc:
+            except Exception as exc:
                 if a0 == 0:  # the chain from the rest end (``_window``) failed: from the LP's state at knot 1
                     self.stats.rest_retries += 1
                     a0 = 1
                     continue
                 skip = min(B, a0 + max(2, self.window - self.overlap))
-                self._record(a0, skip, d, exc.window, exc.reason, exc.status, "lp feed kept on this span")
-                a0 = skip
-                continue
-            except Exception as exc:
-                if a0 == 0:
-                    self.stats.rest_retries += 1
-                    a0 = 1
-                    continue
-                skip = min(B, a0 + max(2, self.window - self.overlap))
-                self._record(a0, skip, d, self.stats.windows - 1, f"{type(exc).__name__}: {exc}", "exception",
-                             "lp feed kept on this span")
+                if isinstance(exc, NlpFailure):
+                    self._record(a0, skip, d, exc.window, exc.reason, exc.status, "lp feed kept on this span")
+                else:
+                    self._record(a0, skip, d, self.stats.windows - 1, f"{type(exc).__name__}: {exc}", "exception",
+                                 "lp feed kept on this span")
                 a0 = skip
                 continue
             out.append((a0, b0, vals))
