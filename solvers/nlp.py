@@ -492,10 +492,7 @@ class _Shape:
         for is_rest, k, inner in ((self.head, 0, 1), (self.tail, n - 1, n - 1)):
             if not is_rest:
                 continue
-            fk = 0.5 * (x[inner] + x[inner + 1])
-            near = fk * (3.0 * x[inner] - x[inner + 1]) / 2.0   # f^2 - f f' d at the inner knot
-            far = fk * (3.0 * x[inner + 1] - x[inner]) / 2.0    # f^2 + f f' d
-            c0, c1, c2 = (-near, near, far) if k == 0 else (near, far, -far)
+            c0, c1, c2 = _rest_cp_values(x[inner], x[inner + 1], k == 0)
             c_rest, c_in = (c1, c2) if k == 0 else (c1, c0)   # next to rest, and the inner one
             extra.append(c_rest)
             rest_time = rest_time + (2.0 / n) * sum(
@@ -1579,9 +1576,15 @@ def rest_cps(p_in: float, p_out: float, d: float, head: bool) -> FloatArray:
     inner knot and vanish at rest: the control points either side of the inner knot are f^2 -+ f f' d,
     and the one past rest is minus its neighbour (q = 0 at rest, q' = 2 c / d there, c the control point
     next to rest).  Head (knot 1 of the piece): (c_0, c_1, c_2); tail (knot n_int - 1): (c_{n-1}, c_n, c_{n+1})."""
+    return np.array(_rest_cp_values(p_in, p_out, head))
+
+
+def _rest_cp_values(p_in: Any, p_out: Any, head: bool) -> tuple[Any, Any, Any]:
+    """``rest_cps``' three values, in plain arithmetic: floats, or CasADi expressions (``_Shape._rest_rows``)."""
     f = 0.5 * (p_in + p_out)
-    near, far = f * (3.0 * p_in - p_out) / 2.0, f * (3.0 * p_out - p_in) / 2.0
-    return np.array([-near, near, far] if head else [near, far, -far])
+    near = f * (3.0 * p_in - p_out) / 2.0  # f^2 - f f' d at the inner knot
+    far = f * (3.0 * p_out - p_in) / 2.0  # f^2 + f f' d
+    return (-near, near, far) if head else (near, far, -far)
 
 
 def rest_profile(
