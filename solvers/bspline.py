@@ -85,3 +85,26 @@ def integral_weights(k0: int, k1: int, d: float, col0: int, ncols: int) -> Float
     np.add.at(w, idx + 1, 2.0 * d / 3.0)
     np.add.at(w, idx + 2, d / 6.0)
     return w
+
+
+#: The power m of the rest interval's bump b = tau (1 - tau)^m (``rest_bump``).
+REST_BUMP_POWER = 2
+
+
+def rest_bump(s: FloatArray, d: float, k: int, head: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
+    r"""The extra shape b of a rest interval's q (``solvers.nlp.REST_BUMP``) and its s-derivatives, at
+    piece-local s on knot interval k (the piece's first, ``head``, or last), with m = REST_BUMP_POWER and
+    r the unit distance from rest (tau = s / d - k at the head, 1 - tau at the tail), u = 1 - r:
+
+        b = r u^m,  db/dr = u^(m-1) (1 - (m+1) r),  d2b/dr2 = -m u^(m-2) (2 - (m+1) r)
+
+    (d/ds = +-1/d d/dr).  b is 0 at both ends of the interval, and so is b' at the inner knot: q + g b keeps
+    q's value at rest and its value and slope at the inner knot, and adds g / d to |q'| at rest.
+    Each (K,), 1, 1/mm, 1/mm^2."""
+    m = REST_BUMP_POWER
+    t = np.asarray(s, dtype=np.float64) / d - k
+    r = t if head else 1.0 - t
+    u = 1.0 - r
+    sign = 1.0 if head else -1.0
+    return (r * u**m, sign * u ** (m - 1) * (1.0 - (m + 1) * r) / d,
+            -m * u ** (m - 2) * (2.0 - (m + 1) * r) / (d * d))

@@ -724,23 +724,29 @@ def _refine_piece(
         if pipe is not None:
             pipe.close()  # (its chains were on other knots)
         refiner = _refiner(piece, machine, opt, lp_prof.n_int, nlp_lim, refiners, stats)
-        p, mask = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain, opt.nlp_workers, verify_s)
+        p, mask = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain, opt.nlp_workers, verify_s,
+                                 _standing_ends(toolpath, piece))
     # the rest intervals the NLP solved (``solvers.nlp.REST_ENDS``) as q control points; a span reverted to
     # the LP's feed below takes the LP's rest interval next to it back too
-    c, mask = rest_profile(lp_prof.c, p, mask, lp_prof.d)
+    c, mask, g = rest_profile(lp_prof.c, p, mask, lp_prof.d)
     n_int = lp_prof.n_int
 
     def revert(lo: int, hi: int) -> None:
         mask[lo:hi] = False
         if lo == 1:
             c[:3] = lp_prof.c[:3]
+            g[0] = 0.0
         if hi == n_int - 1:
             c[-3:] = lp_prof.c[-3:]
+            g[1] = 0.0
+
+    def refined() -> PieceProfile:
+        return replace(lp_prof, c=c, p=p, f_mask=mask, rest_g=(g[0], g[1]))
 
     # A refined feed that stalls between its verification points (its quadratic dips to ~0 inside a knot
     # interval: bench seeds 1978, 1987) keeps the LP's feed over that NLP span (unless the LP's stalls too):
     # a run of refined intervals starts and ends on the LP's state, so the feed stays continuous
-    stalled = stalled_intervals(replace(lp_prof, c=c, p=p, f_mask=mask))
+    stalled = stalled_intervals(refined())
     for k in stalled if stalled.size and not stuck(lp_prof) else ():
         if not mask[k]:
             continue
@@ -759,7 +765,7 @@ def _refine_piece(
     # feed is within the NLP's limits over the span (``NlpRefiner.lp_worst``: lp+nlp's LP leaves part of the
     # drive limits to the NLP, which may have to be slower there)
     refiner.verify = np.zeros(0) if verify_s is None else np.asarray(verify_s, dtype=np.float64)
-    for lo, hi, t_f, t_lp in _slower_spans(lp_prof, replace(lp_prof, c=c, p=p, f_mask=mask), joins):
+    for lo, hi, t_f, t_lp in _slower_spans(lp_prof, refined(), joins):
         if refiner.lp_worst(geometry, lp_prof.c, lp_prof.d, lo, hi, breaks) > 1.0 + NLP_VERIFY_TOL:
             stats.slower_kept += 1
             continue
@@ -769,7 +775,7 @@ def _refine_piece(
             "reason": f"the refined feed takes {t_f:.6g} s over the span, the lp feed {t_lp:.6g} s",
             "status": "slower than lp", "fallback": "lp feed over the span",
         })
-    return replace(lp_prof, c=c, p=p, f_mask=mask)
+    return refined()
 
 
 def _slower_spans(lp_prof: PieceProfile, prof: PieceProfile, joins: list[int]) -> list[tuple[int, int, float, float]]:
@@ -795,8 +801,9 @@ def _slower_spans(lp_prof: PieceProfile, prof: PieceProfile, joins: list[int]) -
     t_lp = np.add.reduceat(interval_times(lp_prof, on), first)
     last = np.append(first[1:], on.size) - 1
     rest_f, rest_lp = rest_interval_times(prof), rest_interval_times(lp_prof)
-    for j, k, same in ((0, 1, np.array_equal(prof.c[:3], lp_prof.c[:3])),
-                       (-1, lp_prof.n_int - 2, np.array_equal(prof.c[-3:], lp_prof.c[-3:]))):
+    for j, k, same in ((0, 1, np.array_equal(prof.c[:3], lp_prof.c[:3]) and prof.rest_g[0] == lp_prof.rest_g[0]),
+                       (-1, lp_prof.n_int - 2,
+                        np.array_equal(prof.c[-3:], lp_prof.c[-3:]) and prof.rest_g[1] == lp_prof.rest_g[1])):
         at = first if j == 0 else last
         hit = np.flatnonzero(on[at] == k)
         if not same and hit.size:
@@ -828,7 +835,13 @@ def _chain_pipeline(
     plan = plan_piece(piece, machine, opt, n_int, toolpath)
     refiner = _refiner(piece, machine, opt, plan.n_int, nlp_lim, refiners, stats)
     return ChainPipeline(refiner, _local(toolpath, piece), plan.d, plan.n_int, _breaks(toolpath, piece),
-                         opt.nlp_workers)
+                         opt.nlp_workers, _standing_ends(toolpath, piece))
+
+
+def _standing_ends(toolpath: Toolpath, piece: Piece) -> tuple[bool, bool]:
+    """Whether the machine stands before / after the piece (the path's start / end), rather than passing a
+    corner from (to) another piece: where the NLP may give a rest interval its bump (``NlpRefiner.bump``)."""
+    return piece.index == 0, piece.index == len(toolpath.pieces) - 1
 
 
 def first_sample_at(t: float, Ts: float) -> int:

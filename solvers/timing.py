@@ -51,7 +51,9 @@ class PieceProfile:
     sdot = f(s) (control points ``p``), elsewhere sdot = sqrt(q(s)) (control
     points ``c``).  The two agree in value and slope at every knot where they
     meet (the NLP fixes p there from q), so feed and tangential acceleration
-    are continuous.  The first and last intervals (rest) are always q.
+    are continuous.  The first and last intervals (rest) are always q, plus
+    ``rest_g`` times the rest interval's bump (``bspline.rest_bump``: the NLP's extra
+    shape there, ``solvers.nlp.REST_BUMP``; 0 for the LP's).
 
     Attributes:
         s_start: global arc length of the piece start, mm.
@@ -60,6 +62,7 @@ class PieceProfile:
         c: (n_int + 2,) control points of q, mm^2/s^2.
         p: (n_int + 2,) control points of f, mm/s, or None (LP only).
         f_mask: (n_int,) bool, intervals that use f, or None.
+        rest_g: the bumps' amplitudes (first, last rest interval), mm^2/s^2.
     """
 
     s_start: float
@@ -68,6 +71,12 @@ class PieceProfile:
     c: FloatArray
     p: FloatArray | None = None
     f_mask: NDArray[np.bool_] | None = None
+    rest_g: tuple[float, float] = (0.0, 0.0)
+
+    def rest_slopes(self) -> tuple[float, float]:
+        """q' at the start (> 0 if the feed leaves rest) and at the end (< 0 if it reaches rest), mm/s^2."""
+        c, d = self.c, self.d
+        return (float(c[1] - c[0] + self.rest_g[0]) / d, float(c[-1] - c[-2] - self.rest_g[1]) / d)
 
     @property
     def n_int(self) -> int:
@@ -76,7 +85,10 @@ class PieceProfile:
     def feed(self, s: FloatArray) -> kinematics.FeedDerivs:
         """(sdot, sddot, sdddot) at piece-local s, each (K,)."""
         s = np.asarray(s, dtype=np.float64)
-        out = kinematics.from_q(*bspline.evaluate(self.c, s, self.d))
+        q3 = bspline.evaluate(self.c, s, self.d)
+        if any(self.rest_g):
+            q3 = self._bumped(s, q3)
+        out = kinematics.from_q(*q3)
         if self.p is None or self.f_mask is None:
             return out
         k = np.clip(np.floor(s / self.d), 0, self.n_int - 1).astype(np.int64)
@@ -87,6 +99,21 @@ class PieceProfile:
         for o, v in zip(out, fd, strict=True):
             o[use] = v
         return out
+
+    def _bumped(
+        self, s: FloatArray, q3: tuple[FloatArray, FloatArray, FloatArray]
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """q, q', q'' with ``rest_g`` times the rest intervals' bumps added (copies)."""
+        q, q1, q2 = (x.copy() for x in q3)
+        n, d = self.n_int, self.d
+        for g, k, head in ((self.rest_g[0], 0, True), (self.rest_g[1], n - 1, False)):
+            sel = s < d if head else s > (n - 1) * d
+            if g and sel.any():
+                b, b1, b2 = bspline.rest_bump(s[sel], d, k, head)
+                q[sel] += g * b
+                q1[sel] += g * b1
+                q2[sel] += g * b2
+        return q, q1, q2
 
     def s_of_x(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Piece-local s(x) and ds/dx."""
@@ -111,7 +138,8 @@ class PieceProfile:
 
         In the end intervals q = sigma (|q'_rest| + q''_end sigma / 2) with sigma
         the distance from the rest point = d w^2, so h = 2 sqrt(d) /
-        sqrt(|q'_rest| + q''_end d w^2 / 2): no cancellation, no singularity.
+        sqrt(|q'_rest| + q''_end d w^2 / 2): no cancellation, no singularity (the bump
+        g b adds g (1 - w^2)^2 / d under the root: ``bspline.rest_bump`` with tau = w^2).
         """
         c, d, n = self.c, self.d, self.n_int
         xl = np.clip(np.asarray(xl, dtype=np.float64), -float(x0), float(n - x0))
@@ -132,8 +160,15 @@ class PieceProfile:
         wL = (n - x0) - xl
         with np.errstate(divide="ignore", invalid="ignore"):
             mid = d / sdot
-            head = 2.0 * np.sqrt(d) / np.sqrt(q1_0 + 0.5 * q2_0 * d * w0 * w0)
-            tail = 2.0 * np.sqrt(d) / np.sqrt(-q1_L + 0.5 * q2_L * d * wL * wL)
+            r0 = q1_0 + 0.5 * q2_0 * d * w0 * w0
+            rL = -q1_L + 0.5 * q2_L * d * wL * wL
+            g0, gL = self.rest_g
+            if g0:
+                r0 = r0 + (g0 / d) * (1.0 - w0 * w0) ** bspline.REST_BUMP_POWER
+            if gL:
+                rL = rL + (gL / d) * (1.0 - wL * wL) ** bspline.REST_BUMP_POWER
+            head = 2.0 * np.sqrt(d) / np.sqrt(r0)
+            tail = 2.0 * np.sqrt(d) / np.sqrt(rL)
         out = np.where(x < 1.0, head, np.where(x > n - 1.0, tail, mid))
         return np.asarray(out, dtype=np.float64)
 
@@ -181,8 +216,7 @@ class PieceTiming:
         """The time table of ``profile``; without ``inverse`` it holds the integral only (``duration``: the
         same value), not refined for ``s_at`` (which then raises)."""
         n = profile.n_int
-        q1_0 = (profile.c[1] - profile.c[0]) / profile.d
-        q1_L = (profile.c[-1] - profile.c[-2]) / profile.d
+        q1_0, q1_L = profile.rest_slopes()
         if not (q1_0 > 0 and q1_L < 0):
             raise ScheduleError(
                 "feed profile cannot leave or reach a rest point (zero acceleration at rest): the path turns "
@@ -252,8 +286,7 @@ def _segment_table(profile: PieceProfile, x0: float, x1: float, inverse: bool) -
 
 def stuck(profile: PieceProfile) -> bool:
     """True if the feed cannot leave or reach a rest end (q' = 0 there) or stalls inside the piece."""
-    q1_0 = (profile.c[1] - profile.c[0]) / profile.d
-    q1_L = (profile.c[-1] - profile.c[-2]) / profile.d
+    q1_0, q1_L = profile.rest_slopes()
     return not (q1_0 > 0 and q1_L < 0) or stalled_intervals(profile).size > 0
 
 
@@ -329,11 +362,19 @@ def rest_interval_times(profile: PieceProfile) -> tuple[float, float]:
     On the first, c_0 = -c_1 and q(t) = 2 c_1 t + (c_2 - 3 c_1) t^2 / 2 (t in [0, 1]); with t = w^2 the
     time d * integral dt / sqrt(q) is 2 d * integral_0^1 dw / sqrt(A + B w^2), A = 2 c_1, B = (c_2 - 3 c_1) / 2:
     2 d asinh(sqrt(B / A)) / sqrt(B) if B > 0, 2 d asin(sqrt(-B / A)) / sqrt(-B) if B < 0 (A + B = q(1) > 0),
-    2 d / sqrt(A) if B = 0; the last interval mirrored.  inf if the feed does not leave (reach) rest."""
+    2 d / sqrt(A) if B = 0; the last interval mirrored.  With a bump (``PieceProfile.rest_g``: g b added to
+    q) the root is of A + B w^2 + g (1 - w^2)^2, smooth in w: REST_TIME_NODES-point Gauss-Legendre.
+    inf if the feed does not leave (reach) rest."""
     c, d = profile.c, profile.d
     out = []
-    for c1, c2 in ((c[1], c[2]), (c[-2], c[-3])):
+    for c1, c2, g in ((c[1], c[2], profile.rest_g[0]), (c[-2], c[-3], profile.rest_g[1])):
         A, B = 2.0 * float(c1), 0.5 * (float(c2) - 3.0 * float(c1))
+        if g:
+            w, x = _REST_TIME_GL
+            r = A + B * x * x + g * (1.0 - x * x) ** bspline.REST_BUMP_POWER
+            ok = A + g > 0.0 and A + B > 0.0 and bool(np.all(r > 0.0))
+            out.append(2.0 * d * float(np.sum(w / np.sqrt(r))) if ok else math.inf)
+            continue
         if not (A > 0.0 and A + B > 0.0):
             out.append(math.inf)
             continue
@@ -346,6 +387,13 @@ def rest_interval_times(profile: PieceProfile) -> tuple[float, float]:
             val = math.asin(math.sqrt(-z)) / math.sqrt(-z)
         out.append(2.0 * d * val / math.sqrt(A))
     return out[0], out[1]
+
+
+#: Gauss-Legendre nodes for a rest interval's time with a bump (``rest_interval_times``).
+REST_TIME_NODES = 48
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(REST_TIME_NODES)
+#: (weights, nodes) on [0, 1]
+_REST_TIME_GL = (0.5 * _GL_W, 0.5 * (_GL_X + 1.0))
 
 
 def _inverse_quadratic_integral(p0: FloatArray, p1: FloatArray, p2: FloatArray) -> FloatArray:

@@ -50,6 +50,58 @@ def test_rest_cps_meet_rest_and_the_inner_state(head: bool) -> None:
         assert q1 == pytest.approx(2.0 * f * f1, rel=STATE_RTOL, abs=1e-12 * f * f / d)
 
 
+def _bump_poly(head: bool) -> np.polynomial.Polynomial:
+    """The rest interval's bump as a polynomial in tau (independent of ``bspline.rest_bump``'s closed forms):
+    r (1 - r)^m, r = tau at the head, 1 - tau at the tail."""
+    P = np.polynomial.Polynomial
+    r = P([0.0, 1.0]) if head else P([1.0, -1.0])
+    return r * (1 - r) ** bspline.REST_BUMP_POWER
+
+
+@pytest.mark.parametrize("head", [True, False])
+def test_rest_bump_keeps_rest_and_the_inner_state(head: bool) -> None:
+    """``bspline.rest_bump`` against the polynomial r (1 - r)^m and its derivatives (numpy), and its ends:
+    b = 0 at rest and at the inner knot, b' = 0 at the inner knot, |b'| = 1/d at rest."""
+    d, k = 1.3, 5
+    t = np.linspace(0.0, 1.0, 41)
+    b, b1, b2 = bspline.rest_bump((k + t) * d, d, k, head)
+    P = _bump_poly(head)
+    np.testing.assert_allclose(b, P(t), atol=1e-14)
+    np.testing.assert_allclose(b1, P.deriv(1)(t) / d, atol=1e-13)
+    np.testing.assert_allclose(b2, P.deriv(2)(t) / d**2, atol=1e-12)
+    rest, inner = (0, -1) if head else (-1, 0)
+    assert b[rest] == 0.0 and abs(b[inner]) < 1e-15 and abs(b1[inner]) < 1e-15
+    assert b1[rest] == pytest.approx((1.0 if head else -1.0) / d, rel=1e-14)
+
+
+def test_rest_interval_times_with_bumps_match_quadrature() -> None:
+    """``rest_interval_times`` with bumps (``PieceProfile.rest_g``; Gauss-Legendre) against scipy's quad of
+    d / sqrt(q) with q evaluated by ``PieceProfile.feed``, and against the time table (``PieceTiming``)."""
+    from solvers.timing import PieceTiming
+
+    d = 1.7
+    for (p_in, p_out), g in (((40.0, 80.0), (1500.0, -800.0)), ((60.0, 45.0), (-600.0, 2500.0))):
+        head, tail = nlp.rest_cps(p_in, p_out, d, True), nlp.rest_cps(p_out, p_in, d, False)
+        c = np.concatenate([head, np.full(4, 2000.0), tail])
+        prof = PieceProfile(s_start=0.0, length=(c.size - 2) * d, d=d, c=c, rest_g=g)
+        n = prof.n_int
+
+        def inv(s: float, prof: PieceProfile = prof) -> float:
+            return 1.0 / float(prof.feed(np.array([s]))[0][0])
+
+        # 1 / sqrt(q) ~ (distance to rest)^(-1/2): in w, the distance d w^2, the integrand is smooth
+        L = n * d
+        t0 = quad(lambda w, d=d: 2 * d * w * inv(d * w * w), 0.0, 1.0, epsabs=0, epsrel=1e-12, limit=200)[0]
+        t1 = quad(lambda w, L=L: 2 * d * w * inv(L - d * w * w), 0.0, 1.0, epsabs=0, epsrel=1e-12, limit=200)[0]
+        got = rest_interval_times(prof)
+        assert got[0] == pytest.approx(t0, rel=TIME_RTOL)
+        assert got[1] == pytest.approx(t1, rel=TIME_RTOL)
+        mid = sum(quad(inv, k * d, (k + 1) * d, epsabs=0, epsrel=1e-12)[0] for k in range(1, n - 1))
+        assert PieceTiming.build(prof).duration == pytest.approx(t0 + t1 + mid, rel=TIME_RTOL)
+        # the rest slopes: q' at rest, with the bump's g / d
+        assert prof.rest_slopes() == pytest.approx(((2 * c[1] + g[0]) / d, -(2 * c[-2] + g[1]) / d), rel=1e-14)
+
+
 def test_rest_interval_times_match_quadrature() -> None:
     """The closed form of ``rest_interval_times`` (asinh, asin, or 2 d / sqrt(A)) against scipy's quad of
     d / sqrt(q) over both rest intervals, with the acceleration rising (B > 0), falling (B < 0) or constant."""
@@ -88,7 +140,8 @@ def test_rest_rows_are_the_q_kinematics() -> None:
     s = (k + tau) * d
     geo = {name: np.column_stack([np.sin(s + i), np.cos(0.7 * s + i)]) for i, name in enumerate(("d1", "d2", "d3"))}
     coef = rng.uniform(0.5, 1.5, (len(axes), 8))
-    x = np.concatenate([[0.0], rng.uniform(0.3, 0.6, n), [0.0]])
+    # p_0 and p_n+1 carry the rest intervals' bumps (REST_BUMP): one raises q inside, one lowers it
+    x = np.concatenate([[0.2], rng.uniform(0.3, 0.6, n), [-0.1]])
     p = np.concatenate([
         [Fs, 1 / d], *geo["d1"].T, *geo["d2"].T, *geo["d3"].T, *geo["d3"].T, np.zeros(K), np.zeros(K),
         coef.ravel(),
@@ -101,10 +154,14 @@ def test_rest_rows_are_the_q_kinematics() -> None:
     # independent: q of each rest interval (all its checkpoints, both ends included) from its control
     # points, through bspline and from_q
     c_head, c_tail = nlp.rest_cps(pw[1], pw[2], d, True), nlp.rest_cps(pw[n - 1], pw[n], d, False)
+    g_head, g_tail = pw[0] * (pw[1] + pw[2]) / 2, pw[n + 1] * (pw[n - 1] + pw[n]) / 2
     fd = tuple(np.zeros(K) for _ in range(3))
-    for sel, cq, kk in ((k == 0, c_head, 0), (k == n - 1, c_tail, n - 1)):
-        ref = kinematics.from_q(*bspline.evaluate(cq, s[sel], d, k_lo=kk, k_hi=kk, col0=kk))
-        for o, v in zip(fd, ref, strict=True):
+    for sel, cq, kk, gb, head in ((k == 0, c_head, 0, g_head, True), (k == n - 1, c_tail, n - 1, g_tail, False)):
+        q3 = bspline.evaluate(cq, s[sel], d, k_lo=kk, k_hi=kk, col0=kk)
+        bump = _bump_poly(head)
+        t = s[sel] / d - kk
+        q3 = (q3[0] + gb * bump(t), q3[1] + gb * bump.deriv(1)(t) / d, q3[2] + gb * bump.deriv(2)(t) / d**2)
+        for o, v in zip(fd, kinematics.from_q(*q3), strict=True):
             o[sel] = v
     # the verification's feed (``_window_feed``) is the same inside the rest intervals
     inside = rest & (tau > 0) & (tau < 1)
@@ -125,17 +182,20 @@ def test_rest_rows_are_the_q_kinematics() -> None:
         idx = np.flatnonzero(rest)
         np.testing.assert_allclose(g[shape.row_index[blk + 1, idx]], e[idx], rtol=ROW_RTOL,
                                    atol=ROW_RTOL * np.abs(e).max())
-    np.testing.assert_allclose(g[-2:], [c_head[1] / Fs**2, c_tail[1] / Fs**2], rtol=1e-12)
+    # the extra rows: the acceleration step at rest, q' d / 2 there
+    np.testing.assert_allclose(g[-2:], [(c_head[1] + g_head / 2) / Fs**2, (c_tail[1] + g_tail / 2) / Fs**2],
+                               rtol=1e-12)
     # with zero time weights on the checkpoints the objective is the rest intervals' time x Fs / (n d)
     c = np.concatenate([c_head, np.full(n - 4, 1.0), c_tail])
-    t_rest = sum(rest_interval_times(PieceProfile(0.0, n * d, d, c)))
+    t_rest = sum(rest_interval_times(PieceProfile(0.0, n * d, d, c, rest_g=(g_head, g_tail))))
     assert float(obj) == pytest.approx(t_rest * Fs / (n * d), rel=1e-6)
 
 
 def test_nlp_solves_the_rest_intervals(monkeypatch: pytest.MonkeyPatch) -> None:
     """One flower loop: with REST_ENDS the NLP moves the state at knots 1 and n_int - 1 (the rest intervals'
     q differs from the LP's, their acceleration at rest within the LP's), the motion is shorter than with
-    the LP's rest intervals (same run), feed and tangential acceleration are continuous at every knot, and
+    the LP's rest intervals (same run), and shorter still with the bumps (REST_BUMP) than without, feed
+    and tangential acceleration are continuous at every knot, and
     the drive limits hold in the finite differences of the samples."""
     tp, m = ex.flower(1), router()
     monkeypatch.setattr(nlp, "REST_ENDS", False)
@@ -144,10 +204,17 @@ def test_nlp_solves_the_rest_intervals(monkeypatch: pytest.MonkeyPatch) -> None:
     on = schedule(tp, m, Options(method="lp+nlp"))
     lp_c, c = off.profiles[0].c, on.profiles[0].c
     assert not np.allclose(c[:3], lp_c[:3]) and not np.allclose(c[-3:], lp_c[-3:])
-    assert 0 < c[1] <= lp_c[1] * (1 + REST_STEP_RTOL) and 0 < c[-2] <= lp_c[-2] * (1 + REST_STEP_RTOL)
+    (q1_0, q1_L), (lp1_0, lp1_L) = on.profiles[0].rest_slopes(), off.profiles[0].rest_slopes()
+    assert 0 < q1_0 <= lp1_0 * (1 + REST_STEP_RTOL) and lp1_L * (1 + REST_STEP_RTOL) <= q1_L < 0
     assert c[0] == -c[1] and c[-1] == -c[-2]
     assert on.summary["nlp_rest_retries"] == 0 and on.diagnostics["nlp_fallbacks"] == []
     assert on.summary["motion_time"] < off.summary["motion_time"]
+    # the bumps (REST_BUMP) are used at both ends, and shorten the motion against the quadratic alone
+    assert all(g != 0.0 for g in on.profiles[0].rest_g)
+    monkeypatch.setattr(nlp, "REST_BUMP", False)
+    plain = schedule(tp, m, Options(method="lp+nlp"))
+    assert plain.profiles[0].rest_g == (0.0, 0.0)
+    assert on.summary["motion_time"] < plain.summary["motion_time"] < off.summary["motion_time"]
     _assert_seams_continuous(on)
     _check_drive(m, on)
 
@@ -171,6 +238,19 @@ def test_failed_rest_window_is_solved_again_from_the_lp_state(monkeypatch: pytes
     assert sch.summary["nlp_rest_retries"] == made[-1].rest_retries == 1
     assert sch.diagnostics["nlp_fallbacks"] == []
     np.testing.assert_array_equal(sch.profiles[0].c[:3], off.profiles[0].c[:3])
+    assert sch.profiles[0].rest_g[0] == 0.0
     assert not np.allclose(sch.profiles[0].c[-3:], off.profiles[0].c[-3:])  # the end's still the NLP's
     _assert_seams_continuous(sch)
+    _check_drive(m, sch)
+
+
+def test_bumps_only_where_the_machine_stands() -> None:
+    """A path with a corner (two pieces): the bump (REST_BUMP) is used at the path's start and end, where the
+    machine stands, and not on either side of the corner, whose acceleration step the two pieces share
+    (``pipeline._standing_ends``); the drive limits hold in the finite differences of the samples."""
+    m = router()
+    sch = schedule(ex.square_corner(50.0), m, Options(method="lp+nlp"))
+    first, second = sch.profiles
+    assert first.rest_g[1] == 0.0 and second.rest_g[0] == 0.0
+    assert first.rest_g[0] != 0.0 and second.rest_g[1] != 0.0
     _check_drive(m, sch)
