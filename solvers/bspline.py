@@ -14,6 +14,8 @@ consecutive control points fixes q and q' there.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
@@ -108,3 +110,11 @@ def rest_bump(s: FloatArray, d: float, k: int, head: bool) -> tuple[FloatArray, 
     sign = 1.0 if head else -1.0
     return (r * u**m, sign * u ** (m - 1) * (1.0 - (m + 1) * r) / d,
             -m * u ** (m - 2) * (2.0 - (m + 1) * r) / (d * d))
+
+
+def rest_bump_quotient(r: Any) -> Any:
+    """b / r = (1 - r)^m of ``rest_bump`` at the unit distance r from rest (floats, arrays or CasADi
+    expressions): what the bump adds, times g, under the root of a rest interval's time integrand, where
+    q / r is taken with r = w^2 (``timing.PieceProfile.h_local``, ``timing.rest_interval_times``,
+    ``solvers.nlp._Shape._rest_rows``)."""
+    return (1.0 - r) ** REST_BUMP_POWER

@@ -509,7 +509,7 @@ class _Shape:
             rest_time = rest_time + (2.0 / n) * sum(
                 float(wi) / ca.sqrt(ca.fmax(
                     2.0 * c_rest + 0.5 * (c_in - 3.0 * c_rest) * float(xi) ** 2
-                    + (0.0 if g is None else g * (1.0 - float(xi) ** 2) ** bspline.REST_BUMP_POWER), REST_Q_FLOOR))
+                    + (0.0 if g is None else g * bspline.rest_bump_quotient(float(xi) ** 2)), REST_Q_FLOOR))
                 for wi, xi in zip(wq, xq, strict=True)
             )
             a1, a2 = c1 - c0, c0 - 2.0 * c1 + c2

@@ -164,9 +164,9 @@ class PieceProfile:
             rL = -q1_L + 0.5 * q2_L * d * wL * wL
             g0, gL = self.rest_g
             if g0:
-                r0 = r0 + (g0 / d) * (1.0 - w0 * w0) ** bspline.REST_BUMP_POWER
+                r0 = r0 + (g0 / d) * bspline.rest_bump_quotient(w0 * w0)
             if gL:
-                rL = rL + (gL / d) * (1.0 - wL * wL) ** bspline.REST_BUMP_POWER
+                rL = rL + (gL / d) * bspline.rest_bump_quotient(wL * wL)
             head = 2.0 * np.sqrt(d) / np.sqrt(r0)
             tail = 2.0 * np.sqrt(d) / np.sqrt(rL)
         out = np.where(x < 1.0, head, np.where(x > n - 1.0, tail, mid))
@@ -371,7 +371,7 @@ def rest_interval_times(profile: PieceProfile) -> tuple[float, float]:
         A, B = 2.0 * float(c1), 0.5 * (float(c2) - 3.0 * float(c1))
         if g:
             w, x = _REST_TIME_GL
-            r = A + B * x * x + g * (1.0 - x * x) ** bspline.REST_BUMP_POWER
+            r = A + B * x * x + g * bspline.rest_bump_quotient(x * x)
             ok = A + g > 0.0 and A + B > 0.0 and bool(np.all(r > 0.0))
             out.append(2.0 * d * float(np.sum(w / np.sqrt(r))) if ok else math.inf)
             continue
