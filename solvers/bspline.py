@@ -91,30 +91,43 @@ def integral_weights(k0: int, k1: int, d: float, col0: int, ncols: int) -> Float
 
 #: The power m of the rest interval's bump b = tau (1 - tau)^m (``rest_bump``).
 REST_BUMP_POWER = 2
+#: The power k of the rest interval's rise e = tau^2 (1 - tau)^k (``rest_bump``; k >= 2).
+REST_RISE_POWER = 2
 
 
-def rest_bump(s: FloatArray, d: float, k: int, head: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
-    r"""The extra shape b of a rest interval's q (``solvers.nlp.REST_BUMP``) and its s-derivatives, at
-    piece-local s on knot interval k (the piece's first, ``head``, or last), with m = REST_BUMP_POWER and
-    r the unit distance from rest (tau = s / d - k at the head, 1 - tau at the tail), u = 1 - r:
+def rest_bump(
+    s: FloatArray, d: float, k: int, head: bool, g: float, h: float = 0.0
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    r"""What the rest interval's two extra shapes add to its q (``solvers.nlp.REST_BUMP``, ``REST_RISE``),
+    g b + h e, and their s-derivatives, at piece-local s on knot interval k (the piece's first, ``head``, or
+    last), with m = REST_BUMP_POWER and r the unit distance from rest (tau = s / d - k at the head, 1 - tau
+    at the tail), u = 1 - r:
 
-        b = r u^m,  db/dr = u^(m-1) (1 - (m+1) r),  d2b/dr2 = -m u^(m-2) (2 - (m+1) r)
+        b = r u^m,    db/dr = u^(m-1) (1 - (m+1) r),  d2b/dr2 = -m u^(m-2) (2 - (m+1) r)
+        e = r^2 u^2,  de/dr = 2 r u (1 - 2 r),        d2e/dr2 = 2 (1 - 6 r + 6 r^2)
 
-    (d/ds = +-1/d d/dr).  b is 0 at both ends of the interval, and so is b' at the inner knot: q + g b keeps
-    q's value at rest and its value and slope at the inner knot, and adds g / d to |q'| at rest.
-    Each (K,), 1, 1/mm, 1/mm^2."""
+    (d/ds = +-1/d d/dr).  Both are 0 at both ends of the interval, and so are their slopes at the inner
+    knot: q + g b + h e keeps q's value at rest and its value and slope at the inner knot.  g adds g / d
+    to |q'| at rest (the acceleration step); e has slope 0 at rest too, so h shapes the acceleration after
+    the step without moving it (the bump alone is spent on the step where the step is at its bound).
+    g, h in mm^2/s^2; returns (K,) mm^2/s^2, mm/s^2, 1/s^2."""
     m = REST_BUMP_POWER
     t = np.asarray(s, dtype=np.float64) / d - k
     r = t if head else 1.0 - t
     u = 1.0 - r
     sign = 1.0 if head else -1.0
-    return (r * u**m, sign * u ** (m - 1) * (1.0 - (m + 1) * r) / d,
-            -m * u ** (m - 2) * (2.0 - (m + 1) * r) / (d * d))
+    b = (g * (r * u**m), g * (u ** (m - 1) * (1.0 - (m + 1) * r)), g * (-m * u ** (m - 2) * (2.0 - (m + 1) * r)))
+    if h:
+        j = REST_RISE_POWER
+        b = (b[0] + h * (r * r * u**j), b[1] + h * (r * u ** (j - 1) * (2.0 - (2.0 + j) * r)),
+             b[2] + h * (u ** (j - 2) * (2.0 * u * u - 4.0 * j * r * u + j * (j - 1) * r * r)))
+    return b[0], sign * b[1] / d, b[2] / (d * d)
 
 
-def rest_bump_quotient(r: Any) -> Any:
-    """b / r = (1 - r)^m of ``rest_bump`` at the unit distance r from rest (floats, arrays or CasADi
-    expressions): what the bump adds, times g, under the root of a rest interval's time integrand, where
-    q / r is taken with r = w^2 (``timing.PieceProfile.h_local``, ``timing.rest_interval_times``,
-    ``solvers.nlp._Shape._rest_rows``)."""
-    return (1.0 - r) ** REST_BUMP_POWER
+def rest_bump_quotient(r: Any, g: Any, h: Any = 0.0) -> Any:
+    """(g b + h e) / r = g (1 - r)^m + h r (1 - r)^2 of ``rest_bump`` at the unit distance r from rest
+    (floats, arrays or CasADi expressions): what the two shapes add under the root of a rest interval's
+    time integrand, where q / r is taken with r = w^2 (``timing.PieceProfile.h_local``,
+    ``timing.rest_interval_times``, ``solvers.nlp._Shape._rest_rows``)."""
+    u = 1.0 - r
+    return g * u**REST_BUMP_POWER + h * (r * u**REST_RISE_POWER)

@@ -86,6 +86,12 @@ from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
 GeometryFn = Callable[[FloatArray], PathSamples]
+#: An NLP span of a chain: (a, b, p_a .. p_{b+1}, rise factors of the piece's first and last rest interval,
+#: 0 unless the span solved it: ``NlpRefiner._chain``).
+Span = tuple[int, int, FloatArray, tuple[float, float]]
+#: The chain's feed committed before a window: (A, p_A .. p_{a+1}, the rise factor of the piece's first rest
+#: interval if A = 0).
+_Left = tuple[int, FloatArray, float]
 
 #: Share of the sampled e and u budgets the impulse of a velocity step (a tangent break passed at speed)
 #: may take (``solvers.lp.v_step_limit``): the impulse is verified on top of e and u either side and a
@@ -181,6 +187,14 @@ REST_ENDS = True
 #: along the interval; the 4x finer NLP's rises after the step at rest (flower: 1711 -> 3010 mm/s^2 in the
 #: first 0.5 mm) and reaches 72 mm/s at 1 mm against the quadratic's 55.
 REST_BUMP = True
+#: ... and, with REST_BUMP, a third: h e, e = tau^2 (1 - tau)^2 (``bspline.rest_bump``: 0 at both ends, slope
+#: 0 at both), h = r f_in with r a variable of its own per rest end (x past p_n+1).  Where the step at rest is
+#: at its bound (the LP's) the bump is spent on the step (flower: g < 0, the quadratic's own slope was over
+#: it), and the acceleration could not rise after the step; e moves neither the step nor the inner state.
+#: A window from (to) rest that fails with it is solved again without it before the LP's state is taken
+#: (``NlpRefiner.rise``): the rest interval's N + 1 checkpoints hold the sharper shape less well
+#: (``square_corner``: 1.12 x between them after 4 rounds).  Flower 3.0033 -> 2.9996 s.
+REST_RISE = True
 #: Pieces on fewer knot intervals keep the LP's rest intervals.
 REST_ENDS_MIN_INTERVALS = 4
 #: Gauss-Legendre nodes and weights on [0, 1] for a rest interval's travel time (``_Shape._rest_rows``).
@@ -384,7 +398,10 @@ class _Shape:
         ncols = n + 2
         self.B0, B1, B2 = _interval_basis(k, tau, ncols)
         na = len(axes)
-        x = ca.SX.sym("p", ncols)
+        #: variables past p_n+1: one rise factor per rest end (``REST_RISE``: first the head's, then the tail's)
+        self.n_rise = (int(head) + int(tail)) if REST_BUMP and REST_RISE else 0
+        xx = ca.SX.sym("p", ncols + self.n_rise)
+        x = xx[:ncols]
         P = ca.SX.sym("P", 2 + 4 * na * K + 2 * K + 8 * na + (n * (1 + 3 * na) if slotted else 0))
         Fs, inv_d = P[0], P[1]
         off = 2
@@ -413,8 +430,8 @@ class _Shape:
         if head or tail:
             # the rest intervals in q (``rest_cps``): their checkpoints' rows, feed and travel time from the
             # q the state at the inner knot gives; interval 0's f (p_0) and interval n-1's (p_n+1) are unused
-            fh, rows, rest_time, rest_rows = self._rest_rows(x, Fs, inv_d, fh, f, f1, f2, xs, xss, xsss_hi,
-                                                             xsss_lo, coef, with_aj, sel)
+            fh, rows, rest_time, rest_rows = self._rest_rows(x, xx[ncols:], Fs, inv_d, fh, f, f1, f2, xs, xss,
+                                                             xsss_hi, xsss_lo, coef, with_aj, sel)
         else:
             rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj, sel)
         rows.append(fh[sel])
@@ -444,7 +461,7 @@ class _Shape:
         rows += rest_rows
         g = ca.vertcat(*rows)
         obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh) + rest_time
-        self._problem = {"x": x, "p": P, "f": obj, "g": g}
+        self._problem = {"x": xx, "p": P, "f": obj, "g": g}
         self.rows = int(g.size1())
         self.base_rows = nxt
         #: rows after the slots: one per rest end (``_rest_rows``)
@@ -470,9 +487,9 @@ class _Shape:
             self._safe_solver = ca.nlpsol("feed_nlp_safe", "ipopt", self._problem, IPOPT_SAFE_OPTIONS)
         return self._safe_solver
 
-    def _rest_rows(self, x: Any, Fs: Any, inv_d: Any, fh: Any, f: Any, f1: Any, f2: Any, xs: list[Any],
-                   xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any], coef: list[Any], with_aj: bool,
-                   sel: list[int]) -> tuple[Any, list[Any], Any, list[Any]]:
+    def _rest_rows(self, x: Any, rise: Any, Fs: Any, inv_d: Any, fh: Any, f: Any, f1: Any, f2: Any,
+                   xs: list[Any], xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any], coef: list[Any],
+                   with_aj: bool, sel: list[int]) -> tuple[Any, list[Any], Any, list[Any]]:
         r"""Rows, scaled feed and travel time of a window whose first (``head``) or last (``tail``) knot interval
         is a rest interval of the piece, its feed sqrt(q) from the quadratic q that starts (ends) at rest and
         meets the f spline's value and slope at the inner knot (``rest_cps``).
@@ -484,7 +501,8 @@ class _Shape:
         over the interval is 2 d times that of 1 / sqrt(2 c_1 + (c_2 - 3 c_1) w^2 / 2) over w in [0, 1]
         (REST_GL Gauss-Legendre nodes; mirrored for the tail); in the objective's units (times / L, f scaled
         by Fs) that is 2 / n times the node sum.  With REST_BUMP, q has g b added (``bspline.rest_bump``,
-        g = ``_rest_g`` of p_0 or p_n+1): under the root g (1 - w^2)^m, and in the rows g b, g b', g b''.
+        g = ``_rest_g`` of p_0 or p_n+1): under the root g (1 - w^2)^m, and in the rows g b, g b', g b''; with
+        REST_RISE also h e (h = ``_rest_g`` of the end's variable in ``rise``: the head's first), alike.
         Extra rows (one per rest end): c_1 + g / 2 (the control point next to rest, plus half the bump's
         amplitude: q' = (2 c_1 + g) / d there), whose bounds hold the acceleration at rest.
 
@@ -498,18 +516,22 @@ class _Shape:
         extra: list[Any] = []
         wq, xq = REST_GL
         tau = np.linspace(0.0, 1.0, N + 1)
+        n_end = 0
         for is_rest, k, inner in ((self.head, 0, 1), (self.tail, n - 1, n - 1)):
             if not is_rest:
                 continue
             c0, c1, c2 = _rest_cp_values(x[inner], x[inner + 1], k == 0)
             c_rest, c_in = (c1, c2) if k == 0 else (c1, c0)   # next to rest, and the inner one
-            # the bump's amplitude (REST_BUMP; p_0 or p_n+1, unused otherwise, is fixed at 0 without it)
+            # the bump's amplitude (REST_BUMP; p_0 or p_n+1, unused otherwise, is fixed at 0 without it) and
+            # the rise's (REST_RISE; its variable fixed at 0 where the bump is)
             g = _rest_g(x[0] if k == 0 else x[n + 1], x[inner], x[inner + 1]) if REST_BUMP else None
+            h = _rest_g(rise[n_end], x[inner], x[inner + 1]) if self.n_rise else 0.0
+            n_end += 1
             extra.append(c_rest if g is None else c_rest + 0.5 * g)
             rest_time = rest_time + (2.0 / n) * sum(
                 float(wi) / ca.sqrt(ca.fmax(
                     2.0 * c_rest + 0.5 * (c_in - 3.0 * c_rest) * float(xi) ** 2
-                    + (0.0 if g is None else g * bspline.rest_bump_quotient(float(xi) ** 2)), REST_Q_FLOOR))
+                    + (0.0 if g is None else bspline.rest_bump_quotient(float(xi) ** 2, g, h)), REST_Q_FLOOR))
                 for wi, xi in zip(wq, xq, strict=True)
             )
             a1, a2 = c1 - c0, c0 - 2.0 * c1 + c2
@@ -518,8 +540,11 @@ class _Shape:
                 qh = 0.5 * (c0 * (1 - t) ** 2 + c1 * (1 + 2 * t - 2 * t * t) + c2 * t * t)
                 dq, d2q = a1 + a2 * t, a2
                 if g is not None:
-                    b, b1, b2 = (float(v[0]) for v in bspline.rest_bump(np.array([t]), 1.0, 0, k == 0))
+                    b, b1, b2 = (float(v[0]) for v in bspline.rest_bump(np.array([t]), 1.0, 0, k == 0, 1.0))
                     qh, dq, d2q = qh + g * b, dq + g * b1, d2q + g * b2
+                    if self.n_rise:
+                        e, e1, e2 = (float(v[0]) for v in bspline.rest_bump(np.array([t]), 1.0, 0, k == 0, 0.0, 1.0))
+                        qh, dq, d2q = qh + h * e, dq + h * e1, d2q + h * e2
                 r = ca.sqrt(ca.fmax(qh, REST_Q_FLOOR))
                 sd = Fs * r
                 sdd = 0.5 * Fs * Fs * inv_d * dq
@@ -683,6 +708,9 @@ class NlpRefiner:
         #: the machine stands before (after) the piece, at the path's start (end), not at a corner (set per
         #: piece by ``refine``)
         self.bump: tuple[bool, bool] = (True, True)
+        #: whether the current chain's first / last rest interval may have its rise (REST_RISE): off for the
+        #: retry of a window from (to) rest that failed with it (set per chain by ``_spans``)
+        self.rise: list[bool] = [True, True]
         #: how many leading LP control points are final while a chain is solved (``ChainPipeline``; None: all)
         self.c_final: int | None = None
         #: the last solve's window start, size, moving axes, lam_g (rows without cut slots), lam_x and its
@@ -708,11 +736,12 @@ class NlpRefiner:
         workers: int = 1,
         verify: FloatArray | None = None,
         bump: tuple[bool, bool] = (True, True),
-    ) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """f control points (n_int + 2,) and the mask of knot intervals that use them.  The mask is True on
+    ) -> tuple[FloatArray, NDArray[np.bool_], tuple[float, float]]:
+        """f control points (n_int + 2,), the mask of knot intervals that use them, and the rise factors of
+        the first and last rest interval (REST_RISE, mm/s; 0 where the LP's stays).  The mask is True on
         a rest interval (the first or last) the NLP solved: its q is then ``rest_cps`` of the f control
-        points at its inner knot plus the bump of p_0 (p_n_int+1) (``rest_profile`` makes the piece's
-        profile of it).
+        points at its inner knot plus the bump of p_0 (p_n_int+1) and the rise (``rest_profile`` makes the
+        piece's profile of it).
 
         ``c``: the LP's q control points over the piece; ``joins``: knots where LP
         windows meet (chains end and start there); ``breaks``: piece-local s of
@@ -732,19 +761,23 @@ class NlpRefiner:
         kept = [self._lp_at_bound(geometry, c, d, A, B, breaks) for A, B in chains]
         self.stats.lp_kept_chains += sum(kept)
         solve = [ch for ch, k in zip(chains, kept, strict=True) if not k]
-        results: Iterator[list[tuple[int, int, FloatArray]]]
+        results: Iterator[list[Span]]
         if workers > 1 and len(solve) > 1:
             results = iter(_parallel_spans(self, geometry, c, d, breaks, solve, workers))
         else:
             results = (self._spans(geometry, c, d, A, B, breaks) for A, B in solve)
+        rise = [0.0, 0.0]
         for (_, B), k in zip(chains, kept, strict=True):
             spans = [] if k else next(results)
-            for a0, b0, vals in spans:
-                p[a0 : b0 + 2] = vals
-                mask[a0:b0] = True
+            _place(spans, p, mask, rise)
             if on_chain is not None:
                 on_chain(B * d)
-        return p, mask
+        return p, mask, (rise[0], rise[1])
+
+    def _rise_free(self, tail: bool) -> bool:
+        """Whether the piece's first (last, ``tail``) rest interval's rise is free in the current chain: with
+        REST_BUMP and REST_RISE, where its bump is (``bump``) and no retry took it off (``rise``)."""
+        return REST_BUMP and REST_RISE and self.bump[int(tail)] and self.rise[int(tail)]
 
     def _lp_at_bound(
         self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray
@@ -822,8 +855,8 @@ class NlpRefiner:
 
     def _spans(
         self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray
-    ) -> list[tuple[int, int, FloatArray]]:
-        """NLP spans (a, b, p_a .. p_{b+1}) covering [A, B) from and back to LP states.
+    ) -> list[Span]:
+        """NLP spans (a, b, p_a .. p_{b+1}, rise) covering [A, B) from and back to LP states (rise: ``_chain``'s).
 
         Normally one span, the whole chain.  If a window fails, the span so far
         is closed by re-solving the previous window with its far end joined to
@@ -831,17 +864,22 @@ class NlpRefiner:
         state; if a span's first window fails, the LP feed is kept over one
         window advance and a new span starts after it.  Failures are recorded.
         """
-        out: list[tuple[int, int, FloatArray]] = []
+        out: list[Span] = []
         a0 = A
+        self.rise = [True, True]
         while B - a0 >= 2:
             try:
-                b0, vals = self._chain(geometry, c, d, a0, B, breaks)
+                b0, vals, rise = self._chain(geometry, c, d, a0, B, breaks)
             except LpNotFinal:
                 raise
             except Exception as exc:
-                if a0 == 0:  # the chain from the rest end (``_window``) failed: from the LP's state at knot 1
+                if a0 == 0:  # the chain from the rest end (``_window``) failed: without the rise, then from the
+                    # LP's state at knot 1
                     self.stats.rest_retries += 1
-                    a0 = 1
+                    if self._rise_free(False):
+                        self.rise[0] = False
+                    else:
+                        a0 = 1
                     continue
                 skip = min(B, a0 + max(2, self.window - self.overlap))
                 if isinstance(exc, NlpFailure):
@@ -851,15 +889,16 @@ class NlpRefiner:
                                  "lp feed kept on this span")
                 a0 = skip
                 continue
-            out.append((a0, b0, vals))
+            out.append((a0, b0, vals, rise))
             a0 = b0
         return out
 
     def _chain(
         self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray
-    ) -> tuple[int, FloatArray]:
-        """NLP windows from the LP state at knot A towards B; returns (b, p_A .. p_{b+1}) with b = B,
-        or an earlier knot b where a bridge joined the LP state after a failed window.
+    ) -> tuple[int, FloatArray, tuple[float, float]]:
+        """NLP windows from the LP state at knot A towards B; returns (b, p_A .. p_{b+1}, rise) with b = B,
+        or an earlier knot b where a bridge joined the LP state after a failed window; rise: the rise factors
+        (REST_RISE, mm/s) of the piece's first and last rest interval where the chain solved them, else 0.
 
         A window inheriting from the previous NLP window fixes three control
         points (so its first knot interval is the one the previous window
@@ -873,7 +912,8 @@ class NlpRefiner:
         start: tuple[float, ...] = () if A == 0 else _lp_state(c, d, A)
         end = (0.0, 0.0) if B == n_int else _lp_state(c, d, B)
         prev: FloatArray | None = None
-        last: tuple[int, int, tuple[float, ...], FloatArray | None, tuple[int, FloatArray] | None] | None = None
+        last: tuple[int, int, tuple[float, ...], FloatArray | None, _Left | None] | None = None
+        rise = [0.0, 0.0]
         W, P = self.window, self.overlap
         while True:
             # windows and commits on the grid of the chain between the rest intervals (knots 1 .. n_int - 1),
@@ -888,7 +928,7 @@ class NlpRefiner:
                 commit = ga + W - P
                 if gb - commit < W:
                     commit = max(gb - W, ga + 1)
-            left = (A, out[: a - A + 2].copy()) if a > A else None
+            left = (A, out[: a - A + 2].copy(), rise[0]) if a > A else None
             try:
                 try:
                     sol = self._window(geometry, c, d, a, b, commit, start, end if b == B else (0.0, 0.0), breaks,
@@ -898,13 +938,26 @@ class NlpRefiner:
                 except Exception:
                     if not (b == B == n_int and B - 1 - a >= 2):
                         raise
-                    # the window that solved the rest interval at the piece's end failed: to the LP's state
-                    # at its inner knot instead
+                    # the window that solved the rest interval at the piece's end failed: without the rise,
+                    # then to the LP's state at its inner knot instead
                     self.stats.rest_retries += 1
-                    B = b = commit = n_int - 1
-                    end = _lp_state(c, d, B)
-                    out = out[: B - A + 2]
-                    sol = self._window(geometry, c, d, a, b, commit, start, end, breaks, prev, left)
+                    again: FloatArray | None = None
+                    if self._rise_free(True):
+                        self.rise[1] = False
+                        try:
+                            again = self._window(geometry, c, d, a, b, commit, start, end, breaks, prev, left)
+                        except LpNotFinal:
+                            raise
+                        except Exception:
+                            self.stats.rest_retries += 1
+                    if again is not None:
+                        sol = again
+                    else:
+                        B = b = commit = n_int - 1
+                        end = _lp_state(c, d, B)
+                        out = out[: B - A + 2]
+                        sol = self._window(geometry, c, d, a, b, commit, start, end, breaks, prev, left)
+                sol, (rise_h, rise_t) = _split_rise(sol, a, b, n_int)
             except Exception as exc:
                 if last is None or isinstance(exc, LpNotFinal):
                     raise
@@ -921,11 +974,16 @@ class NlpRefiner:
                 except Exception:
                     raise NlpFailure(f"{reason}; the bridge to the LP feed failed too", window, status) from exc
                 self._record(a, lb, d, window, reason, status, "previous window re-solved to join the lp feed")
+                bridge, (rise_h, _) = _split_rise(bridge, la, lb, n_int)
+                if la == 0:
+                    rise[0] = rise_h
                 out[la - A : lb - A + 2] = bridge
-                return lb, out[: lb - A + 2]
+                return lb, out[: lb - A + 2], (rise[0], 0.0)
+            if a == 0:
+                rise[0] = rise_h
             if b == B:
                 out[a - A :] = sol
-                return B, out
+                return B, out, (rise[0], rise_t if b == n_int else 0.0)
             out[a - A : commit - A + 3] = sol[: commit - a + 3]
             last = (a, b, start, prev, left)
             start = tuple(float(x) for x in sol[commit - a : commit - a + 3])
@@ -944,14 +1002,15 @@ class NlpRefiner:
         end: tuple[float, float],
         breaks: FloatArray,
         prev: FloatArray | None,
-        left: tuple[int, FloatArray] | None = None,
+        left: _Left | None = None,
     ) -> FloatArray:
-        """Solve one NLP window over knot intervals [a, b); returns p_a .. p_{b+1} (mm/s).
+        """Solve one NLP window over knot intervals [a, b); returns p_a .. p_{b+1} (mm/s), then the rise factors
+        of the rest ends it solves (REST_RISE, ``_Shape.n_rise``: ``_split_rise``).
 
         ``start``: the first 2 (from the LP) or 3 (from the previous window)
         control points, fixed; ``end``: p_b, p_{b+1}, fixed; ``prev``: the
         previous window's solution from p_a on (initial guess), or None;
-        ``left``: (A, p_A .. p_{a+1}), the chain's feed already committed before a
+        ``left``: (A, p_A .. p_{a+1}, rise), the chain's feed already committed before a
         (None: the LP's feed is the motion before a).
         Limits are verified over [a, commit + 1] (one interval past the
         commit, which the next window inherits whole).
@@ -1012,7 +1071,8 @@ class NlpRefiner:
                     raise NlpFailure("the LP feed does not leave or reach the rest end", index, "rest")
                 rest_lo.append(REST_C_FLOOR * c_lp / Fs**2)
                 rest_hi.append(REST_C_CEIL * c_lp / Fs**2)
-        x0 = shape.handover(f_lp / Fs, {**fixed, **fit})
+        # (the rise factors, past p_n+1, start at 0: ``_Shape.n_rise``)
+        x0 = np.concatenate([shape.handover(f_lp / Fs, {**fixed, **fit}), np.zeros(shape.n_rise)])
         if prev is not None:
             m = min(prev.size, n + 2) - self.overlap // 2
             x0[:m] = prev[:m] / Fs
@@ -1043,16 +1103,21 @@ class NlpRefiner:
             *(xsss_hi[:, ax] for ax in moving), *(xsss_lo[:, ax] for ax in moving),
             wt, wf, np.ravel(coefs),
         ])
-        lbx = np.full(n + 2, -np.inf)
-        ubx = np.full(n + 2, np.inf)
+        nx = n + 2 + shape.n_rise
+        lbx = np.full(nx, -np.inf)
+        ubx = np.full(nx, np.inf)
         for i, val in fixed.items():
             lbx[i] = ubx[i] = val
+        # the rise factors (REST_RISE): fixed at 0 unless that end's bump is free
+        lbx[n + 2 :] = ubx[n + 2 :] = 0.0
         if REST_BUMP:  # p_0 (p_n+1) carries the rest interval's bump: free, from 0 (``_Shape._rest_rows``)
             # (at a corner the bump stays 0: the sampled check below sees the machine standing before/after
             # the piece, not the other piece's acceleration, whose step the corner shares: bench seed 55, a
             # bump's rise after the step took the sampled servo error to 1.06 x next to a corner)
-            for i in [0] * (head and self.bump[0]) + [n + 1] * (tail and self.bump[1]):
+            for i, j in [(0, n + 2)] * (head and self.bump[0]) + [(n + 1, nx - 1)] * (tail and self.bump[1]):
                 lbx[i], ubx[i] = -np.inf, np.inf
+                if shape.n_rise and self._rise_free(i > 0):  # (a cached shape has them when REST_RISE is off)
+                    lbx[j], ubx[j] = -np.inf, np.inf
         fac_u = np.full((K, len(moving)), BOUND_FACTOR)
         fac_e = np.full((K, len(moving)), BOUND_FACTOR)
         fac_k = np.ones(K)  # velocity/feed rows are linear in f: no margin needed
@@ -1127,7 +1192,7 @@ class NlpRefiner:
             args: dict[str, Any] = {"x0": x, "p": p_all, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
             warm = WARM_START and lam_g is not None and lam_x is not None
             args["lam_g0"] = lam_g if warm else np.zeros(shape.rows)
-            args["lam_x0"] = lam_x if warm else np.zeros(n + 2)
+            args["lam_x0"] = lam_x if warm else np.zeros(nx)
             solver = shape.solver
             res = solver(**args)
             st = solver.stats()
@@ -1248,7 +1313,7 @@ class NlpRefiner:
         ok = (dst >= 0) & (src >= 0)
         lam_g = np.zeros(shape.rows)
         lam_g[dst[ok]] = dd[3][src[ok]]
-        lam_x = np.zeros(n + 2)
+        lam_x = np.zeros(n + 2 + shape.n_rise)  # (a rest end's rise factor: 0)
         kx = min(n + 2, dd[1] + 2 - adv)
         lam_x[:kx] = dd[4][adv : adv + kx]
         return lam_g, lam_x
@@ -1577,6 +1642,28 @@ class NlpRefiner:
         return x0
 
 
+def _place(spans: list[Span], p: FloatArray, mask: NDArray[np.bool_], rise: list[float]) -> None:
+    """Write a chain's spans into the piece's f control points p, the mask of the knot intervals they cover,
+    and the rise factors [first, last] of the rest intervals a span solved."""
+    for a0, b0, vals, (r_head, r_tail) in spans:
+        p[a0 : b0 + 2] = vals
+        mask[a0:b0] = True
+        if a0 == 0:
+            rise[0] = r_head
+        if b0 == mask.size:
+            rise[1] = r_tail
+
+
+def _split_rise(sol: FloatArray, a: int, b: int, n_int: int) -> tuple[FloatArray, tuple[float, float]]:
+    """A window's solution over [a, b) (``_window``) as p_a .. p_{b+1} and the rise factors of the piece's
+    first and last rest interval (0 where the window has none)."""
+    n = b - a
+    r = sol[n + 2 :]
+    head = float(r[0]) if a == 0 and r.size else 0.0
+    tail = float(r[-1]) if b == n_int and r.size else 0.0
+    return sol[: n + 2], (head, tail)
+
+
 def chain_spans(n_int: int, joins: list[int]) -> list[tuple[int, int]]:
     """The NLP chains (A, B) of a piece on n_int knot intervals whose LP windows meet at ``joins``: knot
     intervals [A, B) from the LP's state at knot A to its state at B, or from and to the piece's rest ends
@@ -1627,56 +1714,62 @@ def _rest_g(p_rest: Any, p_in: Any, p_out: Any) -> Any:
 
 
 def rest_profile(
-    c: FloatArray, p: FloatArray, mask: NDArray[np.bool_], d: float
-) -> tuple[FloatArray, NDArray[np.bool_], list[float]]:
+    c: FloatArray, p: FloatArray, mask: NDArray[np.bool_], d: float, rise: tuple[float, float] = (0.0, 0.0)
+) -> tuple[FloatArray, NDArray[np.bool_], list[float], list[float]]:
     """The LP's q control points with the rest intervals the NLP solved (``mask`` True on a rest interval:
-    ``refine``'s output) replaced by ``rest_cps``, the mask with them off (a rest interval's feed is
-    always q: ``solvers.timing.PieceProfile``), and their bumps' amplitudes [first, last] (``_rest_g``;
-    0 where the LP's rest interval stays)."""
+    ``refine``'s output, with its rise factors ``rise``) replaced by ``rest_cps``, the mask with them off (a
+    rest interval's feed is always q: ``solvers.timing.PieceProfile``), and their bumps' and rises'
+    amplitudes [first, last] (``_rest_g``; 0 where the LP's rest interval stays)."""
     c, mask = c.copy(), mask.copy()
     n_int = mask.size
     g = [0.0, 0.0]
+    h = [0.0, 0.0]
     if mask[0]:
         c[:3] = rest_cps(float(p[1]), float(p[2]), d, True)
         g[0] = float(_rest_g(p[0], p[1], p[2]))
+        h[0] = float(_rest_g(rise[0], p[1], p[2]))
         mask[0] = False
     if mask[-1]:
         c[-3:] = rest_cps(float(p[n_int - 1]), float(p[n_int]), d, False)
         g[1] = float(_rest_g(p[n_int + 1], p[n_int - 1], p[n_int]))
+        h[1] = float(_rest_g(rise[1], p[n_int - 1], p[n_int]))
         mask[-1] = False
-    return c, mask, g
+    return c, mask, g, h
 
 
 def _window_feed(
     pw: FloatArray, s: FloatArray, a: int, b: int, d: float, head: bool, tail: bool
 ) -> kinematics.FeedDerivs:
-    """(sdot, sddot, sdddot) at piece-local s of a window's control points pw (p_a .. p_b+1) over knot
-    intervals [a, b): f, and the rest intervals' q (``rest_cps``) on the first (``head``, a = 0) or last
-    (``tail``, b = n_int) interval."""
+    """(sdot, sddot, sdddot) at piece-local s of a window's control points pw (p_a .. p_b+1, then its rise
+    factors: ``_window``) over knot intervals [a, b): f, and the rest intervals' q (``rest_cps``) on the
+    first (``head``, a = 0) or last (``tail``, b = n_int) interval."""
+    rise = pw[b - a + 2 :]
+    pw = pw[: b - a + 2]
     fd = kinematics.from_f(*bspline.evaluate(pw, s, d, col0=a, k_lo=a, k_hi=b - 1))
     if not (head or tail):
         return fd
     f, sdd, sddd = (x.copy() for x in fd)
     ends = []
     if head:
-        ends.append((s < (a + 1) * d, a, pw[0], pw[1], pw[2]))
+        ends.append((s < (a + 1) * d, a, pw[0], pw[1], pw[2], float(rise[0]) if rise.size else 0.0))
     if tail:
-        ends.append((s > (b - 1) * d, b - 1, pw[-1], pw[-3], pw[-2]))
-    for sel, k, p_rest, p_in, p_out in ends:
+        ends.append((s > (b - 1) * d, b - 1, pw[-1], pw[-3], pw[-2], float(rise[-1]) if rise.size else 0.0))
+    for sel, k, p_rest, p_in, p_out, p_rise in ends:
         if sel.any():
-            f[sel], sdd[sel], sddd[sel] = _rest_feed(p_rest, p_in, p_out, s[sel], d, k, k == 0)
+            f[sel], sdd[sel], sddd[sel] = _rest_feed(p_rest, p_in, p_out, s[sel], d, k, k == 0, p_rise)
     return f, sdd, sddd
 
 
 def _rest_feed(p_rest: float, p_in: float, p_out: float, s: FloatArray, d: float, k: int,
-               head: bool) -> kinematics.FeedDerivs:
+               head: bool, p_rise: float = 0.0) -> kinematics.FeedDerivs:
     """(sdot, sddot, sdddot) at piece-local s on a rest interval k (the piece's first, ``head``, or last) that
-    the NLP solved: q from ``rest_cps`` of (p_in, p_out) at its inner knot, plus ``_rest_g`` times the bump."""
+    the NLP solved: q from ``rest_cps`` of (p_in, p_out) at its inner knot, plus the bump and the rise with
+    amplitudes ``_rest_g`` of p_rest and of p_rise."""
     q, q1, q2 = bspline.evaluate(rest_cps(p_in, p_out, d, head), s, d, k_lo=k, k_hi=k, col0=k)
-    g = float(_rest_g(p_rest, p_in, p_out))
-    if g:
-        b, b1, b2 = bspline.rest_bump(s, d, k, head)
-        q, q1, q2 = q + g * b, q1 + g * b1, q2 + g * b2
+    g, h = float(_rest_g(p_rest, p_in, p_out)), float(_rest_g(p_rise, p_in, p_out))
+    if g or h:
+        b, b1, b2 = bspline.rest_bump(s, d, k, head, g, h)
+        q, q1, q2 = q + b, q1 + b1, q2 + b2
     return kinematics.from_q(q, q1, q2)
 
 
@@ -1991,11 +2084,11 @@ class _Context:
 
     @staticmethod
     def around(
-        c: FloatArray, d: float, s_a: float, s_b: float | None, left: tuple[int, FloatArray] | None,
+        c: FloatArray, d: float, s_a: float, s_b: float | None, left: _Left | None,
         Ts: float | None, c_final: int | None = None,
     ) -> _Context:
         """``c``: the LP's q control points over the piece; ``s_a``: the window's first s; ``s_b``: its
-        last verified s if the LP's feed follows it (None: nothing after it); ``left``: (A, p_A .. p_{a+1});
+        last verified s if the LP's feed follows it (None: nothing after it); ``left``: (A, p_A .. p_{a+1}, rise);
         ``c_final``: how many leading entries of c are final (default all: ``_context_span``)."""
         empty: kinematics.FeedDerivs = (np.zeros(0), np.zeros(0), np.zeros(0))
         none = (np.zeros(0), np.zeros(0), empty)
@@ -2003,23 +2096,25 @@ class _Context:
             return _Context(*none, *none)
         length = (c.size - 2) * d
         rest: FloatArray | None = None
+        rise = 0.0
         if left is not None and left[0] == 0:
             # the chain solved the rest interval: its q (``_rest_feed``), and f from knot 1 on
             rest = left[1][:3].copy()
+            rise = left[2]
             c = c.copy()
             c[:3] = rest_cps(float(rest[1]), float(rest[2]), d, True)
-            left = (1, left[1][1:])
+            left = (1, left[1][1:], 0.0)
 
         def feed(s: FloatArray) -> kinematics.FeedDerivs:
             f, f1, f2 = kinematics.from_q(*bspline.evaluate(c, s, d))
-            if rest is not None and rest[0] != 0.0:
+            if rest is not None and (rest[0] != 0.0 or rise != 0.0):
                 on = s < d
                 if on.any():
                     f, f1, f2 = f.copy(), f1.copy(), f2.copy()
                     f[on], f1[on], f2[on] = _rest_feed(float(rest[0]), float(rest[1]), float(rest[2]), s[on], d, 0,
-                                                       True)
+                                                       True, rise)
             if left is not None:
-                A, p = left
+                A, p, _ = left
                 nlp = (s >= A * d) & (s <= s_a)
                 if nlp.any():
                     a = A + p.size - 2
@@ -2190,7 +2285,7 @@ def _die_with_parent() -> None:
         pass
 
 
-def _chain_task(chain: tuple[int, int]) -> tuple[list[tuple[int, int, FloatArray]], NlpStats]:
+def _chain_task(chain: tuple[int, int]) -> tuple[list[Span], NlpStats]:
     if _FORK_STATE is None:  # pragma: no cover - set by _parallel_spans before the pool forks
         raise RuntimeError("NLP worker started without its state")
     refiner, geometry, c, d, breaks = _FORK_STATE
@@ -2207,7 +2302,7 @@ def _parallel_spans(
     breaks: FloatArray,
     chains: list[tuple[int, int]],
     workers: int,
-) -> Iterator[list[tuple[int, int, FloatArray]]]:
+) -> Iterator[list[Span]]:
     """Spans of each chain, in order, solved by ``workers`` forked processes; their counters are merged
     into ``refiner.stats``."""
     global _FORK_STATE
@@ -2252,7 +2347,7 @@ _PIPE_STATE: tuple[NlpRefiner, GeometryFn, float, FloatArray] | None = None
 _PipeTask = tuple[int, int, FloatArray, int]
 
 
-def _pipe_task(task: _PipeTask) -> tuple[bool | None, list[tuple[int, int, FloatArray]], NlpStats]:
+def _pipe_task(task: _PipeTask) -> tuple[bool | None, list[Span], NlpStats]:
     """One chain in a pipeline worker: (kept, spans, counters); kept None if it read LP control points
     that were not final yet (``LpNotFinal``: solved again once the LP is done)."""
     if _PIPE_STATE is None:  # pragma: no cover - set by ChainPipeline before its pool forks
@@ -2332,8 +2427,8 @@ class ChainPipeline:
 
     def finish(
         self, c: FloatArray, joins: list[int], on_chain: Callable[[float], None] | None = None
-    ) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """``refine``'s (p, mask) on the piece's final c and joins, from the chains handed out (the rest
+    ) -> tuple[FloatArray, NDArray[np.bool_], tuple[float, float]]:
+        """``refine``'s (p, mask, rise) on the piece's final c and joins, from the chains handed out (the rest
         handed out now)."""
         sent = [(A, B) for (A, B, _, _), _ in self.sent]
         if not sent or sent != self.chains(joins)[: len(sent)]:
@@ -2344,6 +2439,7 @@ class ChainPipeline:
         self.lp_progress(c, joins, True)
         p = np.zeros(self.n_int + 2)
         mask = np.zeros(self.n_int, dtype=bool)
+        rise = [0.0, 0.0]
         for (A, B, task_c, c_final), res in self.sent:
             kept, spans, st = res.get()
             if kept is None or not np.array_equal(task_c[:c_final], c[:c_final]):
@@ -2351,12 +2447,10 @@ class ChainPipeline:
             if kept is None:  # pragma: no cover - the final c is final everywhere
                 raise RuntimeError("an NLP chain read LP control points past the piece")
             _merge_stats(self.refiner.stats, st)
-            for a0, b0, vals in spans:
-                p[a0 : b0 + 2] = vals
-                mask[a0:b0] = True
+            _place(spans, p, mask, rise)
             if on_chain is not None:
                 on_chain(B * self.d)
-        return p, mask
+        return p, mask, (rise[0], rise[1])
 
     def close(self) -> None:
         """Stop the workers (after ``finish``, or when the piece is abandoned)."""

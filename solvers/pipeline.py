@@ -719,29 +719,29 @@ def _refine_piece(
     geometry, breaks = _local(toolpath, piece), _breaks(toolpath, piece)
     if pipe is not None and verify_s is None and pipe.n_int == lp_prof.n_int and pipe.d == lp_prof.d:
         refiner = pipe.refiner
-        p, mask = pipe.finish(lp_prof.c, joins, on_chain)
+        p, mask, rise = pipe.finish(lp_prof.c, joins, on_chain)
     else:
         if pipe is not None:
             pipe.close()  # (its chains were on other knots)
         refiner = _refiner(piece, machine, opt, lp_prof.n_int, nlp_lim, refiners, stats)
-        p, mask = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain, opt.nlp_workers, verify_s,
-                                 _standing_ends(toolpath, piece))
+        p, mask, rise = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain, opt.nlp_workers,
+                                       verify_s, _standing_ends(toolpath, piece))
     # the rest intervals the NLP solved (``solvers.nlp.REST_ENDS``) as q control points; a span reverted to
     # the LP's feed below takes the LP's rest interval next to it back too
-    c, mask, g = rest_profile(lp_prof.c, p, mask, lp_prof.d)
+    c, mask, g, h = rest_profile(lp_prof.c, p, mask, lp_prof.d, rise)
     n_int = lp_prof.n_int
 
     def revert(lo: int, hi: int) -> None:
         mask[lo:hi] = False
         if lo == 1:
             c[:3] = lp_prof.c[:3]
-            g[0] = 0.0
+            g[0] = h[0] = 0.0
         if hi == n_int - 1:
             c[-3:] = lp_prof.c[-3:]
-            g[1] = 0.0
+            g[1] = h[1] = 0.0
 
     def refined() -> PieceProfile:
-        return replace(lp_prof, c=c, p=p, f_mask=mask, rest_g=(g[0], g[1]))
+        return replace(lp_prof, c=c, p=p, f_mask=mask, rest_g=(g[0], g[1]), rest_h=(h[0], h[1]))
 
     # A refined feed that stalls between its verification points (its quadratic dips to ~0 inside a knot
     # interval: bench seeds 1978, 1987) keeps the LP's feed over that NLP span (unless the LP's stalls too):
@@ -801,9 +801,11 @@ def _slower_spans(lp_prof: PieceProfile, prof: PieceProfile, joins: list[int]) -
     t_lp = np.add.reduceat(interval_times(lp_prof, on), first)
     last = np.append(first[1:], on.size) - 1
     rest_f, rest_lp = rest_interval_times(prof), rest_interval_times(lp_prof)
-    for j, k, same in ((0, 1, np.array_equal(prof.c[:3], lp_prof.c[:3]) and prof.rest_g[0] == lp_prof.rest_g[0]),
+    for j, k, same in ((0, 1, np.array_equal(prof.c[:3], lp_prof.c[:3]) and prof.rest_g[0] == lp_prof.rest_g[0]
+                        and prof.rest_h[0] == lp_prof.rest_h[0]),
                        (-1, lp_prof.n_int - 2,
-                        np.array_equal(prof.c[-3:], lp_prof.c[-3:]) and prof.rest_g[1] == lp_prof.rest_g[1])):
+                        np.array_equal(prof.c[-3:], lp_prof.c[-3:]) and prof.rest_g[1] == lp_prof.rest_g[1]
+                        and prof.rest_h[1] == lp_prof.rest_h[1])):
         at = first if j == 0 else last
         hit = np.flatnonzero(on[at] == k)
         if not same and hit.size:

@@ -52,8 +52,8 @@ class PieceProfile:
     points ``c``).  The two agree in value and slope at every knot where they
     meet (the NLP fixes p there from q), so feed and tangential acceleration
     are continuous.  The first and last intervals (rest) are always q, plus
-    ``rest_g`` times the rest interval's bump (``bspline.rest_bump``: the NLP's extra
-    shape there, ``solvers.nlp.REST_BUMP``; 0 for the LP's).
+    ``rest_g`` times the rest interval's bump and ``rest_h`` times its rise (``bspline.rest_bump``: the
+    NLP's extra shapes there, ``solvers.nlp.REST_BUMP`` and ``REST_RISE``; 0 for the LP's).
 
     Attributes:
         s_start: global arc length of the piece start, mm.
@@ -63,6 +63,7 @@ class PieceProfile:
         p: (n_int + 2,) control points of f, mm/s, or None (LP only).
         f_mask: (n_int,) bool, intervals that use f, or None.
         rest_g: the bumps' amplitudes (first, last rest interval), mm^2/s^2.
+        rest_h: the rises' amplitudes (first, last rest interval), mm^2/s^2.
     """
 
     s_start: float
@@ -72,6 +73,7 @@ class PieceProfile:
     p: FloatArray | None = None
     f_mask: NDArray[np.bool_] | None = None
     rest_g: tuple[float, float] = (0.0, 0.0)
+    rest_h: tuple[float, float] = (0.0, 0.0)
 
     def rest_slopes(self) -> tuple[float, float]:
         """q' at the start (> 0 if the feed leaves rest) and at the end (< 0 if it reaches rest), mm/s^2."""
@@ -86,7 +88,7 @@ class PieceProfile:
         """(sdot, sddot, sdddot) at piece-local s, each (K,)."""
         s = np.asarray(s, dtype=np.float64)
         q3 = bspline.evaluate(self.c, s, self.d)
-        if any(self.rest_g):
+        if any(self.rest_g) or any(self.rest_h):
             q3 = self._bumped(s, q3)
         out = kinematics.from_q(*q3)
         if self.p is None or self.f_mask is None:
@@ -103,16 +105,17 @@ class PieceProfile:
     def _bumped(
         self, s: FloatArray, q3: tuple[FloatArray, FloatArray, FloatArray]
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """q, q', q'' with ``rest_g`` times the rest intervals' bumps added (copies)."""
+        """q, q', q'' with the rest intervals' bumps and rises (``rest_g``, ``rest_h``) added (copies)."""
         q, q1, q2 = (x.copy() for x in q3)
         n, d = self.n_int, self.d
-        for g, k, head in ((self.rest_g[0], 0, True), (self.rest_g[1], n - 1, False)):
+        for g, h, k, head in ((self.rest_g[0], self.rest_h[0], 0, True),
+                              (self.rest_g[1], self.rest_h[1], n - 1, False)):
             sel = s < d if head else s > (n - 1) * d
-            if g and sel.any():
-                b, b1, b2 = bspline.rest_bump(s[sel], d, k, head)
-                q[sel] += g * b
-                q1[sel] += g * b1
-                q2[sel] += g * b2
+            if (g or h) and sel.any():
+                b, b1, b2 = bspline.rest_bump(s[sel], d, k, head, g, h)
+                q[sel] += b
+                q1[sel] += b1
+                q2[sel] += b2
         return q, q1, q2
 
     def s_of_x(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -138,8 +141,9 @@ class PieceProfile:
 
         In the end intervals q = sigma (|q'_rest| + q''_end sigma / 2) with sigma
         the distance from the rest point = d w^2, so h = 2 sqrt(d) /
-        sqrt(|q'_rest| + q''_end d w^2 / 2): no cancellation, no singularity (the bump
-        g b adds g (1 - w^2)^2 / d under the root: ``bspline.rest_bump`` with tau = w^2).
+        sqrt(|q'_rest| + q''_end d w^2 / 2): no cancellation, no singularity (the bump and rise
+        g b + h e add (g (1 - w^2)^2 + h w^2 (1 - w^2)^2) / d under the root: ``bspline.rest_bump`` with
+        tau = w^2).
         """
         c, d, n = self.c, self.d, self.n_int
         xl = np.clip(np.asarray(xl, dtype=np.float64), -float(x0), float(n - x0))
@@ -162,11 +166,11 @@ class PieceProfile:
             mid = d / sdot
             r0 = q1_0 + 0.5 * q2_0 * d * w0 * w0
             rL = -q1_L + 0.5 * q2_L * d * wL * wL
-            g0, gL = self.rest_g
-            if g0:
-                r0 = r0 + (g0 / d) * bspline.rest_bump_quotient(w0 * w0)
-            if gL:
-                rL = rL + (gL / d) * bspline.rest_bump_quotient(wL * wL)
+            (g0, gL), (h0, hL) = self.rest_g, self.rest_h
+            if g0 or h0:
+                r0 = r0 + bspline.rest_bump_quotient(w0 * w0, g0, h0) / d
+            if gL or hL:
+                rL = rL + bspline.rest_bump_quotient(wL * wL, gL, hL) / d
             head = 2.0 * np.sqrt(d) / np.sqrt(r0)
             tail = 2.0 * np.sqrt(d) / np.sqrt(rL)
         out = np.where(x < 1.0, head, np.where(x > n - 1.0, tail, mid))
@@ -362,16 +366,18 @@ def rest_interval_times(profile: PieceProfile) -> tuple[float, float]:
     On the first, c_0 = -c_1 and q(t) = 2 c_1 t + (c_2 - 3 c_1) t^2 / 2 (t in [0, 1]); with t = w^2 the
     time d * integral dt / sqrt(q) is 2 d * integral_0^1 dw / sqrt(A + B w^2), A = 2 c_1, B = (c_2 - 3 c_1) / 2:
     2 d asinh(sqrt(B / A)) / sqrt(B) if B > 0, 2 d asin(sqrt(-B / A)) / sqrt(-B) if B < 0 (A + B = q(1) > 0),
-    2 d / sqrt(A) if B = 0; the last interval mirrored.  With a bump (``PieceProfile.rest_g``: g b added to
-    q) the root is of A + B w^2 + g (1 - w^2)^2, smooth in w: REST_TIME_NODES-point Gauss-Legendre.
+    2 d / sqrt(A) if B = 0; the last interval mirrored.  With a bump or rise (``PieceProfile.rest_g``,
+    ``rest_h``: g b + h e added to q) the root is of A + B w^2 + g (1 - w^2)^2 + h w^2 (1 - w^2)^2, smooth in
+    w: REST_TIME_NODES-point Gauss-Legendre.
     inf if the feed does not leave (reach) rest."""
     c, d = profile.c, profile.d
     out = []
-    for c1, c2, g in ((c[1], c[2], profile.rest_g[0]), (c[-2], c[-3], profile.rest_g[1])):
+    for c1, c2, g, h in ((c[1], c[2], profile.rest_g[0], profile.rest_h[0]),
+                         (c[-2], c[-3], profile.rest_g[1], profile.rest_h[1])):
         A, B = 2.0 * float(c1), 0.5 * (float(c2) - 3.0 * float(c1))
-        if g:
+        if g or h:
             w, x = _REST_TIME_GL
-            r = A + B * x * x + g * bspline.rest_bump_quotient(x * x)
+            r = A + B * x * x + bspline.rest_bump_quotient(x * x, g, h)
             ok = A + g > 0.0 and A + B > 0.0 and bool(np.all(r > 0.0))
             out.append(2.0 * d * float(np.sum(w / np.sqrt(r))) if ok else math.inf)
             continue

@@ -462,7 +462,7 @@ def test_refined_span_slower_than_the_lp_keeps_the_lp_feed(monkeypatch: pytest.M
 
     def slowing(self: NlpRefiner, geometry: Any, c: Any, d: float, joins: list[int], *args: Any,
                 **kwargs: Any) -> Any:
-        p, mask = refine(self, geometry, c, d, joins, *args, **kwargs)
+        p, mask, rise = refine(self, geometry, c, d, joins, *args, **kwargs)
         chains = chain_spans(c.size - 2, joins)
         if len(chains) >= 3:
             A, B = chains[len(chains) // 2]
@@ -471,7 +471,7 @@ def test_refined_span_slower_than_the_lp_keeps_the_lp_feed(monkeypatch: pytest.M
             i = np.arange(A + 2, B)
             p[i] *= 1.0 - 0.5 * np.sin(np.pi * (i - A - 1) / (B - A - 1)) ** 2  # (down to half, smoothly)
             slowed.append((A, B, d, np.array(c)))
-        return p, mask
+        return p, mask, rise
 
     monkeypatch.setattr(NlpRefiner, "refine", slowing)
     case = gen.case(6, "bench")

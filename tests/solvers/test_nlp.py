@@ -442,7 +442,7 @@ def test_context_around_a_window_is_the_motion_outside_it() -> None:
     c = np.full(n_int + 2, F**2)
     A, a = 5, 10
     p_left = np.full(a - A + 2, F2)
-    ctx = _Context.around(c, d, a * d, None, (A, p_left), Ts)
+    ctx = _Context.around(c, d, a * d, None, (A, p_left, 0.0), Ts)
     assert ctx.right_s.size == 0
     # before a: F2 back to A d (5 mm = 0.1 s, more than CONTEXT_SAMPLES Ts: never reaches A)
     assert np.all(np.diff(ctx.left_s) > 0) and np.all(ctx.left_s < a * d)

@@ -30,6 +30,8 @@ TIME_RTOL = 1e-9
 REST_STEP_RTOL = 1e-9
 #: CasADi rows against numpy (relative to the row's scale; sqrt(q) is floored at sqrt(REST_Q_FLOOR) Fs at rest).
 ROW_RTOL = 1e-9
+#: ... at rest itself, where the floor meets the rise's q'' in the jerk (relative to the rows' largest).
+REST_ROW_ATOL = 1e-7
 
 
 @pytest.mark.parametrize("head", [True, False])
@@ -58,32 +60,49 @@ def _bump_poly(head: bool) -> np.polynomial.Polynomial:
     return r * (1 - r) ** bspline.REST_BUMP_POWER
 
 
+def _rise_poly(head: bool) -> np.polynomial.Polynomial:
+    """The rest interval's rise as a polynomial in tau: r^2 (1 - r)^k, r = tau at the head, 1 - tau at the tail."""
+    P = np.polynomial.Polynomial
+    r = P([0.0, 1.0]) if head else P([1.0, -1.0])
+    return r * r * (1 - r) ** bspline.REST_RISE_POWER
+
+
 @pytest.mark.parametrize("head", [True, False])
 def test_rest_bump_keeps_rest_and_the_inner_state(head: bool) -> None:
-    """``bspline.rest_bump`` against the polynomial r (1 - r)^m and its derivatives (numpy), and its ends:
-    b = 0 at rest and at the inner knot, b' = 0 at the inner knot, |b'| = 1/d at rest."""
+    """``bspline.rest_bump`` against the polynomials r (1 - r)^m (bump) and r^2 (1 - r)^k (rise) and their
+    derivatives (numpy), and its ends: both 0 at rest and at the inner knot with slope 0 at the inner knot;
+    at rest the bump's |b'| = 1/d and the rise's slope 0 (it leaves the step at rest alone)."""
     d, k = 1.3, 5
     t = np.linspace(0.0, 1.0, 41)
-    b, b1, b2 = bspline.rest_bump((k + t) * d, d, k, head)
-    P = _bump_poly(head)
-    np.testing.assert_allclose(b, P(t), atol=1e-14)
-    np.testing.assert_allclose(b1, P.deriv(1)(t) / d, atol=1e-13)
-    np.testing.assert_allclose(b2, P.deriv(2)(t) / d**2, atol=1e-12)
+    s = (k + t) * d
     rest, inner = (0, -1) if head else (-1, 0)
-    assert b[rest] == 0.0 and abs(b[inner]) < 1e-15 and abs(b1[inner]) < 1e-15
-    assert b1[rest] == pytest.approx((1.0 if head else -1.0) / d, rel=1e-14)
+    for g, h, P in ((1.0, 0.0, _bump_poly(head)), (0.0, 1.0, _rise_poly(head)),
+                    (-2.5, 4.0, -2.5 * _bump_poly(head) + 4.0 * _rise_poly(head))):
+        b, b1, b2 = bspline.rest_bump(s, d, k, head, g, h)
+        np.testing.assert_allclose(b, P(t), atol=1e-14)
+        np.testing.assert_allclose(b1, P.deriv(1)(t) / d, atol=1e-13)
+        np.testing.assert_allclose(b2, P.deriv(2)(t) / d**2, atol=1e-12)
+        assert b[rest] == 0.0 and abs(b[inner]) < 1e-14 and abs(b1[inner]) < 1e-14
+        assert b1[rest] == pytest.approx((1.0 if head else -1.0) * g / d, rel=1e-14, abs=1e-15)
+        # the time integrand's share, (g b + h e) / r, at the unit distance r from rest
+        r = t if head else 1.0 - t
+        np.testing.assert_allclose(bspline.rest_bump_quotient(r[r > 0], g, h), b[r > 0] / r[r > 0], rtol=1e-12,
+                                   atol=1e-14)
 
 
 def test_rest_interval_times_with_bumps_match_quadrature() -> None:
-    """``rest_interval_times`` with bumps (``PieceProfile.rest_g``; Gauss-Legendre) against scipy's quad of
-    d / sqrt(q) with q evaluated by ``PieceProfile.feed``, and against the time table (``PieceTiming``)."""
+    """``rest_interval_times`` with bumps and rises (``PieceProfile.rest_g``, ``rest_h``; Gauss-Legendre)
+    against scipy's quad of d / sqrt(q) with q evaluated by ``PieceProfile.feed``, and against the time
+    table (``PieceTiming``)."""
     from solvers.timing import PieceTiming
 
     d = 1.7
-    for (p_in, p_out), g in (((40.0, 80.0), (1500.0, -800.0)), ((60.0, 45.0), (-600.0, 2500.0))):
+    for (p_in, p_out), g, h in (((40.0, 80.0), (1500.0, -800.0), (0.0, 0.0)),
+                                ((60.0, 45.0), (-600.0, 2500.0), (9000.0, -1500.0)),
+                                ((60.0, 45.0), (0.0, 0.0), (4000.0, 6000.0))):
         head, tail = nlp.rest_cps(p_in, p_out, d, True), nlp.rest_cps(p_out, p_in, d, False)
         c = np.concatenate([head, np.full(4, 2000.0), tail])
-        prof = PieceProfile(s_start=0.0, length=(c.size - 2) * d, d=d, c=c, rest_g=g)
+        prof = PieceProfile(s_start=0.0, length=(c.size - 2) * d, d=d, c=c, rest_g=g, rest_h=h)
         n = prof.n_int
 
         def inv(s: float, prof: PieceProfile = prof) -> float:
@@ -140,8 +159,10 @@ def test_rest_rows_are_the_q_kinematics() -> None:
     s = (k + tau) * d
     geo = {name: np.column_stack([np.sin(s + i), np.cos(0.7 * s + i)]) for i, name in enumerate(("d1", "d2", "d3"))}
     coef = rng.uniform(0.5, 1.5, (len(axes), 8))
-    # p_0 and p_n+1 carry the rest intervals' bumps (REST_BUMP): one raises q inside, one lowers it
-    x = np.concatenate([[0.2], rng.uniform(0.3, 0.6, n), [-0.1]])
+    # p_0 and p_n+1 carry the rest intervals' bumps (REST_BUMP): one raises q inside, one lowers it; the
+    # two variables after them the rises (REST_RISE: the head's, then the tail's)
+    assert shape.n_rise == 2
+    x = np.concatenate([[0.2], rng.uniform(0.3, 0.6, n), [-0.1], [0.5, -0.2]])
     p = np.concatenate([
         [Fs, 1 / d], *geo["d1"].T, *geo["d2"].T, *geo["d3"].T, *geo["d3"].T, np.zeros(K), np.zeros(K),
         coef.ravel(),
@@ -155,12 +176,14 @@ def test_rest_rows_are_the_q_kinematics() -> None:
     # points, through bspline and from_q
     c_head, c_tail = nlp.rest_cps(pw[1], pw[2], d, True), nlp.rest_cps(pw[n - 1], pw[n], d, False)
     g_head, g_tail = pw[0] * (pw[1] + pw[2]) / 2, pw[n + 1] * (pw[n - 1] + pw[n]) / 2
+    h_head, h_tail = pw[n + 2] * (pw[1] + pw[2]) / 2, pw[n + 3] * (pw[n - 1] + pw[n]) / 2
     fd = tuple(np.zeros(K) for _ in range(3))
-    for sel, cq, kk, gb, head in ((k == 0, c_head, 0, g_head, True), (k == n - 1, c_tail, n - 1, g_tail, False)):
+    for sel, cq, kk, gb, hb, head in ((k == 0, c_head, 0, g_head, h_head, True),
+                                      (k == n - 1, c_tail, n - 1, g_tail, h_tail, False)):
         q3 = bspline.evaluate(cq, s[sel], d, k_lo=kk, k_hi=kk, col0=kk)
-        bump = _bump_poly(head)
+        bump = gb * _bump_poly(head) + hb * _rise_poly(head)
         t = s[sel] / d - kk
-        q3 = (q3[0] + gb * bump(t), q3[1] + gb * bump.deriv(1)(t) / d, q3[2] + gb * bump.deriv(2)(t) / d**2)
+        q3 = (q3[0] + bump(t), q3[1] + bump.deriv(1)(t) / d, q3[2] + bump.deriv(2)(t) / d**2)
         for o, v in zip(fd, kinematics.from_q(*q3), strict=True):
             o[sel] = v
     # the verification's feed (``_window_feed``) is the same inside the rest intervals
@@ -179,15 +202,19 @@ def test_rest_rows_are_the_q_kinematics() -> None:
         blk = m * 3
         idx = np.flatnonzero(rest & (shape.row_index[blk] >= 0))
         np.testing.assert_allclose(g[shape.row_index[blk, idx]], u[idx], rtol=ROW_RTOL, atol=ROW_RTOL * np.abs(u).max())
-        idx = np.flatnonzero(rest)
+        # (at rest itself the floored sqrt(q), 1e-10 Fs, times the rise's q'' = 2 h / d^2 is in the rows' jerk)
+        at_rest = ((k == 0) & (tau == 0.0)) | ((k == n - 1) & (tau == 1.0))
+        idx = np.flatnonzero(rest & ~at_rest)
         np.testing.assert_allclose(g[shape.row_index[blk + 1, idx]], e[idx], rtol=ROW_RTOL,
                                    atol=ROW_RTOL * np.abs(e).max())
+        idx = np.flatnonzero(at_rest)
+        np.testing.assert_allclose(g[shape.row_index[blk + 1, idx]], e[idx], atol=REST_ROW_ATOL * np.abs(e).max())
     # the extra rows: the acceleration step at rest, q' d / 2 there
     np.testing.assert_allclose(g[-2:], [(c_head[1] + g_head / 2) / Fs**2, (c_tail[1] + g_tail / 2) / Fs**2],
                                rtol=1e-12)
     # with zero time weights on the checkpoints the objective is the rest intervals' time x Fs / (n d)
     c = np.concatenate([c_head, np.full(n - 4, 1.0), c_tail])
-    t_rest = sum(rest_interval_times(PieceProfile(0.0, n * d, d, c, rest_g=(g_head, g_tail))))
+    t_rest = sum(rest_interval_times(PieceProfile(0.0, n * d, d, c, rest_g=(g_head, g_tail), rest_h=(h_head, h_tail))))
     assert float(obj) == pytest.approx(t_rest * Fs / (n * d), rel=1e-6)
 
 
@@ -215,14 +242,24 @@ def test_nlp_solves_the_rest_intervals(monkeypatch: pytest.MonkeyPatch) -> None:
     plain = schedule(tp, m, Options(method="lp+nlp"))
     assert plain.profiles[0].rest_g == (0.0, 0.0)
     assert on.summary["motion_time"] < plain.summary["motion_time"] < off.summary["motion_time"]
+    # ... and the rises (REST_RISE) too: used at both ends, shorter than the bumps alone
+    assert all(h != 0.0 for h in on.profiles[0].rest_h)
+    monkeypatch.setattr(nlp, "REST_BUMP", True)
+    monkeypatch.setattr(nlp, "REST_RISE", False)
+    bumps = schedule(tp, m, Options(method="lp+nlp"))
+    assert bumps.profiles[0].rest_h == (0.0, 0.0) and all(g != 0.0 for g in bumps.profiles[0].rest_g)
+    assert on.summary["motion_time"] < bumps.summary["motion_time"] < plain.summary["motion_time"]
     _assert_seams_continuous(on)
     _check_drive(m, on)
 
 
-def test_failed_rest_window_is_solved_again_from_the_lp_state(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The chain's first window, from rest, fails: the chain is solved again from the LP's state at knot 1
-    (counted in ``nlp_rest_retries``, not a fallback), so the first rest interval is the LP's again, and
-    the limits hold."""
+@pytest.mark.parametrize("faulted", [(0,), (0, 1)])
+def test_failed_rest_window_is_solved_again_from_the_lp_state(
+    monkeypatch: pytest.MonkeyPatch, faulted: tuple[int, ...]
+) -> None:
+    """The chain's first window, from rest, fails: it is solved again without the rise (REST_RISE), and if that
+    fails too, the chain is solved again from the LP's state at knot 1, so the first rest interval is the LP's
+    again (each counted in ``nlp_rest_retries``, not a fallback); the limits hold."""
     tp, m = ex.flower(1), router()
     monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)
     monkeypatch.setattr(nlp, "REST_ENDS", False)
@@ -231,15 +268,21 @@ def test_failed_rest_window_is_solved_again_from_the_lp_state(monkeypatch: pytes
     made = _capture_stats(monkeypatch)
 
     def fault(index: int) -> None:
-        if index == 0:
+        if index in faulted:
             raise RuntimeError("injected")
 
     sch = schedule(tp, m, Options(method="lp+nlp", nlp_fault=fault))
-    assert sch.summary["nlp_rest_retries"] == made[-1].rest_retries == 1
+    assert sch.summary["nlp_rest_retries"] == made[-1].rest_retries == len(faulted)
     assert sch.diagnostics["nlp_fallbacks"] == []
-    np.testing.assert_array_equal(sch.profiles[0].c[:3], off.profiles[0].c[:3])
-    assert sch.profiles[0].rest_g[0] == 0.0
-    assert not np.allclose(sch.profiles[0].c[-3:], off.profiles[0].c[-3:])  # the end's still the NLP's
+    first = sch.profiles[0]
+    assert first.rest_h[0] == 0.0
+    if len(faulted) == 1:  # the NLP's rest interval, with its bump, without its rise
+        assert not np.allclose(first.c[:3], off.profiles[0].c[:3]) and first.rest_g[0] != 0.0
+    else:
+        np.testing.assert_array_equal(first.c[:3], off.profiles[0].c[:3])
+        assert first.rest_g[0] == 0.0
+    assert not np.allclose(first.c[-3:], off.profiles[0].c[-3:])  # the end's still the NLP's
+    assert first.rest_h[1] != 0.0
     _assert_seams_continuous(sch)
     _check_drive(m, sch)
 
@@ -252,5 +295,6 @@ def test_bumps_only_where_the_machine_stands() -> None:
     sch = schedule(ex.square_corner(50.0), m, Options(method="lp+nlp"))
     first, second = sch.profiles
     assert first.rest_g[1] == 0.0 and second.rest_g[0] == 0.0
+    assert first.rest_h[1] == 0.0 and second.rest_h[0] == 0.0
     assert first.rest_g[0] != 0.0 and second.rest_g[1] != 0.0
     _check_drive(m, sch)
