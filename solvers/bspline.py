@@ -14,6 +14,7 @@ consecutive control points fixes q and q' there.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -91,25 +92,28 @@ def integral_weights(k0: int, k1: int, d: float, col0: int, ncols: int) -> Float
 
 #: The power m of the rest interval's bump b = tau (1 - tau)^m (``rest_bump``).
 REST_BUMP_POWER = 2
-#: The power k of the rest interval's rise e = tau^2 (1 - tau)^k (``rest_bump``; k >= 2).
-REST_RISE_POWER = 2
+#: The powers k of the rest interval's rises e_k = tau^2 (1 - tau)^k (``rest_bump``; each k >= 2): one
+#: amplitude each.  With the quadratic and the bump, (2,) spans the quartics that vanish at rest; each
+#: further power adds a degree.  Flower lp+nlp with the rest points (``solvers.nlp.REST_SUBDIV`` 4):
+#: (2,) 2.9945 s, (2, 3) 2.9908, (2, 3, 4) 2.9843, (2, 3, 4, 5) 2.9810, (2, ..., 6) 2.9815 s.
+REST_RISE_POWERS: tuple[int, ...] = (2, 3, 4, 5)
 
 
 def rest_bump(
-    s: FloatArray, d: float, k: int, head: bool, g: float, h: float = 0.0
+    s: FloatArray, d: float, k: int, head: bool, g: float, h: Sequence[float] = ()
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    r"""What the rest interval's two extra shapes add to its q (``solvers.nlp.REST_BUMP``, ``REST_RISE``),
-    g b + h e, and their s-derivatives, at piece-local s on knot interval k (the piece's first, ``head``, or
-    last), with m = REST_BUMP_POWER and r the unit distance from rest (tau = s / d - k at the head, 1 - tau
-    at the tail), u = 1 - r:
+    r"""What the rest interval's extra shapes add to its q (``solvers.nlp.REST_BUMP``, ``REST_RISE``),
+    g b + sum_k h_k e_k, and their s-derivatives, at piece-local s on knot interval k (the piece's first,
+    ``head``, or last), with m = REST_BUMP_POWER, the k of REST_RISE_POWERS (h: one amplitude each, or
+    none) and r the unit distance from rest (tau = s / d - k at the head, 1 - tau at the tail), u = 1 - r:
 
-        b = r u^m,    db/dr = u^(m-1) (1 - (m+1) r),  d2b/dr2 = -m u^(m-2) (2 - (m+1) r)
-        e = r^2 u^2,  de/dr = 2 r u (1 - 2 r),        d2e/dr2 = 2 (1 - 6 r + 6 r^2)
+        b = r u^m,      db/dr = u^(m-1) (1 - (m+1) r),     d2b/dr2 = -m u^(m-2) (2 - (m+1) r)
+        e_k = r^2 u^k,  de_k/dr = r u^(k-1) (2 - (2+k) r),  d2e_k/dr2 = u^(k-2) (2 u^2 - 4 k r u + k (k-1) r^2)
 
-    (d/ds = +-1/d d/dr).  Both are 0 at both ends of the interval, and so are their slopes at the inner
+    (d/ds = +-1/d d/dr).  All are 0 at both ends of the interval, and so are their slopes at the inner
     knot: q + g b + h e keeps q's value at rest and its value and slope at the inner knot.  g adds g / d
-    to |q'| at rest (the acceleration step); e has slope 0 at rest too, so h shapes the acceleration after
-    the step without moving it (the bump alone is spent on the step where the step is at its bound).
+    to |q'| at rest (the acceleration step); e_k has slope 0 at rest too, so h shapes the acceleration
+    after the step without moving it (the bump alone is spent on the step where the step is at its bound).
     g, h in mm^2/s^2; returns (K,) mm^2/s^2, mm/s^2, 1/s^2."""
     m = REST_BUMP_POWER
     t = np.asarray(s, dtype=np.float64) / d - k
@@ -117,17 +121,20 @@ def rest_bump(
     u = 1.0 - r
     sign = 1.0 if head else -1.0
     b = (g * (r * u**m), g * (u ** (m - 1) * (1.0 - (m + 1) * r)), g * (-m * u ** (m - 2) * (2.0 - (m + 1) * r)))
-    if h:
-        j = REST_RISE_POWER
-        b = (b[0] + h * (r * r * u**j), b[1] + h * (r * u ** (j - 1) * (2.0 - (2.0 + j) * r)),
-             b[2] + h * (u ** (j - 2) * (2.0 * u * u - 4.0 * j * r * u + j * (j - 1) * r * r)))
+    for hk, j in zip(h, REST_RISE_POWERS, strict=True) if len(h) else ():
+        if hk:
+            b = (b[0] + hk * (r * r * u**j), b[1] + hk * (r * u ** (j - 1) * (2.0 - (2.0 + j) * r)),
+                 b[2] + hk * (u ** (j - 2) * (2.0 * u * u - 4.0 * j * r * u + j * (j - 1) * r * r)))
     return b[0], sign * b[1] / d, b[2] / (d * d)
 
 
-def rest_bump_quotient(r: Any, g: Any, h: Any = 0.0) -> Any:
-    """(g b + h e) / r = g (1 - r)^m + h r (1 - r)^2 of ``rest_bump`` at the unit distance r from rest
-    (floats, arrays or CasADi expressions): what the two shapes add under the root of a rest interval's
+def rest_bump_quotient(r: Any, g: Any, h: Sequence[Any] = ()) -> Any:
+    """(g b + sum_k h_k e_k) / r = g (1 - r)^m + sum_k h_k r (1 - r)^k of ``rest_bump`` at the unit distance r
+    from rest (floats, arrays or CasADi expressions): what the shapes add under the root of a rest interval's
     time integrand, where q / r is taken with r = w^2 (``timing.PieceProfile.h_local``,
     ``timing.rest_interval_times``, ``solvers.nlp._Shape._rest_rows``)."""
     u = 1.0 - r
-    return g * u**REST_BUMP_POWER + h * (r * u**REST_RISE_POWER)
+    out = g * u**REST_BUMP_POWER
+    for hk, j in zip(h, REST_RISE_POWERS, strict=True) if len(h) else ():
+        out = out + hk * (r * u**j)
+    return out

@@ -86,12 +86,14 @@ from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
 GeometryFn = Callable[[FloatArray], PathSamples]
+#: A rest end's rise factors, one per ``bspline.REST_RISE_POWERS`` (mm/s), or none (no rise there).
+Rise = tuple[float, ...]
 #: An NLP span of a chain: (a, b, p_a .. p_{b+1}, rise factors of the piece's first and last rest interval,
-#: 0 unless the span solved it: ``NlpRefiner._chain``).
-Span = tuple[int, int, FloatArray, tuple[float, float]]
-#: The chain's feed committed before a window: (A, p_A .. p_{a+1}, the rise factor of the piece's first rest
-#: interval if A = 0).
-_Left = tuple[int, FloatArray, float]
+#: none unless the span solved it: ``NlpRefiner._chain``).
+Span = tuple[int, int, FloatArray, tuple[Rise, Rise]]
+#: The chain's feed committed before a window: (A, p_A .. p_{a+1}, the rise factors of the piece's first
+#: rest interval if A = 0).
+_Left = tuple[int, FloatArray, Rise]
 
 #: Share of the sampled e and u budgets the impulse of a velocity step (a tangent break passed at speed)
 #: may take (``solvers.lp.v_step_limit``): the impulse is verified on top of e and u either side and a
@@ -193,8 +195,18 @@ REST_BUMP = True
 #: it), and the acceleration could not rise after the step; e moves neither the step nor the inner state.
 #: A window from (to) rest that fails with it is solved again without it before the LP's state is taken
 #: (``NlpRefiner.rise``): the rest interval's N + 1 checkpoints hold the sharper shape less well
-#: (``square_corner``: 1.12 x between them after 4 rounds).  Flower 3.0033 -> 2.9996 s.
+#: (``square_corner``: 1.12 x between them after 4 rounds).  Flower 3.0033 -> 2.9996 s.  Since session 17
+#: one rise per power in ``bspline.REST_RISE_POWERS`` (2, 3, 4, 5: q a polynomial of degree 7 in tau that
+#: vanishes at rest), each its own variable, with the rest points' rows (``REST_SUBDIV``) to hold them:
+#: flower 2.9996 -> 2.9810 s, its rest intervals within 0.3 ms of the 4x finer NLP's.
 REST_RISE = True
+#: A rest interval has rows at tau = j / (N REST_SUBDIV), j = 0 .. N REST_SUBDIV: its N + 1 checkpoints and,
+#: between them, the rest points (``rest_point_taus``: the path's exact derivatives there, like a cut slot's,
+#: and bounds of their own, tightened by the violations next to them).  Over 1 / N of a knot interval the
+#: shapes q + g b + h e (a sextic in tau) swing between the checkpoints: flower at N = 4 with one rise the
+#: window keeps the 4 checkpoints' rows and its tightening also pulled the next intervals' rows down; with
+#: rows as dense as the 4x finer NLP's, the rest intervals come within 0.2 ms of its (``REST_RISE``).
+REST_SUBDIV = 4
 #: Pieces on fewer knot intervals keep the LP's rest intervals.
 REST_ENDS_MIN_INTERVALS = 4
 #: Gauss-Legendre nodes and weights on [0, 1] for a rest interval's travel time (``_Shape._rest_rows``).
@@ -227,6 +239,11 @@ IPOPT_OPTIONS: dict[str, Any] = {
     # spec §10: MUMPS scaling off cut NLP time ~2.5x on this problem class
     "ipopt.mumps_permuting_scaling": 0,
     "ipopt.mumps_scaling": 0,
+    # approximate minimum degree ordering instead of MUMPS's automatic choice: a window that solves a rest
+    # interval (its rest points' rows, ``REST_SUBDIV``) took 2-3x as long per iteration in the linear
+    # solves with the automatic choice (bench seed 0: 0.76 -> 0.33 s, seed 35: 1.83 -> 0.99 s); other
+    # windows about the same (18.35 m path at 4.63 mm knots: 16.5 -> 15.8 s of NLP, same iterates)
+    "ipopt.mumps_pivot_order": 0,
     # no forced iterative-refinement step after each KKT solve (Ipopt still refines when the residual
     # is large): the same iterates to ~1e-14 and ~10 % less Ipopt time (flower x10 at 4.63 mm, replayed
     # windows, best of 5: 0.82 -> 0.74 s)
@@ -344,6 +361,13 @@ def checkpoint_layout(n: int, N: int) -> tuple[NDArray[np.int64], FloatArray]:
     return k, tau
 
 
+def rest_point_taus(N: int) -> FloatArray:
+    """Unit tau of a rest interval's rest points (``REST_SUBDIV``): j / (N REST_SUBDIV) for j between the
+    checkpoints' (each (M,), M = N (REST_SUBDIV - 1))."""
+    j = np.arange(1, N * REST_SUBDIV)
+    return np.asarray(j[j % REST_SUBDIV != 0] / (N * REST_SUBDIV), dtype=np.float64)
+
+
 def knot_twins(n: int, N: int) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
     """Checkpoints (window-local indices) of the rows that depend on f and f' only (u, a, f): ``kept``,
     and each interior knot's checkpoint seen from the left, ``dup`` (tau = 1 of interval k < n - 1),
@@ -398,11 +422,15 @@ class _Shape:
         ncols = n + 2
         self.B0, B1, B2 = _interval_basis(k, tau, ncols)
         na = len(axes)
-        #: variables past p_n+1: one rise factor per rest end (``REST_RISE``: first the head's, then the tail's)
-        self.n_rise = (int(head) + int(tail)) if REST_BUMP and REST_RISE else 0
+        #: variables past p_n+1: the rise factors of each rest end (``REST_RISE``, one per
+        #: ``bspline.REST_RISE_POWERS``: first the head's, then the tail's)
+        self.n_rise = (int(head) + int(tail)) * len(bspline.REST_RISE_POWERS) if REST_BUMP and REST_RISE else 0
         xx = ca.SX.sym("p", ncols + self.n_rise)
         x = xx[:ncols]
-        P = ca.SX.sym("P", 2 + 4 * na * K + 2 * K + 8 * na + (n * (1 + 3 * na) if slotted else 0))
+        #: the rest points (``rest_point_taus``) of each rest end: first the head's, then the tail's
+        self.n_rest_points = (int(head) + int(tail)) * rest_point_taus(N).size if REST_ENDS else 0
+        n_base = 2 + 4 * na * K + 2 * K + 8 * na + (n * (1 + 3 * na) if slotted else 0)
+        P = ca.SX.sym("P", n_base + 3 * na * self.n_rest_points)
         Fs, inv_d = P[0], P[1]
         off = 2
 
@@ -429,9 +457,12 @@ class _Shape:
         rest_rows: list[Any] = []
         if head or tail:
             # the rest intervals in q (``rest_cps``): their checkpoints' rows, feed and travel time from the
-            # q the state at the inner knot gives; interval 0's f (p_0) and interval n-1's (p_n+1) are unused
+            # q the state at the inner knot gives; interval 0's f (p_0) and interval n-1's (p_n+1) are unused;
+            # the rest points' x_s, x_ss, x_sss per moving axis are the last parameters
+            m = self.n_rest_points
+            rp = [[P[n_base + (3 * i + j) * m : n_base + (3 * i + j + 1) * m] for i in range(na)] for j in range(3)]
             fh, rows, rest_time, rest_rows = self._rest_rows(x, xx[ncols:], Fs, inv_d, fh, f, f1, f2, xs, xss,
-                                                             xsss_hi, xsss_lo, coef, with_aj, sel)
+                                                             xsss_hi, xsss_lo, coef, with_aj, sel, rp)
         else:
             rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj, sel)
         rows.append(fh[sel])
@@ -457,15 +488,17 @@ class _Shape:
             sf2 = Fs * inv_d * inv_d * (c0 - 2 * c1 + c2)
             rows += self._axis_rows(sf, sf1, sf2, sxs, sxss, sxsss, sxsss, coef, with_aj)
             rows.append(sfh)
-        # the rest intervals' control points next to rest (their acceleration at rest), after every other row
+        # the rest intervals' control points next to rest (their acceleration at rest) and their rest points'
+        # rows, after every other row
         rows += rest_rows
         g = ca.vertcat(*rows)
         obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh) + rest_time
         self._problem = {"x": xx, "p": P, "f": obj, "g": g}
         self.rows = int(g.size1())
         self.base_rows = nxt
-        #: rows after the slots: one per rest end (``_rest_rows``)
-        self.n_rest = len(rest_rows)
+        #: rows after the slots (``_rest_rows``): one per rest end, then the rest points' (per moving axis u,
+        #: e_hi, e_lo, [a, j_hi, j_lo], each over the rest points: ``_point_bounds``'s order)
+        self.n_rest = int(ca.vertcat(*rest_rows).size1()) if rest_rows else 0
         self.solver = ca.nlpsol("feed_nlp", "ipopt", self._problem, IPOPT_WARM_OPTIONS)
         self._safe_solver: Any = None
         # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
@@ -489,7 +522,7 @@ class _Shape:
 
     def _rest_rows(self, x: Any, rise: Any, Fs: Any, inv_d: Any, fh: Any, f: Any, f1: Any, f2: Any,
                    xs: list[Any], xss: list[Any], xsss_hi: list[Any], xsss_lo: list[Any], coef: list[Any],
-                   with_aj: bool, sel: list[int]) -> tuple[Any, list[Any], Any, list[Any]]:
+                   with_aj: bool, sel: list[int], rp: list[list[Any]]) -> tuple[Any, list[Any], Any, list[Any]]:
         r"""Rows, scaled feed and travel time of a window whose first (``head``) or last (``tail``) knot interval
         is a rest interval of the piece, its feed sqrt(q) from the quadratic q that starts (ends) at rest and
         meets the f spline's value and slope at the inner knot (``rest_cps``).
@@ -502,9 +535,13 @@ class _Shape:
         (REST_GL Gauss-Legendre nodes; mirrored for the tail); in the objective's units (times / L, f scaled
         by Fs) that is 2 / n times the node sum.  With REST_BUMP, q has g b added (``bspline.rest_bump``,
         g = ``_rest_g`` of p_0 or p_n+1): under the root g (1 - w^2)^m, and in the rows g b, g b', g b''; with
-        REST_RISE also h e (h = ``_rest_g`` of the end's variable in ``rise``: the head's first), alike.
+        REST_RISE also sum_k h_k e_k (h_k = ``_rest_g`` of the end's variables in ``rise``: the head's first),
+        alike.
         Extra rows (one per rest end): c_1 + g / 2 (the control point next to rest, plus half the bump's
-        amplitude: q' = (2 c_1 + g) / d there), whose bounds hold the acceleration at rest.
+        amplitude: q' = (2 c_1 + g) / d there), whose bounds hold the acceleration at rest; then the rows at
+        the rest points (``rest_point_taus``: between the checkpoints, with the path's exact derivatives
+        there, ``rp`` = [x_s, x_ss, x_sss][axis] over the rest points), per moving axis u, e_hi, e_lo, [a,
+        j_hi, j_lo] each over all of them.
 
         Returns (scaled feed at every checkpoint, the base rows with the rest intervals' checkpoints
         replaced, the travel time term, the extra rows)."""
@@ -516,6 +553,8 @@ class _Shape:
         extra: list[Any] = []
         wq, xq = REST_GL
         tau = np.linspace(0.0, 1.0, N + 1)
+        taus_p = rest_point_taus(N)
+        point_rows: list[list[Any]] = []  # [row block][rest point]
         n_end = 0
         for is_rest, k, inner in ((self.head, 0, 1), (self.tail, n - 1, n - 1)):
             if not is_rest:
@@ -525,7 +564,8 @@ class _Shape:
             # the bump's amplitude (REST_BUMP; p_0 or p_n+1, unused otherwise, is fixed at 0 without it) and
             # the rise's (REST_RISE; its variable fixed at 0 where the bump is)
             g = _rest_g(x[0] if k == 0 else x[n + 1], x[inner], x[inner + 1]) if REST_BUMP else None
-            h = _rest_g(rise[n_end], x[inner], x[inner + 1]) if self.n_rise else 0.0
+            nr = len(bspline.REST_RISE_POWERS) if self.n_rise else 0
+            h = [_rest_g(rise[n_end * nr + i], x[inner], x[inner + 1]) for i in range(nr)]
             n_end += 1
             extra.append(c_rest if g is None else c_rest + 0.5 * g)
             rest_time = rest_time + (2.0 / n) * sum(
@@ -534,29 +574,29 @@ class _Shape:
                     + (0.0 if g is None else bspline.rest_bump_quotient(float(xi) ** 2, g, h)), REST_Q_FLOOR))
                 for wi, xi in zip(wq, xq, strict=True)
             )
-            a1, a2 = c1 - c0, c0 - 2.0 * c1 + c2
             for j, t in enumerate(tau):
                 i = k * (N + 1) + j
-                qh = 0.5 * (c0 * (1 - t) ** 2 + c1 * (1 + 2 * t - 2 * t * t) + c2 * t * t)
-                dq, d2q = a1 + a2 * t, a2
-                if g is not None:
-                    b, b1, b2 = (float(v[0]) for v in bspline.rest_bump(np.array([t]), 1.0, 0, k == 0, 1.0))
-                    qh, dq, d2q = qh + g * b, dq + g * b1, d2q + g * b2
-                    if self.n_rise:
-                        e, e1, e2 = (float(v[0]) for v in bspline.rest_bump(np.array([t]), 1.0, 0, k == 0, 0.0, 1.0))
-                        qh, dq, d2q = qh + h * e, dq + h * e1, d2q + h * e2
-                r = ca.sqrt(ca.fmax(qh, REST_Q_FLOOR))
-                sd = Fs * r
-                sdd = 0.5 * Fs * Fs * inv_d * dq
-                sddd = 0.5 * sd * Fs * Fs * inv_d * inv_d * d2q
+                r, sd, sdd, sddd = _rest_point(float(t), (c0, c1, c2), g, h, k == 0, Fs, inv_d)
                 vals = self._axis_rows_t(sd, sdd, sddd, [v[i] for v in xs], [v[i] for v in xss],
                                          [v[i] for v in xsss_hi], [v[i] for v in xsss_lo], coef, with_aj)
                 for blk, val in zip(full_parts, vals, strict=True):
                     blk[i] = val
                 fh_parts[i] = r
+            for j, t in enumerate(taus_p):
+                i = (n_end - 1) * taus_p.size + j
+                _, sd, sdd, sddd = _rest_point(float(t), (c0, c1, c2), g, h, k == 0, Fs, inv_d)
+                px = [[v[i] for v in rp_j] for rp_j in rp]
+                # (x_sss exact: e_hi = e_lo and j_hi = j_lo, one row each with both bounds: ``_exact_rows``)
+                vals = _exact_rows(self._axis_rows_t(sd, sdd, sddd, px[0], px[1], px[2], px[2], coef, with_aj),
+                                   with_aj)
+                if not point_rows:
+                    point_rows = [[] for _ in vals]
+                for blk, val in zip(point_rows, vals, strict=True):
+                    blk.append(val)
         reduced = ([True, False, False] + ([True, False, False] if with_aj else [])) * len(xs)
         rows = [ca.vertcat(*(blk[i] for i in sel)) if red else ca.vertcat(*blk)
                 for blk, red in zip(full_parts, reduced, strict=True)]
+        extra += [ca.vertcat(*blk) for blk in point_rows]
         return ca.vertcat(*fh_parts), rows, rest_time, extra
 
     @staticmethod
@@ -666,12 +706,12 @@ def _cached_shape(n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted:
                   tail: bool = False) -> _Shape:
     """The shape for this key from this thread's LRU cache, built on a miss.  Per thread: a CasADi
     Function's call and the OSQP hand-over fit hold state, so two threads never share one."""
-    cache: OrderedDict[tuple[int, int, tuple[int, ...], bool, bool, bool, bool], _Shape] | None = getattr(
-        _SHAPE_CACHE, "shapes", None
-    )
+    cache: OrderedDict[tuple[Any, ...], _Shape] | None = getattr(_SHAPE_CACHE, "shapes", None)
     if cache is None:
         cache = _SHAPE_CACHE.shapes = OrderedDict()
-    key = (n, N, axes, with_aj, slotted, head, tail)
+    # (with the module's rest settings a rest window's shape is built with: tests switch them)
+    rest = (REST_ENDS, REST_BUMP, REST_RISE, bspline.REST_RISE_POWERS, REST_SUBDIV) if head or tail else None
+    key = (n, N, axes, with_aj, slotted, head, tail, rest)
     shape = cache.get(key)
     if shape is None:
         shape = cache[key] = _Shape(n, N, axes, with_aj, slotted, head, tail)
@@ -736,7 +776,7 @@ class NlpRefiner:
         workers: int = 1,
         verify: FloatArray | None = None,
         bump: tuple[bool, bool] = (True, True),
-    ) -> tuple[FloatArray, NDArray[np.bool_], tuple[float, float]]:
+    ) -> tuple[FloatArray, NDArray[np.bool_], tuple[Rise, Rise]]:
         """f control points (n_int + 2,), the mask of knot intervals that use them, and the rise factors of
         the first and last rest interval (REST_RISE, mm/s; 0 where the LP's stays).  The mask is True on
         a rest interval (the first or last) the NLP solved: its q is then ``rest_cps`` of the f control
@@ -766,7 +806,7 @@ class NlpRefiner:
             results = iter(_parallel_spans(self, geometry, c, d, breaks, solve, workers))
         else:
             results = (self._spans(geometry, c, d, A, B, breaks) for A, B in solve)
-        rise = [0.0, 0.0]
+        rise: list[Rise] = [(), ()]
         for (_, B), k in zip(chains, kept, strict=True):
             spans = [] if k else next(results)
             _place(spans, p, mask, rise)
@@ -895,10 +935,10 @@ class NlpRefiner:
 
     def _chain(
         self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray
-    ) -> tuple[int, FloatArray, tuple[float, float]]:
+    ) -> tuple[int, FloatArray, tuple[Rise, Rise]]:
         """NLP windows from the LP state at knot A towards B; returns (b, p_A .. p_{b+1}, rise) with b = B,
         or an earlier knot b where a bridge joined the LP state after a failed window; rise: the rise factors
-        (REST_RISE, mm/s) of the piece's first and last rest interval where the chain solved them, else 0.
+        (REST_RISE, mm/s) of the piece's first and last rest interval where the chain solved them, else none.
 
         A window inheriting from the previous NLP window fixes three control
         points (so its first knot interval is the one the previous window
@@ -913,7 +953,7 @@ class NlpRefiner:
         end = (0.0, 0.0) if B == n_int else _lp_state(c, d, B)
         prev: FloatArray | None = None
         last: tuple[int, int, tuple[float, ...], FloatArray | None, _Left | None] | None = None
-        rise = [0.0, 0.0]
+        rise: list[Rise] = [(), ()]
         W, P = self.window, self.overlap
         while True:
             # windows and commits on the grid of the chain between the rest intervals (knots 1 .. n_int - 1),
@@ -978,12 +1018,12 @@ class NlpRefiner:
                 if la == 0:
                     rise[0] = rise_h
                 out[la - A : lb - A + 2] = bridge
-                return lb, out[: lb - A + 2], (rise[0], 0.0)
+                return lb, out[: lb - A + 2], (rise[0], ())
             if a == 0:
                 rise[0] = rise_h
             if b == B:
                 out[a - A :] = sol
-                return B, out, (rise[0], rise_t if b == n_int else 0.0)
+                return B, out, (rise[0], rise_t if b == n_int else ())
             out[a - A : commit - A + 3] = sol[: commit - a + 3]
             last = (a, b, start, prev, left)
             start = tuple(float(x) for x in sol[commit - a : commit - a + 3])
@@ -1028,15 +1068,20 @@ class NlpRefiner:
         k_loc, tau = checkpoint_layout(n, N)
         s_chk = (a + k_loc + tau) * d
         fine = self._fine_points(a * d, min(b, commit + VERIFY_PAST_COMMIT) * d, d, breaks)
+        if head or tail:
+            fine = _rest_fine(fine, a * d if head else None, b * d if tail else None, d, N * VERIFY_SUBDIV)
         # the motion around the window for the sampled check: before a (the chain so far, or the LP), and
         # after b when the chain ends there (inside a chain the next window checks what follows)
         joins_lp = not tail and (end[0] != 0.0 or end[1] != 0.0)
         ctx = _Context.around(c, d, a * d, fine[-1] if joins_lp else None, left, lim.sample_period, self.c_final)
+        # the rest intervals' rest points (``REST_SUBDIV``): the head's, then the tail's
+        s_rest = np.concatenate([(k0 + rest_point_taus(N)) * d for k0, on in ((a, head), (b - 1, tail)) if on]
+                                + [np.zeros(0)])
         # every point the set-up evaluates, in one call (a call costs ~0.6 ms on top of ~2 us a point)
         br_near = breaks[(breaks > (a - 1) * d) & (breaks < (b + 1) * d)]
         geometry = _Prefetched(geometry, np.concatenate([
             s_chk, _envelope_points(k_loc, tau, a, d, N).ravel(), br_near - BREAK_EPS_MM,
-            br_near + BREAK_EPS_MM, fine, ctx.points(),
+            br_near + BREAK_EPS_MM, fine, ctx.points(), s_rest,
         ]))
         ctx_motion = ctx.motion(geometry)
         if (head or tail) and lim.sample_period is not None:
@@ -1047,6 +1092,11 @@ class NlpRefiner:
             ax for ax in range(3) if np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS
         )
         shape = self._shape(n, moving, head=head, tail=tail)
+        g_rest = geometry(s_rest)
+        rest_params = np.concatenate([x[:, ax] for ax in moving for x in (g_rest.d1, g_rest.d2, g_rest.d3)]
+                                     + [np.zeros(0)])
+        #: the rest points' bound factor (u, e; a and j relative to BOUND_FACTOR, like a slot's)
+        rest_fac = np.full(s_rest.size, BOUND_FACTOR)
         base_rows = shape.rows
         K = shape.K
         q_lp = bspline.evaluate(c, s_chk, d)[0]
@@ -1114,10 +1164,11 @@ class NlpRefiner:
             # (at a corner the bump stays 0: the sampled check below sees the machine standing before/after
             # the piece, not the other piece's acceleration, whose step the corner shares: bench seed 55, a
             # bump's rise after the step took the sampled servo error to 1.06 x next to a corner)
-            for i, j in [(0, n + 2)] * (head and self.bump[0]) + [(n + 1, nx - 1)] * (tail and self.bump[1]):
+            nr = len(bspline.REST_RISE_POWERS)
+            for i, j in [(0, n + 2)] * (head and self.bump[0]) + [(n + 1, nx - nr)] * (tail and self.bump[1]):
                 lbx[i], ubx[i] = -np.inf, np.inf
                 if shape.n_rise and self._rise_free(i > 0):  # (a cached shape has them when REST_RISE is off)
-                    lbx[j], ubx[j] = -np.inf, np.inf
+                    lbx[j : j + nr], ubx[j : j + nr] = -np.inf, np.inf
         fac_u = np.full((K, len(moving)), BOUND_FACTOR)
         fac_e = np.full((K, len(moving)), BOUND_FACTOR)
         fac_k = np.ones(K)  # velocity/feed rows are linear in f: no margin needed
@@ -1185,10 +1236,14 @@ class NlpRefiner:
                 s_lo, s_hi = slots.bounds(self, prev)
                 lbg, ubg = np.concatenate([lbg, s_lo]), np.concatenate([ubg, s_hi])
             if shape.n_rest:
-                lbg, ubg = np.concatenate([lbg, rest_lo]), np.concatenate([ubg, rest_hi])
+                fr = np.repeat(rest_fac[:, None], len(moving), axis=1)
+                pts = _point_bounds(lim, moving, g_rest.d1, fr, fr, np.minimum(1.0, rest_fac / BOUND_FACTOR))
+                pts_lo, pts_hi = _exact_bounds(*pts, lim.amax is not None)
+                lbg = np.concatenate([lbg, rest_lo, pts_lo.ravel()])
+                ubg = np.concatenate([ubg, rest_hi, pts_hi.ravel()])
             if self.fault is not None:
                 self.fault(index)
-            p_all = np.concatenate([pvec, slots.params()]) if slots.any else pvec
+            p_all = np.concatenate([pvec, slots.params(), rest_params] if slots.any else [pvec, rest_params])
             args: dict[str, Any] = {"x0": x, "p": p_all, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
             warm = WARM_START and lam_g is not None and lam_x is not None
             args["lam_g0"] = lam_g if warm else np.zeros(shape.rows)
@@ -1226,7 +1281,7 @@ class NlpRefiner:
                     # tightening made the window infeasible: retry with half of it (geometric mean)
                     retries += 1
                     self.stats.softer_retries += 1
-                    for cur, old in zip((fac_u, fac_e, fac_k, slots.fac), prev_fac, strict=True):
+                    for cur, old in zip((fac_u, fac_e, fac_k, slots.fac, rest_fac), prev_fac, strict=True):
                         cur[...] = np.sqrt(cur * old)
                     x = best[1] / Fs if best is not None else x0
                     lam_g = None
@@ -1270,7 +1325,7 @@ class NlpRefiner:
             self.stats.cut_rounds += 1
             # the worst point of each violated stretch gets a cut slot while slots last; the rest
             # tighten the bounds of the checkpoints around them
-            prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy(), slots.fac.copy())
+            prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy(), slots.fac.copy(), rest_fac.copy())
             # a deferred cap whose step is over its limit is added from the next round on (bench seed 2053)
             added = lp_side.add_violated(fine, util, feed_ub)
             had_slots = slots.any
@@ -1280,6 +1335,7 @@ class NlpRefiner:
                 cut = lam_g.size - shape.n_rest
                 lam_g = np.concatenate([lam_g[:cut], np.zeros(shape.rows - lam_g.size), lam_g[cut:]])
             self._tighten(util, fine, a * d, d, moving, fac_u, fac_e, fac_k)
+            _tighten_points(util, fine, s_rest, d / (N * REST_SUBDIV), rest_fac)
             fac_k[added] = prev_fac[2][added]  # (a cap just added is not tightened: its overshoot was without it)
             # bounds of constant rows stay as they are (tightening them could only make the window infeasible)
             fac_u[~keep] = BOUND_FACTOR
@@ -1642,7 +1698,7 @@ class NlpRefiner:
         return x0
 
 
-def _place(spans: list[Span], p: FloatArray, mask: NDArray[np.bool_], rise: list[float]) -> None:
+def _place(spans: list[Span], p: FloatArray, mask: NDArray[np.bool_], rise: list[Rise]) -> None:
     """Write a chain's spans into the piece's f control points p, the mask of the knot intervals they cover,
     and the rise factors [first, last] of the rest intervals a span solved."""
     for a0, b0, vals, (r_head, r_tail) in spans:
@@ -1654,13 +1710,14 @@ def _place(spans: list[Span], p: FloatArray, mask: NDArray[np.bool_], rise: list
             rise[1] = r_tail
 
 
-def _split_rise(sol: FloatArray, a: int, b: int, n_int: int) -> tuple[FloatArray, tuple[float, float]]:
+def _split_rise(sol: FloatArray, a: int, b: int, n_int: int) -> tuple[FloatArray, tuple[Rise, Rise]]:
     """A window's solution over [a, b) (``_window``) as p_a .. p_{b+1} and the rise factors of the piece's
-    first and last rest interval (0 where the window has none)."""
+    first and last rest interval (none where the window has none)."""
     n = b - a
     r = sol[n + 2 :]
-    head = float(r[0]) if a == 0 and r.size else 0.0
-    tail = float(r[-1]) if b == n_int and r.size else 0.0
+    nr = len(bspline.REST_RISE_POWERS)
+    head = tuple(float(v) for v in r[:nr]) if a == 0 and r.size else ()
+    tail = tuple(float(v) for v in r[-nr:]) if b == n_int and r.size else ()
     return sol[: n + 2], (head, tail)
 
 
@@ -1714,8 +1771,8 @@ def _rest_g(p_rest: Any, p_in: Any, p_out: Any) -> Any:
 
 
 def rest_profile(
-    c: FloatArray, p: FloatArray, mask: NDArray[np.bool_], d: float, rise: tuple[float, float] = (0.0, 0.0)
-) -> tuple[FloatArray, NDArray[np.bool_], list[float], list[float]]:
+    c: FloatArray, p: FloatArray, mask: NDArray[np.bool_], d: float, rise: tuple[Rise, Rise] = ((), ())
+) -> tuple[FloatArray, NDArray[np.bool_], list[float], list[Rise]]:
     """The LP's q control points with the rest intervals the NLP solved (``mask`` True on a rest interval:
     ``refine``'s output, with its rise factors ``rise``) replaced by ``rest_cps``, the mask with them off (a
     rest interval's feed is always q: ``solvers.timing.PieceProfile``), and their bumps' and rises'
@@ -1723,16 +1780,16 @@ def rest_profile(
     c, mask = c.copy(), mask.copy()
     n_int = mask.size
     g = [0.0, 0.0]
-    h = [0.0, 0.0]
+    h: list[Rise] = [(), ()]
     if mask[0]:
         c[:3] = rest_cps(float(p[1]), float(p[2]), d, True)
         g[0] = float(_rest_g(p[0], p[1], p[2]))
-        h[0] = float(_rest_g(rise[0], p[1], p[2]))
+        h[0] = tuple(float(_rest_g(r, p[1], p[2])) for r in rise[0])
         mask[0] = False
     if mask[-1]:
         c[-3:] = rest_cps(float(p[n_int - 1]), float(p[n_int]), d, False)
         g[1] = float(_rest_g(p[n_int + 1], p[n_int - 1], p[n_int]))
-        h[1] = float(_rest_g(rise[1], p[n_int - 1], p[n_int]))
+        h[1] = tuple(float(_rest_g(r, p[n_int - 1], p[n_int])) for r in rise[1])
         mask[-1] = False
     return c, mask, g, h
 
@@ -1743,7 +1800,8 @@ def _window_feed(
     """(sdot, sddot, sdddot) at piece-local s of a window's control points pw (p_a .. p_b+1, then its rise
     factors: ``_window``) over knot intervals [a, b): f, and the rest intervals' q (``rest_cps``) on the
     first (``head``, a = 0) or last (``tail``, b = n_int) interval."""
-    rise = pw[b - a + 2 :]
+    rise = tuple(float(r) for r in pw[b - a + 2 :])
+    nr = len(bspline.REST_RISE_POWERS)
     pw = pw[: b - a + 2]
     fd = kinematics.from_f(*bspline.evaluate(pw, s, d, col0=a, k_lo=a, k_hi=b - 1))
     if not (head or tail):
@@ -1751,9 +1809,9 @@ def _window_feed(
     f, sdd, sddd = (x.copy() for x in fd)
     ends = []
     if head:
-        ends.append((s < (a + 1) * d, a, pw[0], pw[1], pw[2], float(rise[0]) if rise.size else 0.0))
+        ends.append((s < (a + 1) * d, a, pw[0], pw[1], pw[2], rise[:nr]))
     if tail:
-        ends.append((s > (b - 1) * d, b - 1, pw[-1], pw[-3], pw[-2], float(rise[-1]) if rise.size else 0.0))
+        ends.append((s > (b - 1) * d, b - 1, pw[-1], pw[-3], pw[-2], rise[-nr:] if rise else ()))
     for sel, k, p_rest, p_in, p_out, p_rise in ends:
         if sel.any():
             f[sel], sdd[sel], sddd[sel] = _rest_feed(p_rest, p_in, p_out, s[sel], d, k, k == 0, p_rise)
@@ -1761,13 +1819,13 @@ def _window_feed(
 
 
 def _rest_feed(p_rest: float, p_in: float, p_out: float, s: FloatArray, d: float, k: int,
-               head: bool, p_rise: float = 0.0) -> kinematics.FeedDerivs:
+               head: bool, p_rise: Rise = ()) -> kinematics.FeedDerivs:
     """(sdot, sddot, sdddot) at piece-local s on a rest interval k (the piece's first, ``head``, or last) that
     the NLP solved: q from ``rest_cps`` of (p_in, p_out) at its inner knot, plus the bump and the rise with
-    amplitudes ``_rest_g`` of p_rest and of p_rise."""
+    amplitudes ``_rest_g`` of p_rest and of each of p_rise."""
     q, q1, q2 = bspline.evaluate(rest_cps(p_in, p_out, d, head), s, d, k_lo=k, k_hi=k, col0=k)
-    g, h = float(_rest_g(p_rest, p_in, p_out)), float(_rest_g(p_rise, p_in, p_out))
-    if g or h:
+    g, h = float(_rest_g(p_rest, p_in, p_out)), tuple(float(_rest_g(r, p_in, p_out)) for r in p_rise)
+    if g or any(h):
         b, b1, b2 = bspline.rest_bump(s, d, k, head, g, h)
         q, q1, q2 = q + b, q1 + b1, q2 + b2
     return kinematics.from_q(q, q1, q2)
@@ -1823,24 +1881,9 @@ class _Slots:
         k = np.arange(n, dtype=np.int64)
         # on the intervals inherited from the previous window its (verified) solution stays admissible
         fu, fe = ref._inherited_floor(prev, g, g.d3, g.d3, k, self.tau, self.d, self.moving)
-        for i, ax in enumerate(self.moving):
-            xs = g.d1[:, ax]
-            unsure = np.abs(xs) < SIGN_EPS
-            sg_hi = np.where(unsure, 1.0, np.sign(xs))
-            sg_lo = np.where(unsure, -1.0, np.sign(xs))
-            um, c, dd = lim.umax[ax], lim.c[ax], lim.d[ax]
-            bu = np.maximum(self.fac, fu[:, i])
-            be = np.maximum(self.fac, fe[:, i])
-            bk = np.minimum(1.0, self.fac / BOUND_FACTOR)
-            r = i * per_axis
-            lo[r, on] = ((-um * bu - c - dd * sg_lo) / um)[on]
-            hi[r, on] = ((um * bu - c - dd * sg_hi) / um)[on]
-            hi[r + 1, on] = be[on]
-            lo[r + 2, on] = -be[on]
-            if per_axis == 6:
-                lo[r + 3, on], hi[r + 3, on] = -bk[on], bk[on]
-                hi[r + 4, on] = bk[on]
-                lo[r + 5, on] = -bk[on]
+        lo[:-1, on], hi[:-1, on] = (x[:, on] for x in _point_bounds(
+            lim, self.moving, g.d1, np.maximum(self.fac[:, None], fu), np.maximum(self.fac[:, None], fe),
+            np.minimum(1.0, self.fac / BOUND_FACTOR)))
         lo[-1, on] = 0.0
         return lo.ravel(), hi.ravel()
 
@@ -1891,6 +1934,109 @@ class _Slots:
             for name in names:
                 out[name][run] = 0.0
         return out
+
+
+def _rest_fine(fine: FloatArray, s_head: float | None, s_tail: float | None, d: float, n: int) -> FloatArray:
+    """The fine grid with n - 1 more points in each rest interval (its rest end at ``s_head`` / ``s_tail``, or
+    None) at the distance d (j / n)^2 from rest: even in time for a constant acceleration, where the even
+    grid in s leaves the first cell next to rest a long time (t ~ sqrt(s)) over which ``_sampled``
+    interpolates v and a linearly (bench-test seed 41: the sampled e at the path's last sample 1.013 x with
+    the rises, where the window's check read it within its tolerance)."""
+    w = (np.arange(1, n, dtype=np.float64) / n) ** 2 * d
+    extra = [s_head + w] if s_head is not None else []
+    extra += [s_tail - w] if s_tail is not None else []
+    if not extra:
+        return fine
+    more = np.concatenate(extra)
+    return np.unique(np.concatenate([fine, more[(more > fine[0]) & (more < fine[-1])]]))
+
+
+def _rest_point(t: float, cps: tuple[Any, Any, Any], g: Any, h: list[Any], head: bool, Fs: Any,
+                inv_d: Any) -> tuple[Any, Any, Any, Any]:
+    """(sqrt(q), sdot, sddot, sdddot) at unit tau t of a rest interval (``_Shape._rest_rows``; CasADi
+    expressions, q scaled by Fs^2): the quadratic of control points ``cps``, plus g b (None: no bump) and
+    sum_k h_k e_k (``bspline.rest_bump``).  sdot = Fs sqrt(q), sddot = q' / 2, sdddot = sqrt(q) q'' / 2."""
+    c0, c1, c2 = cps
+    qh = 0.5 * (c0 * (1 - t) ** 2 + c1 * (1 + 2 * t - 2 * t * t) + c2 * t * t)
+    dq, d2q = (c1 - c0) + (c0 - 2.0 * c1 + c2) * t, c0 - 2.0 * c1 + c2
+    if g is not None:
+        b, b1, b2 = (float(v[0]) for v in bspline.rest_bump(np.array([t]), 1.0, 0, head, 1.0))
+        qh, dq, d2q = qh + g * b, dq + g * b1, d2q + g * b2
+        for ir, hr in enumerate(h):
+            unit = tuple(float(ir == jr) for jr in range(len(h)))
+            e, e1, e2 = (float(v[0]) for v in bspline.rest_bump(np.array([t]), 1.0, 0, head, 0.0, unit))
+            qh, dq, d2q = qh + hr * e, dq + hr * e1, d2q + hr * e2
+    r = ca.sqrt(ca.fmax(qh, REST_Q_FLOOR))
+    sd = Fs * r
+    return r, sd, 0.5 * Fs * Fs * inv_d * dq, 0.5 * sd * Fs * Fs * inv_d * inv_d * d2q
+
+
+def _tighten_points(util: dict[str, FloatArray], fine: FloatArray, s_pts: FloatArray, h: float,
+                    fac: FloatArray) -> None:
+    """Scale the bound factor ``fac`` (P,) of each point at ``s_pts`` (a rest point: spacing ``h`` from its
+    neighbours) by overshoot^-TIGHTEN_POWER - TIGHTEN_MARGIN of the worst violated fine point within h of
+    it (``NlpRefiner._tighten``'s rule for the checkpoints), at least MIN_BOUND_FACTOR."""
+    if not s_pts.size:
+        return
+    names = [k for k in ("control_signal", "servo_error", "sampled_control_signal", "sampled_servo_error",
+                         "acceleration", "jerk") if k in util]
+    if not names:
+        return
+    r = np.max(np.column_stack([u if u.ndim == 1 else np.max(u, axis=1) for u in (util[k] for k in names)]), axis=1)
+    bad = np.flatnonzero(r > 1.0 + VERIFY_TOL)
+    if not bad.size:
+        return
+    near = np.abs(s_pts[:, None] - fine[None, bad]) <= h  # (P, B)
+    if not near.any():
+        return
+    worst = np.max(np.where(near, r[None, bad], 1.0), axis=1)
+    hit = worst > 1.0 + VERIFY_TOL
+    fac[hit] = np.maximum(MIN_BOUND_FACTOR, fac[hit] * (worst[hit] ** -TIGHTEN_POWER - TIGHTEN_MARGIN))
+
+
+def _exact_rows(rows: list[Any], with_aj: bool) -> list[Any]:
+    """``_Shape._axis_rows_t``'s rows at a point with one x_sss (no envelope: e_hi = e_lo, j_hi = j_lo) without
+    the duplicates: per axis u, e, [a, j].  (Two equal rows make Ipopt's KKT matrix rank-deficient: a rest
+    window's solve took twice as long with them.)"""
+    per_axis = 6 if with_aj else 3
+    keep = (0, 1, 3, 4) if with_aj else (0, 1)
+    return [r for i, r in enumerate(rows) if i % per_axis in keep]
+
+
+def _exact_bounds(lo: FloatArray, hi: FloatArray, with_aj: bool) -> tuple[FloatArray, FloatArray]:
+    """``_point_bounds``' (lo, hi) for ``_exact_rows``: e's bounds from e_hi's upper and e_lo's lower, j's alike."""
+    per_axis = 6 if with_aj else 3
+    row = np.arange(lo.shape[0]) % per_axis
+    return (lo[np.isin(row, (0, 2, 3, 5) if with_aj else (0, 2))],
+            hi[np.isin(row, (0, 1, 3, 4) if with_aj else (0, 1))])
+
+
+def _point_bounds(
+    lim: NlpLimits, moving: tuple[int, ...], d1: FloatArray, bu: FloatArray, be: FloatArray, bk: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Row bounds (scaled units) at points with the path's exact derivatives (a cut slot, a rest point), each
+    (rows, P): per moving axis u, e_hi, e_lo, [a, j_hi, j_lo] (``_Shape._axis_rows_t``'s order).  ``d1``: x_s
+    (P, 3), for the friction's sign (both signs where |x_s| < SIGN_EPS); ``bu``, ``be`` (P, na): the u and e
+    bound factors; ``bk`` (P,): the a and j rows'."""
+    per_axis = 6 if lim.amax is not None else 3
+    lo = np.full((len(moving) * per_axis, d1.shape[0]), -np.inf)
+    hi = np.full_like(lo, np.inf)
+    for i, ax in enumerate(moving):
+        xs = d1[:, ax]
+        unsure = np.abs(xs) < SIGN_EPS
+        sg_hi = np.where(unsure, 1.0, np.sign(xs))
+        sg_lo = np.where(unsure, -1.0, np.sign(xs))
+        um, c, dd = lim.umax[ax], lim.c[ax], lim.d[ax]
+        r = i * per_axis
+        lo[r] = (-um * bu[:, i] - c - dd * sg_lo) / um
+        hi[r] = (um * bu[:, i] - c - dd * sg_hi) / um
+        hi[r + 1] = be[:, i]
+        lo[r + 2] = -be[:, i]
+        if per_axis == 6:
+            lo[r + 3], hi[r + 3] = -bk, bk
+            hi[r + 4] = bk
+            lo[r + 5] = -bk
+    return lo, hi
 
 
 @dataclass
@@ -2096,18 +2242,18 @@ class _Context:
             return _Context(*none, *none)
         length = (c.size - 2) * d
         rest: FloatArray | None = None
-        rise = 0.0
+        rise: Rise = ()
         if left is not None and left[0] == 0:
             # the chain solved the rest interval: its q (``_rest_feed``), and f from knot 1 on
             rest = left[1][:3].copy()
             rise = left[2]
             c = c.copy()
             c[:3] = rest_cps(float(rest[1]), float(rest[2]), d, True)
-            left = (1, left[1][1:], 0.0)
+            left = (1, left[1][1:], ())
 
         def feed(s: FloatArray) -> kinematics.FeedDerivs:
             f, f1, f2 = kinematics.from_q(*bspline.evaluate(c, s, d))
-            if rest is not None and (rest[0] != 0.0 or rise != 0.0):
+            if rest is not None and (rest[0] != 0.0 or any(rise)):
                 on = s < d
                 if on.any():
                     f, f1, f2 = f.copy(), f1.copy(), f2.copy()
@@ -2427,7 +2573,7 @@ class ChainPipeline:
 
     def finish(
         self, c: FloatArray, joins: list[int], on_chain: Callable[[float], None] | None = None
-    ) -> tuple[FloatArray, NDArray[np.bool_], tuple[float, float]]:
+    ) -> tuple[FloatArray, NDArray[np.bool_], tuple[Rise, Rise]]:
         """``refine``'s (p, mask, rise) on the piece's final c and joins, from the chains handed out (the rest
         handed out now)."""
         sent = [(A, B) for (A, B, _, _), _ in self.sent]
@@ -2439,7 +2585,7 @@ class ChainPipeline:
         self.lp_progress(c, joins, True)
         p = np.zeros(self.n_int + 2)
         mask = np.zeros(self.n_int, dtype=bool)
-        rise = [0.0, 0.0]
+        rise: list[Rise] = [(), ()]
         for (A, B, task_c, c_final), res in self.sent:
             kept, spans, st = res.get()
             if kept is None or not np.array_equal(task_c[:c_final], c[:c_final]):

@@ -735,10 +735,10 @@ def _refine_piece(
         mask[lo:hi] = False
         if lo == 1:
             c[:3] = lp_prof.c[:3]
-            g[0] = h[0] = 0.0
+            g[0], h[0] = 0.0, ()
         if hi == n_int - 1:
             c[-3:] = lp_prof.c[-3:]
-            g[1] = h[1] = 0.0
+            g[1], h[1] = 0.0, ()
 
     def refined() -> PieceProfile:
         return replace(lp_prof, c=c, p=p, f_mask=mask, rest_g=(g[0], g[1]), rest_h=(h[0], h[1]))
@@ -778,6 +778,12 @@ def _refine_piece(
     return refined()
 
 
+def _same_rise(x: tuple[float, ...], y: tuple[float, ...]) -> bool:
+    """Whether two rest ends' rise amplitudes (``PieceProfile.rest_h``) are the same shape: equal, or both
+    none or all 0."""
+    return x == y or not (any(x) or any(y))
+
+
 def _slower_spans(lp_prof: PieceProfile, prof: PieceProfile, joins: list[int]) -> list[tuple[int, int, float, float]]:
     """Refined spans (lo, hi, refined time, LP time; knot intervals [lo, hi), s) slower than the LP's feed.
 
@@ -802,10 +808,10 @@ def _slower_spans(lp_prof: PieceProfile, prof: PieceProfile, joins: list[int]) -
     last = np.append(first[1:], on.size) - 1
     rest_f, rest_lp = rest_interval_times(prof), rest_interval_times(lp_prof)
     for j, k, same in ((0, 1, np.array_equal(prof.c[:3], lp_prof.c[:3]) and prof.rest_g[0] == lp_prof.rest_g[0]
-                        and prof.rest_h[0] == lp_prof.rest_h[0]),
+                        and _same_rise(prof.rest_h[0], lp_prof.rest_h[0])),
                        (-1, lp_prof.n_int - 2,
                         np.array_equal(prof.c[-3:], lp_prof.c[-3:]) and prof.rest_g[1] == lp_prof.rest_g[1]
-                        and prof.rest_h[1] == lp_prof.rest_h[1])):
+                        and _same_rise(prof.rest_h[1], lp_prof.rest_h[1]))):
         at = first if j == 0 else last
         hit = np.flatnonzero(on[at] == k)
         if not same and hit.size:

@@ -63,7 +63,8 @@ class PieceProfile:
         p: (n_int + 2,) control points of f, mm/s, or None (LP only).
         f_mask: (n_int,) bool, intervals that use f, or None.
         rest_g: the bumps' amplitudes (first, last rest interval), mm^2/s^2.
-        rest_h: the rises' amplitudes (first, last rest interval), mm^2/s^2.
+        rest_h: the rises' amplitudes (first, last rest interval), one per ``bspline.REST_RISE_POWERS``
+            (or none), mm^2/s^2.
     """
 
     s_start: float
@@ -73,7 +74,7 @@ class PieceProfile:
     p: FloatArray | None = None
     f_mask: NDArray[np.bool_] | None = None
     rest_g: tuple[float, float] = (0.0, 0.0)
-    rest_h: tuple[float, float] = (0.0, 0.0)
+    rest_h: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
 
     def rest_slopes(self) -> tuple[float, float]:
         """q' at the start (> 0 if the feed leaves rest) and at the end (< 0 if it reaches rest), mm/s^2."""
@@ -88,7 +89,7 @@ class PieceProfile:
         """(sdot, sddot, sdddot) at piece-local s, each (K,)."""
         s = np.asarray(s, dtype=np.float64)
         q3 = bspline.evaluate(self.c, s, self.d)
-        if any(self.rest_g) or any(self.rest_h):
+        if any(self.rest_g) or any(any(h) for h in self.rest_h):
             q3 = self._bumped(s, q3)
         out = kinematics.from_q(*q3)
         if self.p is None or self.f_mask is None:
@@ -111,7 +112,7 @@ class PieceProfile:
         for g, h, k, head in ((self.rest_g[0], self.rest_h[0], 0, True),
                               (self.rest_g[1], self.rest_h[1], n - 1, False)):
             sel = s < d if head else s > (n - 1) * d
-            if (g or h) and sel.any():
+            if (g or any(h)) and sel.any():
                 b, b1, b2 = bspline.rest_bump(s[sel], d, k, head, g, h)
                 q[sel] += b
                 q1[sel] += b1
@@ -141,9 +142,9 @@ class PieceProfile:
 
         In the end intervals q = sigma (|q'_rest| + q''_end sigma / 2) with sigma
         the distance from the rest point = d w^2, so h = 2 sqrt(d) /
-        sqrt(|q'_rest| + q''_end d w^2 / 2): no cancellation, no singularity (the bump and rise
-        g b + h e add (g (1 - w^2)^2 + h w^2 (1 - w^2)^2) / d under the root: ``bspline.rest_bump`` with
-        tau = w^2).
+        sqrt(|q'_rest| + q''_end d w^2 / 2): no cancellation, no singularity (the bump and rises
+        g b + sum_k h_k e_k add (g (1 - w^2)^2 + sum_k h_k w^2 (1 - w^2)^k) / d under the root:
+        ``bspline.rest_bump`` with tau = w^2).
         """
         c, d, n = self.c, self.d, self.n_int
         xl = np.clip(np.asarray(xl, dtype=np.float64), -float(x0), float(n - x0))
@@ -167,9 +168,9 @@ class PieceProfile:
             r0 = q1_0 + 0.5 * q2_0 * d * w0 * w0
             rL = -q1_L + 0.5 * q2_L * d * wL * wL
             (g0, gL), (h0, hL) = self.rest_g, self.rest_h
-            if g0 or h0:
+            if g0 or any(h0):
                 r0 = r0 + bspline.rest_bump_quotient(w0 * w0, g0, h0) / d
-            if gL or hL:
+            if gL or any(hL):
                 rL = rL + bspline.rest_bump_quotient(wL * wL, gL, hL) / d
             head = 2.0 * np.sqrt(d) / np.sqrt(r0)
             tail = 2.0 * np.sqrt(d) / np.sqrt(rL)
@@ -367,15 +368,15 @@ def rest_interval_times(profile: PieceProfile) -> tuple[float, float]:
     time d * integral dt / sqrt(q) is 2 d * integral_0^1 dw / sqrt(A + B w^2), A = 2 c_1, B = (c_2 - 3 c_1) / 2:
     2 d asinh(sqrt(B / A)) / sqrt(B) if B > 0, 2 d asin(sqrt(-B / A)) / sqrt(-B) if B < 0 (A + B = q(1) > 0),
     2 d / sqrt(A) if B = 0; the last interval mirrored.  With a bump or rise (``PieceProfile.rest_g``,
-    ``rest_h``: g b + h e added to q) the root is of A + B w^2 + g (1 - w^2)^2 + h w^2 (1 - w^2)^2, smooth in
-    w: REST_TIME_NODES-point Gauss-Legendre.
+    ``rest_h``: g b + sum_k h_k e_k added to q) the root is of A + B w^2 + g (1 - w^2)^2
+    + sum_k h_k w^2 (1 - w^2)^k, smooth in w: REST_TIME_NODES-point Gauss-Legendre.
     inf if the feed does not leave (reach) rest."""
     c, d = profile.c, profile.d
     out = []
     for c1, c2, g, h in ((c[1], c[2], profile.rest_g[0], profile.rest_h[0]),
                          (c[-2], c[-3], profile.rest_g[1], profile.rest_h[1])):
         A, B = 2.0 * float(c1), 0.5 * (float(c2) - 3.0 * float(c1))
-        if g or h:
+        if g or any(h):
             w, x = _REST_TIME_GL
             r = A + B * x * x + bspline.rest_bump_quotient(x * x, g, h)
             ok = A + g > 0.0 and A + B > 0.0 and bool(np.all(r > 0.0))

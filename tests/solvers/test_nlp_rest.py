@@ -60,24 +60,32 @@ def _bump_poly(head: bool) -> np.polynomial.Polynomial:
     return r * (1 - r) ** bspline.REST_BUMP_POWER
 
 
-def _rise_poly(head: bool) -> np.polynomial.Polynomial:
-    """The rest interval's rise as a polynomial in tau: r^2 (1 - r)^k, r = tau at the head, 1 - tau at the tail."""
+def _rise_poly(head: bool, h: tuple[float, ...]) -> np.polynomial.Polynomial:
+    """The rest interval's rises with amplitudes h as a polynomial in tau: sum_k h_k r^2 (1 - r)^k over the k of
+    ``bspline.REST_RISE_POWERS``, r = tau at the head, 1 - tau at the tail."""
     P = np.polynomial.Polynomial
     r = P([0.0, 1.0]) if head else P([1.0, -1.0])
-    return r * r * (1 - r) ** bspline.REST_RISE_POWER
+    return sum((hk * r * r * (1 - r) ** k for hk, k in zip(h, bspline.REST_RISE_POWERS, strict=True)), P([0.0]))
+
+
+def _amps(a: float) -> tuple[float, ...]:
+    """Rise amplitudes, one per ``bspline.REST_RISE_POWERS``: a, -a / 2, a / 4, ..."""
+    return tuple(a * (-0.5) ** i for i in range(len(bspline.REST_RISE_POWERS)))
 
 
 @pytest.mark.parametrize("head", [True, False])
 def test_rest_bump_keeps_rest_and_the_inner_state(head: bool) -> None:
-    """``bspline.rest_bump`` against the polynomials r (1 - r)^m (bump) and r^2 (1 - r)^k (rise) and their
+    """``bspline.rest_bump`` against the polynomials r (1 - r)^m (bump) and r^2 (1 - r)^k (rises) and their
     derivatives (numpy), and its ends: both 0 at rest and at the inner knot with slope 0 at the inner knot;
     at rest the bump's |b'| = 1/d and the rise's slope 0 (it leaves the step at rest alone)."""
     d, k = 1.3, 5
     t = np.linspace(0.0, 1.0, 41)
     s = (k + t) * d
     rest, inner = (0, -1) if head else (-1, 0)
-    for g, h, P in ((1.0, 0.0, _bump_poly(head)), (0.0, 1.0, _rise_poly(head)),
-                    (-2.5, 4.0, -2.5 * _bump_poly(head) + 4.0 * _rise_poly(head))):
+    R = len(bspline.REST_RISE_POWERS)
+    units = [tuple(float(i == j) for j in range(R)) for i in range(R)]
+    for g, h, P in ((1.0, (), _bump_poly(head)), *((0.0, u, _rise_poly(head, u)) for u in units),
+                    (-2.5, _amps(4.0), -2.5 * _bump_poly(head) + _rise_poly(head, _amps(4.0)))):
         b, b1, b2 = bspline.rest_bump(s, d, k, head, g, h)
         np.testing.assert_allclose(b, P(t), atol=1e-14)
         np.testing.assert_allclose(b1, P.deriv(1)(t) / d, atol=1e-13)
@@ -97,9 +105,9 @@ def test_rest_interval_times_with_bumps_match_quadrature() -> None:
     from solvers.timing import PieceTiming
 
     d = 1.7
-    for (p_in, p_out), g, h in (((40.0, 80.0), (1500.0, -800.0), (0.0, 0.0)),
-                                ((60.0, 45.0), (-600.0, 2500.0), (9000.0, -1500.0)),
-                                ((60.0, 45.0), (0.0, 0.0), (4000.0, 6000.0))):
+    for (p_in, p_out), g, h in (((40.0, 80.0), (1500.0, -800.0), ((), ())),
+                                ((60.0, 45.0), (-600.0, 2500.0), (_amps(9000.0), _amps(-1500.0))),
+                                ((60.0, 45.0), (0.0, 0.0), (_amps(4000.0), _amps(6000.0)))):
         head, tail = nlp.rest_cps(p_in, p_out, d, True), nlp.rest_cps(p_out, p_in, d, False)
         c = np.concatenate([head, np.full(4, 2000.0), tail])
         prof = PieceProfile(s_start=0.0, length=(c.size - 2) * d, d=d, c=c, rest_g=g, rest_h=h)
@@ -151,21 +159,33 @@ def test_rest_rows_are_the_q_kinematics() -> None:
     its objective's rest term is the rest intervals' time (``rest_interval_times``) over the window's length."""
     n, N, axes = 6, 4, (0, 1)
     shape = nlp._Shape(n, N, axes, False, head=True, tail=True)
-    assert shape.n_rest == 2
+    taus = nlp.rest_point_taus(N)
+    Mt = 2 * taus.size  # the rest points: the head's, then the tail's
+    assert shape.n_rest == 2 + 2 * len(axes) * Mt  # (u and e per axis at each rest point)
     k, tau = nlp.checkpoint_layout(n, N)
     K = k.size
     rng = np.random.default_rng(11)
     d, Fs = 1.5, 120.0
     s = (k + tau) * d
-    geo = {name: np.column_stack([np.sin(s + i), np.cos(0.7 * s + i)]) for i, name in enumerate(("d1", "d2", "d3"))}
+    s_pts = np.concatenate([taus * d, (n - 1 + taus) * d])
+
+    def geo_at(s: np.ndarray) -> dict[str, np.ndarray]:
+        return {name: np.column_stack([np.sin(s + i), np.cos(0.7 * s + i)])
+                for i, name in enumerate(("d1", "d2", "d3"))}
+
+    geo, geo_p = geo_at(s), geo_at(s_pts)
     coef = rng.uniform(0.5, 1.5, (len(axes), 8))
     # p_0 and p_n+1 carry the rest intervals' bumps (REST_BUMP): one raises q inside, one lowers it; the
-    # two variables after them the rises (REST_RISE: the head's, then the tail's)
-    assert shape.n_rise == 2
-    x = np.concatenate([[0.2], rng.uniform(0.3, 0.6, n), [-0.1], [0.5, -0.2]])
+    # variables after them the rises (REST_RISE, one per power: the head's, then the tail's)
+    R = len(bspline.REST_RISE_POWERS)
+    assert shape.n_rise == 2 * R
+    rise_head, rise_tail = _amps(0.5), _amps(-0.2)
+    x = np.concatenate([[0.2], rng.uniform(0.3, 0.6, n), [-0.1], rise_head, rise_tail])
     p = np.concatenate([
         [Fs, 1 / d], *geo["d1"].T, *geo["d2"].T, *geo["d3"].T, *geo["d3"].T, np.zeros(K), np.zeros(K),
         coef.ravel(),
+        # the rest points' x_s, x_ss, x_sss per axis
+        *(geo_p[name][:, m] for m in range(len(axes)) for name in ("d1", "d2", "d3")),
     ])
     fn = ca.Function("g", [shape._problem["x"], shape._problem["p"]], [shape._problem["g"], shape._problem["f"]])
     g_ca, obj = fn(x, p)
@@ -176,15 +196,20 @@ def test_rest_rows_are_the_q_kinematics() -> None:
     # points, through bspline and from_q
     c_head, c_tail = nlp.rest_cps(pw[1], pw[2], d, True), nlp.rest_cps(pw[n - 1], pw[n], d, False)
     g_head, g_tail = pw[0] * (pw[1] + pw[2]) / 2, pw[n + 1] * (pw[n - 1] + pw[n]) / 2
-    h_head, h_tail = pw[n + 2] * (pw[1] + pw[2]) / 2, pw[n + 3] * (pw[n - 1] + pw[n]) / 2
+    h_head = tuple(r * Fs * (pw[1] + pw[2]) / 2 for r in rise_head)
+    h_tail = tuple(r * Fs * (pw[n - 1] + pw[n]) / 2 for r in rise_tail)
+
+    def rest_feed(s: np.ndarray, kk: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        head = kk == 0
+        cq, gb, hb = (c_head, g_head, h_head) if head else (c_tail, g_tail, h_tail)
+        q3 = bspline.evaluate(cq, s, d, k_lo=kk, k_hi=kk, col0=kk)
+        bump = gb * _bump_poly(head) + _rise_poly(head, hb)
+        t = s / d - kk
+        return kinematics.from_q(q3[0] + bump(t), q3[1] + bump.deriv(1)(t) / d, q3[2] + bump.deriv(2)(t) / d**2)
+
     fd = tuple(np.zeros(K) for _ in range(3))
-    for sel, cq, kk, gb, hb, head in ((k == 0, c_head, 0, g_head, h_head, True),
-                                      (k == n - 1, c_tail, n - 1, g_tail, h_tail, False)):
-        q3 = bspline.evaluate(cq, s[sel], d, k_lo=kk, k_hi=kk, col0=kk)
-        bump = gb * _bump_poly(head) + hb * _rise_poly(head)
-        t = s[sel] / d - kk
-        q3 = (q3[0] + bump(t), q3[1] + bump.deriv(1)(t) / d, q3[2] + bump.deriv(2)(t) / d**2)
-        for o, v in zip(fd, kinematics.from_q(*q3), strict=True):
+    for sel, kk in ((k == 0, 0), (k == n - 1, n - 1)):
+        for o, v in zip(fd, rest_feed(s[sel], kk), strict=True):
             o[sel] = v
     # the verification's feed (``_window_feed``) is the same inside the rest intervals
     inside = rest & (tau > 0) & (tau < 1)
@@ -192,10 +217,13 @@ def test_rest_rows_are_the_q_kinematics() -> None:
         np.testing.assert_allclose(got, want[inside], rtol=1e-12, atol=1e-9)
     from geometry.toolpath import PathSamples
 
-    z = np.zeros((K, 1))
-    gs = PathSamples(s=s, position=np.zeros((K, 3)), d1=np.hstack([geo["d1"], z]), d2=np.hstack([geo["d2"], z]),
-                     d3=np.hstack([geo["d3"], z]))
-    v, acc, j = kinematics.axis_kinematics(gs, *fd)
+    def drive(s: np.ndarray, geo: dict[str, np.ndarray], fd: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+        z = np.zeros((s.size, 1))
+        gs = PathSamples(s=s, position=np.zeros((s.size, 3)), d1=np.hstack([geo["d1"], z]),
+                         d2=np.hstack([geo["d2"], z]), d3=np.hstack([geo["d3"], z]))
+        return kinematics.axis_kinematics(gs, *fd)
+
+    v, acc, j = drive(s, geo, fd)
     for m in range(len(axes)):
         u = coef[m, 0] * acc[:, m] + coef[m, 1] * v[:, m]
         e = coef[m, 2] * v[:, m] + coef[m, 3] * acc[:, m] + coef[m, 4] * j[:, m]
@@ -209,9 +237,20 @@ def test_rest_rows_are_the_q_kinematics() -> None:
                                    atol=ROW_RTOL * np.abs(e).max())
         idx = np.flatnonzero(at_rest)
         np.testing.assert_allclose(g[shape.row_index[blk + 1, idx]], e[idx], atol=REST_ROW_ATOL * np.abs(e).max())
-    # the extra rows: the acceleration step at rest, q' d / 2 there
-    np.testing.assert_allclose(g[-2:], [(c_head[1] + g_head / 2) / Fs**2, (c_tail[1] + g_tail / 2) / Fs**2],
-                               rtol=1e-12)
+    # the extra rows: the acceleration step at rest, q' d / 2 there, ...
+    first = shape.rows - shape.n_rest
+    np.testing.assert_allclose(g[first : first + 2],
+                               [(c_head[1] + g_head / 2) / Fs**2, (c_tail[1] + g_tail / 2) / Fs**2], rtol=1e-12)
+    # ... then u and e per axis at the rest points (between the checkpoints, exact x_sss there)
+    fd_p = tuple(np.concatenate(parts) for parts in zip(*(rest_feed(s_pts[sl], kk) for sl, kk in (
+        (slice(0, Mt // 2), 0), (slice(Mt // 2, Mt), n - 1))), strict=True))
+    v, acc, j = drive(s_pts, geo_p, fd_p)
+    rows_p = g[first + 2 :].reshape(2 * len(axes), Mt)
+    for m in range(len(axes)):
+        u = coef[m, 0] * acc[:, m] + coef[m, 1] * v[:, m]
+        e = coef[m, 2] * v[:, m] + coef[m, 3] * acc[:, m] + coef[m, 4] * j[:, m]
+        np.testing.assert_allclose(rows_p[2 * m], u, rtol=ROW_RTOL, atol=ROW_RTOL * np.abs(u).max())
+        np.testing.assert_allclose(rows_p[2 * m + 1], e, rtol=ROW_RTOL, atol=ROW_RTOL * np.abs(e).max())
     # with zero time weights on the checkpoints the objective is the rest intervals' time x Fs / (n d)
     c = np.concatenate([c_head, np.full(n - 4, 1.0), c_tail])
     t_rest = sum(rest_interval_times(PieceProfile(0.0, n * d, d, c, rest_g=(g_head, g_tail), rest_h=(h_head, h_tail))))
@@ -243,11 +282,11 @@ def test_nlp_solves_the_rest_intervals(monkeypatch: pytest.MonkeyPatch) -> None:
     assert plain.profiles[0].rest_g == (0.0, 0.0)
     assert on.summary["motion_time"] < plain.summary["motion_time"] < off.summary["motion_time"]
     # ... and the rises (REST_RISE) too: used at both ends, shorter than the bumps alone
-    assert all(h != 0.0 for h in on.profiles[0].rest_h)
+    assert all(any(h) for h in on.profiles[0].rest_h)
     monkeypatch.setattr(nlp, "REST_BUMP", True)
     monkeypatch.setattr(nlp, "REST_RISE", False)
     bumps = schedule(tp, m, Options(method="lp+nlp"))
-    assert bumps.profiles[0].rest_h == (0.0, 0.0) and all(g != 0.0 for g in bumps.profiles[0].rest_g)
+    assert not any(any(h) for h in bumps.profiles[0].rest_h) and all(g != 0.0 for g in bumps.profiles[0].rest_g)
     assert on.summary["motion_time"] < bumps.summary["motion_time"] < plain.summary["motion_time"]
     _assert_seams_continuous(on)
     _check_drive(m, on)
@@ -275,14 +314,14 @@ def test_failed_rest_window_is_solved_again_from_the_lp_state(
     assert sch.summary["nlp_rest_retries"] == made[-1].rest_retries == len(faulted)
     assert sch.diagnostics["nlp_fallbacks"] == []
     first = sch.profiles[0]
-    assert first.rest_h[0] == 0.0
+    assert not any(first.rest_h[0])
     if len(faulted) == 1:  # the NLP's rest interval, with its bump, without its rise
         assert not np.allclose(first.c[:3], off.profiles[0].c[:3]) and first.rest_g[0] != 0.0
     else:
         np.testing.assert_array_equal(first.c[:3], off.profiles[0].c[:3])
         assert first.rest_g[0] == 0.0
     assert not np.allclose(first.c[-3:], off.profiles[0].c[-3:])  # the end's still the NLP's
-    assert first.rest_h[1] != 0.0
+    assert any(first.rest_h[1])
     _assert_seams_continuous(sch)
     _check_drive(m, sch)
 
@@ -295,6 +334,67 @@ def test_bumps_only_where_the_machine_stands() -> None:
     sch = schedule(ex.square_corner(50.0), m, Options(method="lp+nlp"))
     first, second = sch.profiles
     assert first.rest_g[1] == 0.0 and second.rest_g[0] == 0.0
-    assert first.rest_h[1] == 0.0 and second.rest_h[0] == 0.0
+    assert not any(first.rest_h[1]) and not any(second.rest_h[0])
     assert first.rest_g[0] != 0.0 and second.rest_g[1] != 0.0
     _check_drive(m, sch)
+
+
+@pytest.mark.parametrize("kinematic", [False, True])
+def test_rest_points_bounds_and_tightening(kinematic: bool) -> None:
+    """The rest points' rows (``REST_SUBDIV``): one u and one e row per axis with both bounds (``_exact_bounds``
+    of ``_point_bounds``: e's upper bound from the e_hi row's, its lower from the e_lo row's, u's with the
+    friction offset), and a violation tightens only the rest points within one spacing of it, by
+    overshoot^-TIGHTEN_POWER - TIGHTEN_MARGIN (``_tighten_points``)."""
+    lim = nlp.NlpLimits.from_machine(router(), False, kinematic)
+    assert (lim.amax is not None) == kinematic
+    moving = (0, 1)
+    d1 = np.array([[1.0, -0.5, 0.0], [-0.3, 1e-12, 0.0], [0.2, 0.8, 0.0]])
+    P = d1.shape[0]
+    bu = np.full((P, 2), 0.9)
+    be = np.full((P, 2), 0.8)
+    lo, hi = nlp._point_bounds(lim, moving, d1, bu, be, np.full(P, 0.7))
+    per_axis = 6 if lim.amax is not None else 3
+    assert lo.shape == hi.shape == (2 * per_axis, P)
+    xlo, xhi = nlp._exact_bounds(lo, hi, lim.amax is not None)
+    assert xlo.shape == xhi.shape == (2 * (per_axis - per_axis // 3), P)
+    for i, ax in enumerate(moving):
+        um, c, dd = lim.umax[ax], lim.c[ax], lim.d[ax]
+        sign = np.sign(d1[:, ax])
+        unsure = np.abs(d1[:, ax]) < nlp.SIGN_EPS
+        r = i * (per_axis - per_axis // 3)
+        np.testing.assert_allclose(xhi[r], (0.9 * um - c - dd * np.where(unsure, 1.0, sign)) / um, rtol=1e-15)
+        np.testing.assert_allclose(xlo[r], (-0.9 * um - c - dd * np.where(unsure, -1.0, sign)) / um, rtol=1e-15)
+        np.testing.assert_array_equal(xhi[r + 1], 0.8)
+        np.testing.assert_array_equal(xlo[r + 1], -0.8)
+        if kinematic:  # a and j: the kinematic rows' factor, both bounds
+            for k in (r + 2, r + 3):
+                np.testing.assert_array_equal(xhi[k], 0.7)
+                np.testing.assert_array_equal(xlo[k], -0.7)
+    # (no rest points: nothing, without an error)
+    e_lo, e_hi = nlp._exact_bounds(*nlp._point_bounds(lim, moving, np.zeros((0, 3)), np.zeros((0, 2)),
+                                                     np.zeros((0, 2)), np.zeros(0)), lim.amax is not None)
+    assert e_lo.shape[1] == e_hi.shape[1] == 0
+    # tightening: points at s = 0.1, 0.2, 0.3 (spacing 0.1); one violation of 1.05 at s = 0.17
+    fine = np.array([0.05, 0.17, 0.4])
+    util = {"servo_error": np.array([[0.5, 0.5, 0.0], [0.2, 1.05, 0.0], [0.9, 0.1, 0.0]])}
+    fac = np.full(3, nlp.BOUND_FACTOR)
+    nlp._tighten_points(util, fine, np.array([0.1, 0.2, 0.3]), 0.1, fac)
+    want = nlp.BOUND_FACTOR * (1.05 ** -nlp.TIGHTEN_POWER - nlp.TIGHTEN_MARGIN)
+    np.testing.assert_allclose(fac, [want, want, nlp.BOUND_FACTOR], rtol=1e-15)
+
+
+def test_rest_intervals_without_rest_points(monkeypatch: pytest.MonkeyPatch) -> None:
+    """REST_SUBDIV = 1 (the rest intervals' N + 1 checkpoints only, no rest points) with one rise (session 16's
+    rest intervals) still solves both rest intervals (no rest retries: an error in a window is a retry, not a
+    crash), and the rest points with the default rises make the flower's motion shorter; the drive limits hold
+    in the finite differences of the samples."""
+    tp, m = ex.flower(1), router()
+    monkeypatch.setattr(nlp, "REST_SUBDIV", 1)
+    monkeypatch.setattr(bspline, "REST_RISE_POWERS", (2,))
+    few = schedule(tp, m, Options(method="lp+nlp"))
+    assert few.summary["nlp_rest_retries"] == 0 and few.diagnostics["nlp_fallbacks"] == []
+    assert all(any(h) for h in few.profiles[0].rest_h)
+    monkeypatch.undo()
+    dense = schedule(tp, m, Options(method="lp+nlp"))
+    assert dense.summary["motion_time"] < few.summary["motion_time"]
+    _check_drive(m, few)
