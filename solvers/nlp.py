@@ -198,14 +198,15 @@ REST_BUMP = True
 #: (``square_corner``: 1.12 x between them after 4 rounds).  Flower 3.0033 -> 2.9996 s.  Since session 17
 #: one rise per power in ``bspline.REST_RISE_POWERS`` (2, 3, 4, 5: q a polynomial of degree 7 in tau that
 #: vanishes at rest), each its own variable, with the rest points' rows (``REST_SUBDIV``) to hold them:
-#: flower 2.9996 -> 2.9810 s, its rest intervals within 0.3 ms of the 4x finer NLP's.
+#: flower 2.9996 -> 2.9810 s, its rest intervals 2.3 and 0.2 ms behind the 4x finer NLP's (were 7.0, 8.8).
 REST_RISE = True
 #: A rest interval has rows at tau = j / (N REST_SUBDIV), j = 0 .. N REST_SUBDIV: its N + 1 checkpoints and,
 #: between them, the rest points (``rest_point_taus``: the path's exact derivatives there, like a cut slot's,
 #: and bounds of their own, tightened by the violations next to them).  Over 1 / N of a knot interval the
-#: shapes q + g b + h e (a sextic in tau) swing between the checkpoints: flower at N = 4 with one rise the
-#: window keeps the 4 checkpoints' rows and its tightening also pulled the next intervals' rows down; with
-#: rows as dense as the 4x finer NLP's, the rest intervals come within 0.2 ms of its (``REST_RISE``).
+#: shapes q + g b + sum h_k e_k swing between the checkpoints: flower at N = 4 with two rises and no rest
+#: points the rest intervals gained 1-1.5 ms and the tightening of their few rows took 3-4 ms from the
+#: intervals next to them (3.0053 s against one rise's 2.9996); with rows as dense as the 4x finer NLP's
+#: the rises pay (``REST_RISE``, ``bspline.REST_RISE_POWERS``).
 REST_SUBDIV = 4
 #: Pieces on fewer knot intervals keep the LP's rest intervals.
 REST_ENDS_MIN_INTERVALS = 4
@@ -410,6 +411,9 @@ class _Shape:
     whose upper bound min(Fmax, min_x vmax_x / |x_s|) carries the feed and axis velocity limits.
     With ``slotted``: n cut slots (``_Slots``), parameters tau (n), then x_s, x_ss, x_sss (n each)
     per moving axis; rows as above (x_sss exact, so e_hi = e_lo) and f, per slot.
+    With ``head`` / ``tail`` (a rest interval: ``_rest_rows``): the rise variables after p_n+1, the rest
+    points' parameters last (x_s, x_ss, x_sss over all of them, per moving axis in turn) and their rows
+    after every other (one per rest end for its step, then u, e, [a, j] per axis at the rest points).
     """
 
     def __init__(self, n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool = False,
@@ -497,7 +501,7 @@ class _Shape:
         self.rows = int(g.size1())
         self.base_rows = nxt
         #: rows after the slots (``_rest_rows``): one per rest end, then the rest points' (per moving axis u,
-        #: e_hi, e_lo, [a, j_hi, j_lo], each over the rest points: ``_point_bounds``'s order)
+        #: e, [a, j], each over the rest points: ``_exact_rows``, ``_exact_bounds``)
         self.n_rest = int(ca.vertcat(*rest_rows).size1()) if rest_rows else 0
         self.solver = ca.nlpsol("feed_nlp", "ipopt", self._problem, IPOPT_WARM_OPTIONS)
         self._safe_solver: Any = None
@@ -540,8 +544,8 @@ class _Shape:
         Extra rows (one per rest end): c_1 + g / 2 (the control point next to rest, plus half the bump's
         amplitude: q' = (2 c_1 + g) / d there), whose bounds hold the acceleration at rest; then the rows at
         the rest points (``rest_point_taus``: between the checkpoints, with the path's exact derivatives
-        there, ``rp`` = [x_s, x_ss, x_sss][axis] over the rest points), per moving axis u, e_hi, e_lo, [a,
-        j_hi, j_lo] each over all of them.
+        there, ``rp`` = [x_s, x_ss, x_sss][axis] over the rest points), per moving axis u, e, [a, j] each
+        over all of them (``_exact_rows``).
 
         Returns (scaled feed at every checkpoint, the base rows with the rest intervals' checkpoints
         replaced, the travel time term, the extra rows)."""
