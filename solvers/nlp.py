@@ -1452,7 +1452,7 @@ class NlpRefiner:
             out = np.ones(K)
             bad = ratio > 1.0 + VERIFY_TOL
             if bad.any():
-                sc = ratio[bad] ** -TIGHTEN_POWER - TIGHTEN_MARGIN
+                sc = _tighten_scale(ratio[bad])
                 np.minimum.at(out, near[bad].ravel(), np.repeat(sc, near.shape[1]))
             return out
 
@@ -1922,7 +1922,7 @@ class _Slots:
             if self.used[k]:
                 # the feature next to this interval's slot is still over: tighten the slot like a checkpoint
                 if abs(fine[i] - (self.a + k + self.tau[k]) * self.d) <= self.near:
-                    self.fac[k] = max(MIN_BOUND_FACTOR, self.fac[k] * (worst**-TIGHTEN_POWER - TIGHTEN_MARGIN))
+                    self.fac[k] = max(MIN_BOUND_FACTOR, self.fac[k] * _tighten_scale(worst))
                     if out is util:
                         out = {name: v.copy() for name, v in util.items()}
                     for name in names:
@@ -1975,6 +1975,13 @@ def _rest_point(t: float, cps: tuple[Any, Any, Any], g: Any, h: list[Any], head:
     return r, sd, 0.5 * Fs * Fs * inv_d * dq, 0.5 * sd * Fs * Fs * inv_d * inv_d * d2q
 
 
+def _tighten_scale(overshoot: Any) -> Any:
+    """The factor a bound is scaled by for a violation of ``overshoot`` (> 1) next to it:
+    overshoot^-TIGHTEN_POWER - TIGHTEN_MARGIN (a checkpoint's: ``NlpRefiner._tighten``; a cut slot's:
+    ``_Slots.place``; a rest point's: ``_tighten_points``)."""
+    return overshoot**-TIGHTEN_POWER - TIGHTEN_MARGIN
+
+
 def _tighten_points(util: dict[str, FloatArray], fine: FloatArray, s_pts: FloatArray, h: float,
                     fac: FloatArray) -> None:
     """Scale the bound factor ``fac`` (P,) of each point at ``s_pts`` (a rest point: spacing ``h`` from its
@@ -1995,7 +2002,7 @@ def _tighten_points(util: dict[str, FloatArray], fine: FloatArray, s_pts: FloatA
         return
     worst = np.max(np.where(near, r[None, bad], 1.0), axis=1)
     hit = worst > 1.0 + VERIFY_TOL
-    fac[hit] = np.maximum(MIN_BOUND_FACTOR, fac[hit] * (worst[hit] ** -TIGHTEN_POWER - TIGHTEN_MARGIN))
+    fac[hit] = np.maximum(MIN_BOUND_FACTOR, fac[hit] * _tighten_scale(worst[hit]))
 
 
 def _exact_rows(rows: list[Any], with_aj: bool) -> list[Any]:
