@@ -68,7 +68,7 @@ import math
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -1897,7 +1897,7 @@ class _Slots:
         names = [k for k in ("control_signal", "servo_error", "acceleration", "jerk") if k in util]
         if not names:
             return util
-        r = np.max(np.column_stack([np.max(util[k], axis=1) for k in names]), axis=1)
+        r = _worst_util(util, names)
         bad = r > 1.0 + VERIFY_TOL
         ok = bad & (fine > self.s_lo) & (fine < self.s_hi)
         if not self.used.any():  # the first slot needs a large overshoot (then the slotted shape is in use)
@@ -1975,6 +1975,13 @@ def _rest_point(t: float, cps: tuple[Any, Any, Any], g: Any, h: list[Any], head:
     return r, sd, 0.5 * Fs * Fs * inv_d * dq, 0.5 * sd * Fs * Fs * inv_d * inv_d * d2q
 
 
+def _worst_util(util: dict[str, FloatArray], names: Sequence[str]) -> FloatArray:
+    """The largest utilisation at each fine point (F,) over the ``names`` of ``util`` and their axes (each
+    (F, 3) or (F,)): what a cut slot (``_Slots.place``) and a rest point (``_tighten_points``) answer to."""
+    return np.asarray(np.max(np.column_stack([u if u.ndim == 1 else np.max(u, axis=1)
+                                              for u in (util[k] for k in names)]), axis=1), dtype=np.float64)
+
+
 def _tighten_scale(overshoot: Any) -> Any:
     """The factor a bound is scaled by for a violation of ``overshoot`` (> 1) next to it:
     overshoot^-TIGHTEN_POWER - TIGHTEN_MARGIN (a checkpoint's: ``NlpRefiner._tighten``; a cut slot's:
@@ -1993,7 +2000,7 @@ def _tighten_points(util: dict[str, FloatArray], fine: FloatArray, s_pts: FloatA
                          "acceleration", "jerk") if k in util]
     if not names:
         return
-    r = np.max(np.column_stack([u if u.ndim == 1 else np.max(u, axis=1) for u in (util[k] for k in names)]), axis=1)
+    r = _worst_util(util, names)
     bad = np.flatnonzero(r > 1.0 + VERIFY_TOL)
     if not bad.size:
         return
