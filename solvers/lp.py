@@ -370,7 +370,7 @@ def _union(K: int, parts: list[Coupling | None]) -> Coupling | None:
     return near, sp.csr_matrix(C), const
 
 
-def _moving(g: PathSamples, ax: int) -> bool:
+def axis_moves(g: PathSamples, ax: int) -> bool:
     """Whether axis ``ax`` moves along these points (else its rows are all zero)."""
     return bool(np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS)
 
@@ -453,7 +453,7 @@ class WindowLP:
         B0, B1, _ = self._mats(g.s)
         self._add(rows, B0, np.zeros(ub.size), ub / Q, g.s)
         for ax in range(3):
-            if not _moving(g, ax):
+            if not axis_moves(g, ax):
                 continue
             A = (sp.diags(g.d2[:, ax]) @ B0 + sp.diags(0.5 * g.d1[:, ax]) @ B1) * (Q / self.lim.amax[ax])
             one = np.ones(g.s.size)
@@ -503,7 +503,7 @@ class WindowLP:
         assert dr is not None
         B0, B1, B2 = self._mats(g.s)
         for ax in range(3):
-            if not _moving(g, ax):
+            if not axis_moves(g, ax):
                 continue
             xs = g.d1[:, ax]
             A = (sp.diags(g.d2[:, ax]) @ B0 + sp.diags(0.5 * xs) @ B1) * Q
@@ -544,7 +544,7 @@ class WindowLP:
         rq = np.sqrt(qstar[keep])
         B0, B1, B2 = self._mats(g.s)
         for ax in range(3):
-            if not _moving(g, ax):
+            if not axis_moves(g, ax):
                 continue
             J = sp.diags(g.d3[:, ax]) @ B0 + sp.diags(1.5 * g.d2[:, ax]) @ B1 + sp.diags(0.5 * g.d1[:, ax]) @ B2
             A = sp.diags(rq * Q / self.lim.jmax[ax]) @ J

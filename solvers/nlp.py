@@ -81,7 +81,7 @@ from scipy.ndimage import maximum_filter1d
 
 from geometry.toolpath import PathSamples
 from solvers import bspline, kinematics
-from solvers.lp import SIGN_EPS, V_KERNEL_A, V_KERNEL_JC, step_cap, tangent_jump
+from solvers.lp import SIGN_EPS, V_KERNEL_A, V_KERNEL_JC, axis_moves, step_cap, tangent_jump
 from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
@@ -131,8 +131,6 @@ DELTA_F = 1e-3
 #: Offset (mm) used to evaluate either side of a geometry knot (at the knot's own s the path may be
 #: evaluated on either side: bench seed 6 gave the left side at s and the right side at s + 1e-12).
 BREAK_EPS_MM = 1e-6
-#: An axis whose path derivatives are all below this in a window has no rows there.
-AXIS_EPS = 1e-12
 #: Adaptive verification: a fine-grid cell is bisected (at most REFINE_LEVELS times) where the
 #: tangent turns by more than REFINE_TURN (rad) or a utilisation changes by more than REFINE_UTIL
 #: across it (features narrower than the uniform grid: sharp turns, curvature peaks).
@@ -208,6 +206,9 @@ REST_RISE = True
 #: intervals next to them (3.0053 s against one rise's 2.9996); with rows as dense as the 4x finer NLP's
 #: the rises pay (``REST_RISE``, ``bspline.REST_RISE_POWERS``).
 REST_SUBDIV = 4
+#: A window from or to rest is solved with its slot rows from round 0 (``_Shape`` ``slotted``; unused slots
+#: are unbounded): one shape to build instead of two.
+REST_SLOTTED = True
 #: Pieces on fewer knot intervals keep the LP's rest intervals.
 REST_ENDS_MIN_INTERVALS = 4
 #: Gauss-Legendre nodes and weights on [0, 1] for a rest interval's travel time (``_Shape._rest_rows``).
@@ -768,6 +769,17 @@ class NlpRefiner:
             self.shapes[key] = _cached_shape(n, self.N, axes, self.lim.amax is not None, slotted, head, tail)
         return self.shapes[key]
 
+    def prebuild(self, geometry: GeometryFn, d: float, A: int, B: int) -> None:
+        """Build the shapes of a whole window (``window`` knot intervals, without and with cut slots) for the
+        axes moving over knots [A, B), before workers fork: each forked worker would otherwise build both
+        itself (18.35 m path, 2 workers: 4 builds of 0.2-0.3 s for 2).  No-op for a chain without one."""
+        if B - A <= self.window + 2:
+            return
+        k_loc, tau = checkpoint_layout(B - A, self.N)
+        moving = _moving_axes(geometry((A + k_loc + tau) * d))
+        for slotted in (False, True):
+            self._shape(self.window, moving, slotted)
+
     # ----- a piece -------------------------------------------------------------------
     def refine(
         self,
@@ -1092,10 +1104,11 @@ class NlpRefiner:
             ctx_motion = _standing(ctx_motion, head, tail, lim.sample_period)
         g = geometry(s_chk)
         xsss_hi, xsss_lo = _third_derivative_envelope(geometry, g, k_loc, tau, a, d, N, breaks)
-        moving = tuple(
-            ax for ax in range(3) if np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS
-        )
-        shape = self._shape(n, moving, head=head, tail=tail)
+        moving = _moving_axes(g)
+        # a window from or to rest starts with its slot rows (unbounded until a slot is placed): nearly
+        # every one places slots in a cut round, and its second shape cost another 0.25-0.45 s to build
+        # (REST_SLOTTED)
+        shape = self._shape(n, moving, slotted=REST_SLOTTED and (head or tail), head=head, tail=tail)
         g_rest = geometry(s_rest)
         rest_params = np.concatenate([x[:, ax] for ax in moving for x in (g_rest.d1, g_rest.d2, g_rest.d3)]
                                      + [np.zeros(0)])
@@ -1236,7 +1249,7 @@ class NlpRefiner:
         while rnd <= MAX_CUT_ROUNDS:
             lbg, ubg = self._row_bounds(moving, fac_u, fac_e, fac_k, sig_hi, sig_lo, feed_ub, feed_floor, Fs,
                                         free_rows, keep)
-            if slots.any:
+            if shape.slotted:
                 s_lo, s_hi = slots.bounds(self, prev)
                 lbg, ubg = np.concatenate([lbg, s_lo]), np.concatenate([ubg, s_hi])
             if shape.n_rest:
@@ -1247,7 +1260,7 @@ class NlpRefiner:
                 ubg = np.concatenate([ubg, rest_hi, pts_hi.ravel()])
             if self.fault is not None:
                 self.fault(index)
-            p_all = np.concatenate([pvec, slots.params(), rest_params] if slots.any else [pvec, rest_params])
+            p_all = np.concatenate([pvec, slots.params(), rest_params] if shape.slotted else [pvec, rest_params])
             args: dict[str, Any] = {"x0": x, "p": p_all, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
             warm = WARM_START and lam_g is not None and lam_x is not None
             args["lam_g0"] = lam_g if warm else np.zeros(shape.rows)
@@ -1332,9 +1345,8 @@ class NlpRefiner:
             prev_fac = (fac_u.copy(), fac_e.copy(), fac_k.copy(), slots.fac.copy(), rest_fac.copy())
             # a deferred cap whose step is over its limit is added from the next round on (bench seed 2053)
             added = lp_side.add_violated(fine, util, feed_ub)
-            had_slots = slots.any
             util = slots.place(fine, g_fine, util)
-            if slots.any and not had_slots:  # the window's shape with slot rows: the same rows, then the slots'
+            if slots.any and not shape.slotted:  # the window's shape with slot rows: the same rows, then the slots'
                 shape = self._shape(n, moving, slotted=True, head=head, tail=tail)
                 cut = lam_g.size - shape.n_rest
                 lam_g = np.concatenate([lam_g[:cut], np.zeros(shape.rows - lam_g.size), lam_g[cut:]])
@@ -2110,6 +2122,11 @@ class _LpSideCaps:
         return np.unique(self.idx[new])
 
 
+def _moving_axes(g: PathSamples) -> tuple[int, ...]:
+    """The axes that move along these points (``lp.axis_moves``: an NLP shape has rows for these only)."""
+    return tuple(ax for ax in range(3) if axis_moves(g, ax))
+
+
 def _find(sorted_s: FloatArray, s: FloatArray) -> NDArray[np.int64]:
     """Index of each s in sorted_s (exact match), -1 where absent."""
     i = np.minimum(np.searchsorted(sorted_s, s), sorted_s.size - 1)
@@ -2472,6 +2489,7 @@ def _parallel_spans(
     global _FORK_STATE
     import multiprocessing
 
+    refiner.prebuild(geometry, d, *chains[0])
     _FORK_STATE = (refiner, geometry, c, d, breaks)
     ctx = multiprocessing.get_context("fork")
     try:
@@ -2582,6 +2600,7 @@ class ChainPipeline:
 
             self.refiner.verify = np.zeros(0)
             self.refiner.bump = self.bump
+            self.refiner.prebuild(self.geometry, self.d, task[0], task[1])
             _PIPE_STATE = (self.refiner, self.geometry, self.d, self.breaks)
             try:
                 self.pool = multiprocessing.get_context("fork").Pool(self.workers, initializer=_die_with_parent)

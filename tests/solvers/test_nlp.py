@@ -214,6 +214,25 @@ def test_parallel_chains_give_the_same_schedule(monkeypatch: pytest.MonkeyPatch)
     _check_drive(m, par)
 
 
+def test_prebuild_builds_the_window_shapes_for_the_moving_axes() -> None:
+    """``NlpRefiner.prebuild`` (before workers fork): the shapes of a whole window, without and with cut
+    slots, for the axes that move over the chain (x and y on the flower, x alone on a line along x); none
+    for a chain no longer than a window."""
+    from solvers import nlp
+    from solvers.pipeline import _local
+
+    m = router()
+    lim = nlp.NlpLimits.from_machine(m, False, False)
+    for tp, axes in ((ex.flower(1), (0, 1)), (Toolpath([ex.line((0.0, 0.0, 0.0), (300.0, 0.0, 0.0))]), (0,))):
+        geometry = _local(tp, tp.pieces[0])
+        ref = nlp.NlpRefiner(lim, 4, 12, 4)
+        ref.prebuild(geometry, 1.0, 0, 14)
+        assert ref.shapes == {}
+        ref.prebuild(geometry, 1.0, 0, 60)
+        assert set(ref.shapes) == {(12, axes, False, False, False), (12, axes, True, False, False)}
+        assert [sh.slotted for sh in ref.shapes.values()] == [False, True]
+
+
 def test_pipelined_chain_reading_past_the_final_lp_is_solved_again(monkeypatch: pytest.MonkeyPatch) -> None:
     """A chain handed out early whose sampled-check context reaches LP control points not final yet
     (``nlp.LpNotFinal``: here every early chain, with a context of 3 s of motion) is solved again once the

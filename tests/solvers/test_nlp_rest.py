@@ -32,6 +32,9 @@ REST_STEP_RTOL = 1e-9
 ROW_RTOL = 1e-9
 #: ... at rest itself, where the floor meets the rise's q'' in the jerk (relative to the rows' largest).
 REST_ROW_ATOL = 1e-7
+#: Motion with the rest windows' slot rows from round 0 (REST_SLOTTED) against without: the same NLP
+#: with unbounded rows more, so the same optimum to Ipopt's tolerance (relative).
+SLOTTED_MOTION_RTOL = 1e-3
 
 
 @pytest.mark.parametrize("head", [True, False])
@@ -398,3 +401,32 @@ def test_rest_intervals_without_rest_points(monkeypatch: pytest.MonkeyPatch) -> 
     dense = schedule(tp, m, Options(method="lp+nlp"))
     assert dense.summary["motion_time"] < few.summary["motion_time"]
     _check_drive(m, few)
+
+
+def test_rest_windows_start_with_their_slot_rows(monkeypatch: pytest.MonkeyPatch) -> None:
+    """REST_SLOTTED: a window from or to rest asks for its shape with the cut slots' rows from round 0 (one
+    shape to build, not two), the unused slots' rows unbounded.  Both rest intervals are still solved (an
+    error in a rest window would be a rest retry, not a crash), the motion is the one the unslotted start
+    gives to Ipopt's tolerance, and the drive limits hold in the finite differences of the samples."""
+    tp, m = ex.flower(1), router()
+    asked: list[tuple[int, bool, bool, bool]] = []
+    real = nlp._cached_shape
+
+    def spy(n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool, head: bool = False,
+            tail: bool = False) -> nlp._Shape:
+        asked.append((n, slotted, head, tail))
+        return real(n, N, axes, with_aj, slotted, head, tail)
+
+    monkeypatch.setattr(nlp, "_cached_shape", spy)
+    on = schedule(tp, m, Options(method="lp+nlp"))
+    rest = [a for a in asked if a[2] or a[3]]
+    assert rest and all(slotted for _, slotted, _, _ in rest)
+    assert on.summary["nlp_rest_retries"] == 0 and on.diagnostics["nlp_fallbacks"] == []
+    assert all(any(h) for h in on.profiles[0].rest_h)
+    asked.clear()
+    monkeypatch.setattr(nlp, "REST_SLOTTED", False)
+    off = schedule(tp, m, Options(method="lp+nlp"))
+    assert any(not slotted for _, slotted, head, tail in asked if head or tail)
+    assert on.summary["motion_time"] == pytest.approx(off.summary["motion_time"], rel=SLOTTED_MOTION_RTOL)
+    _assert_seams_continuous(on)
+    _check_drive(m, on)
