@@ -772,7 +772,8 @@ class NlpRefiner:
     def prebuild(self, geometry: GeometryFn, d: float, A: int, B: int) -> None:
         """Build the shapes of a whole window (``window`` knot intervals, without and with cut slots) for the
         axes moving over knots [A, B), before workers fork: each forked worker would otherwise build both
-        itself (18.35 m path, 2 workers: 4 builds of 0.2-0.3 s for 2).  No-op for a chain without one."""
+        itself (18.35 m path, 2 workers: 4 builds of 0.2-0.3 s for 2).  No-op for a chain of at most
+        ``window`` + 2 intervals (its windows are the rest ends' or shorter ones)."""
         if B - A <= self.window + 2:
             return
         k_loc, tau = checkpoint_layout(B - A, self.N)
