@@ -1115,7 +1115,6 @@ class NlpRefiner:
                                      + [np.zeros(0)])
         #: the rest points' bound factor (u, e; a and j relative to BOUND_FACTOR, like a slot's)
         rest_fac = np.full(s_rest.size, BOUND_FACTOR)
-        base_rows = shape.rows
         K = shape.K
         q_lp = bspline.evaluate(c, s_chk, d)[0]
         f_lp = np.sqrt(np.maximum(q_lp, 0.0))
@@ -1309,7 +1308,7 @@ class NlpRefiner:
             x = np.asarray(res["x"], dtype=np.float64).ravel()
             lam_g = np.asarray(res["lam_g"], dtype=np.float64).ravel()
             lam_x = np.asarray(res["lam_x"], dtype=np.float64).ravel()
-            self._duals = (a, n, moving, lam_g[:base_rows].copy(), lam_x.copy(), shape.row_index)
+            self._duals = (a, n, moving, lam_g[: shape.base_rows].copy(), lam_x.copy(), shape.row_index)
             if not np.all(np.isfinite(x)):
                 self.stats.window_times.append(time.perf_counter() - t0)
                 raise NlpFailure("Ipopt returned a non-finite point", index, status)

@@ -784,6 +784,14 @@ def _same_rise(x: tuple[float, ...], y: tuple[float, ...]) -> bool:
     return x == y or not (any(x) or any(y))
 
 
+def _same_rest_end(a: PieceProfile, b: PieceProfile, end: int) -> bool:
+    """Whether two profiles have the same first (``end`` 0) or last (1) rest interval: its three q control
+    points, bump and rise."""
+    cp = slice(0, 3) if end == 0 else slice(-3, None)
+    return (np.array_equal(a.c[cp], b.c[cp]) and a.rest_g[end] == b.rest_g[end]
+            and _same_rise(a.rest_h[end], b.rest_h[end]))
+
+
 def _slower_spans(lp_prof: PieceProfile, prof: PieceProfile, joins: list[int]) -> list[tuple[int, int, float, float]]:
     """Refined spans (lo, hi, refined time, LP time; knot intervals [lo, hi), s) slower than the LP's feed.
 
@@ -807,11 +815,8 @@ def _slower_spans(lp_prof: PieceProfile, prof: PieceProfile, joins: list[int]) -
     t_lp = np.add.reduceat(interval_times(lp_prof, on), first)
     last = np.append(first[1:], on.size) - 1
     rest_f, rest_lp = rest_interval_times(prof), rest_interval_times(lp_prof)
-    for j, k, same in ((0, 1, np.array_equal(prof.c[:3], lp_prof.c[:3]) and prof.rest_g[0] == lp_prof.rest_g[0]
-                        and _same_rise(prof.rest_h[0], lp_prof.rest_h[0])),
-                       (-1, lp_prof.n_int - 2,
-                        np.array_equal(prof.c[-3:], lp_prof.c[-3:]) and prof.rest_g[1] == lp_prof.rest_g[1]
-                        and _same_rise(prof.rest_h[1], lp_prof.rest_h[1]))):
+    for j, k, same in ((0, 1, _same_rest_end(prof, lp_prof, 0)),
+                       (-1, lp_prof.n_int - 2, _same_rest_end(prof, lp_prof, 1))):
         at = first if j == 0 else last
         hit = np.flatnonzero(on[at] == k)
         if not same and hit.size:
