@@ -1321,6 +1321,9 @@ def schedule_stream(
         summary.update({
             "nlp_windows": nlp_stats.windows,
             "nlp_iterations": nlp_stats.iterations,
+            # of which the dense interior point's (solvers.ipm), and its solves handed to Ipopt
+            "nlp_ipm_iterations": nlp_stats.ipm_iterations,
+            "nlp_ipm_handed": nlp_stats.ipm_handed,
             "nlp_cut_rounds": nlp_stats.cut_rounds,
             "nlp_failures": len(nlp_stats.failures),
             "nlp_softer_retries": nlp_stats.softer_retries,

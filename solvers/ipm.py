@@ -1,0 +1,362 @@
+r"""A dense, condensed primal-dual interior-point method for NLPs with few variables and many inequality rows.
+
+An NLP window (``solvers.nlp``) has ~40 variables (feed control points) and 1,200-1,700 rows (u, e, feed
+per checkpoint and axis).  Ipopt factors the (n + m)-sized augmented KKT system with MUMPS every iteration
+and spends ~3 ms an iteration on it, about 15 % of it in the function evaluations.  Here the rows are
+condensed into an n x n system, dense Cholesky, so an iteration costs ~1 ms (half of it the CasADi
+evaluation of the derivatives).  A solve that does not converge here is handed to Ipopt by the caller.
+
+Problem (CasADi's ``nlpsol`` form; x: n variables, p: parameters, g: m rows)::
+
+    min f(x, p)   s.t.   lbg <= g(x, p) <= ubg,   lbx <= x <= ubx
+
+Variables with lbx = ubx are fixed and eliminated.  The other finite bounds of x are rows of their own
+(g is extended by x).  Every finite bound is one inequality c_i(x) >= 0 with slack w_i > 0 and multiplier
+z_i > 0:
+
+    c_i = sigma_i g_{r_i}(x) + o_i,   sigma_i = +1, o_i = -lbg_{r_i} (lower)  or  -1, o_i = ubg_{r_i} (upper)
+
+Primal-dual Newton step on  grad f - A^T z = 0,  c - w = 0,  W z = t  (A = dc/dx, t the centring target),
+with the slack and multiplier steps eliminated:
+
+    (H + A^T D A) dx = -grad f + A^T (t / w - D (c - w)),   D = z / w
+    dw = A dx + (c - w),   dz = t / w - z - D dw
+
+H is the Hessian of the Lagrangian f - z^T c = f + lam^T g (lam: CasADi's / Ipopt's row multipliers, positive
+at an upper bound).  Since sigma_i^2 = 1, A^T D A = J^T diag(D_g) J with D_g summed over a row's two bounds:
+J's sparse rows (each row of g reads a few consecutive control points) give it by one ``bincount`` over the
+pairs of a row's non-zeros.  The system is solved by Cholesky after symmetric diagonal scaling; when it is
+not positive definite (a non-convex H), delta I is added (delta from DELTA0, x8 until it factors).
+
+Centring: Mehrotra's predictor-corrector (affine step with t = 0, sigma = (mu_aff / mu)^3, corrector
+t = sigma mu - dW_aff dZ_aff), mu = w^T z / m_i, never below MU_MIN.  Step: fraction to the boundary
+tau = max(0.99, 1 - mu) on w and z separately, and on the linear rows' c where they hold (feed rows: the
+travel time 1 / f is singular past f = 0).  Line search on the primal step, with the slacks reset to
+w = max(w, c) at the trial point (a row that holds does not count as infeasible):
+theta = ||c - w||_1, phi = f - mu_t sum log w; accepted by Armijo on phi when theta is small and the step
+descends (Ipopt's switching condition), else by a decrease of theta or phi (a one-entry filter, reset every
+iteration as mu moves), theta never above THETA_MAX_FACTOR x max(1, theta_0).  If the corrected direction
+finds no step, the plain centring direction (no corrector) is tried before the solve is declared failed.
+
+Converged when  ||grad f - A^T z||_inf / s_d <= TOL_DUAL  (Ipopt's scaling s_d = max(100, ||z||_1 / m_i) /
+100),  max(-c) <= TOL_VIOL  and  max(w z) <= TOL_COMPL.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, cast
+
+import casadi as ca
+import numpy as np
+import scipy.linalg as sla
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+#: scaled dual infeasibility at convergence (Ipopt's ``tol`` in ``solvers.nlp`` is 1e-6 on the same measure)
+TOL_DUAL = 1e-6
+#: largest violation of a row's bound at convergence (rows are scaled: u / umax, e / emax, f / Fs)
+TOL_VIOL = 1e-9
+#: largest complementarity w_i z_i at convergence
+TOL_COMPL = 1e-7
+#: the centring target never drops below this (D = z / w stays within what a dense Cholesky resolves)
+MU_MIN = 1e-9
+#: first regularisation delta I when Cholesky fails (the condensed system in the problem's own scaling)
+#: and the largest tried
+DELTA0 = 1e-6
+DELTA_MAX = 1e20
+#: fraction to the boundary, at least (tau = max(TAU_MIN, 1 - mu))
+TAU_MIN = 0.99
+#: Armijo and sufficient-decrease constants of the line search, its shortest step
+ARMIJO = 1e-4
+GAMMA = 1e-5
+ALPHA_MIN = 1e-8
+#: trial points with theta over this many times max(1, theta at the start) are rejected
+THETA_MAX_FACTOR = 1e4
+#: below this share of max(1, theta at the start), steps must satisfy Armijo on phi (switching condition)
+THETA_MIN_FACTOR = 1e-4
+#: iterations per solve
+MAX_ITER = 100
+#: slack and multiplier floor at the start
+PUSH = 1e-3
+
+
+@dataclass(frozen=True)
+class IpmResult:
+    """One solve.  x (n), lam_g (m) and lam_x (n) in CasADi's / Ipopt's sign convention
+    (grad f + J^T lam_g + lam_x = 0; positive at an upper bound)."""
+
+    x: FloatArray
+    lam_g: FloatArray
+    lam_x: FloatArray
+    iterations: int
+    status: str
+
+    @property
+    def success(self) -> bool:
+        return self.status == "Solve_Succeeded"
+
+
+class DenseIpm:
+    """The method above for one problem structure (``{"x", "p", "f", "g"}`` of SX), built once, called per
+    parameter and bound set.  Evaluations go through CasADi's zero-copy buffers."""
+
+    def __init__(self, problem: dict[str, Any]) -> None:
+        x, p, f, g = problem["x"], problem["p"], problem["f"], problem["g"]
+        n, m0 = int(x.size1()), int(g.size1())
+        gx = ca.vertcat(g, x)  # the variables' own bounds are rows n.. of the extended g
+        m = m0 + n
+        lam = ca.SX.sym("lam", m)
+        H, _ = ca.hessian(f + ca.dot(lam, gx), x)
+        J: Any = ca.jacobian(gx, x)
+        Hl: Any = ca.tril(H)
+        self.n, self.m, self.m0 = n, m, m0
+        jr, jc = J.sparsity().get_triplet()
+        self._jr: IntArray = np.asarray(jr, dtype=np.int64)
+        self._jc: IntArray = np.asarray(jc, dtype=np.int64)
+        hr, hc = Hl.sparsity().get_triplet()
+        hr_a, hc_a = np.asarray(hr, dtype=np.int64), np.asarray(hc, dtype=np.int64)
+        self._h_at: IntArray = hr_a * n + hc_a
+        off = hr_a != hc_a
+        self._h_off = off
+        self._h_mirror: IntArray = (hc_a * n + hr_a)[off]
+        self._pairs(m)
+        #: rows whose value is linear in x (feed rows, the variables' own): kept feasible by the step rule
+        self.linear = ~np.asarray(ca.which_depends(gx, x, 2, True), dtype=bool)
+        self._nj = self._jr.size
+        full = ca.Function("ipm_full", [x, p, lam],
+                           [ca.vertcat(f, ca.gradient(f, x), gx, ca.vertcat(*J.nonzeros()),
+                                       ca.vertcat(*Hl.nonzeros()))])
+        fg = ca.Function("ipm_fg", [x, p], [ca.vertcat(f, gx)])
+        self._x: FloatArray = np.zeros(n)
+        self._p: FloatArray = np.zeros(int(p.size1()))
+        self._lam: FloatArray = np.zeros(m)
+        self._out: FloatArray = np.zeros(int(full.size1_out(0)))
+        self._out_fg: FloatArray = np.zeros(1 + m)
+        self._buf_full: Any
+        self._buf_fg: Any
+        self._buf_full, self._eval_full = full.buffer()
+        for i, a in enumerate((self._x, self._p, self._lam)):
+            self._buf_full.set_arg(i, _view(a))
+        self._buf_full.set_res(0, _view(self._out))
+        self._buf_fg, self._eval_fg = fg.buffer()
+        self._buf_fg.set_arg(0, _view(self._x))
+        self._buf_fg.set_arg(1, _view(self._p))
+        self._buf_fg.set_res(0, _view(self._out_fg))
+
+    def _pairs(self, m: int) -> None:
+        """Pairs (a, b) of non-zeros of J in one row: (A^T D A)[col a, col b] += D_row J_a J_b."""
+        order = np.argsort(self._jr, kind="stable")
+        rows = self._jr[order]
+        counts = np.bincount(rows, minlength=m)
+        width = int(counts.max()) if counts.size else 0
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        slot = np.arange(rows.size) - starts[rows]
+        table = np.full((m, max(width, 1)), -1, dtype=np.int64)
+        table[rows, slot] = order
+        ia, ib = [], []
+        for i in range(width):
+            for j in range(width):
+                ok = (table[:, i] >= 0) & (table[:, j] >= 0)
+                ia.append(table[ok, i])
+                ib.append(table[ok, j])
+        self._ia: IntArray = np.concatenate(ia) if ia else np.zeros(0, dtype=np.int64)
+        self._ib: IntArray = np.concatenate(ib) if ib else np.zeros(0, dtype=np.int64)
+        self._pair_row: IntArray = self._jr[self._ia]
+        self._pair_at: IntArray = self._jc[self._ia] * self.n + self._jc[self._ib]
+
+    def _fg(self, x: FloatArray) -> tuple[float, FloatArray]:
+        self._x[:] = x
+        self._eval_fg()
+        return float(self._out_fg[0]), self._out_fg[1:]
+
+    def solve(self, x0: FloatArray, p: FloatArray, lbx: FloatArray, ubx: FloatArray, lbg: FloatArray,
+              ubg: FloatArray, lam_g0: FloatArray | None = None, max_iter: int | None = None) -> IpmResult:
+        """Solve from x0; lam_g0 (m0, Ipopt's convention) seeds the multipliers of the rows at a bound;
+        at most max_iter iterations (default MAX_ITER)."""
+        n, m, m0 = self.n, self.m, self.m0
+        max_iter = MAX_ITER if max_iter is None else max_iter
+        jr, jc = self._jr, self._jc
+        fixed = lbx == ubx
+        lo_x = np.where(fixed, -np.inf, lbx)
+        hi_x = np.where(fixed, np.inf, ubx)
+        lb = np.concatenate([lbg, lo_x])
+        ub = np.concatenate([ubg, hi_x])
+        lo = np.flatnonzero(np.isfinite(lb))
+        hi = np.flatnonzero(np.isfinite(ub))
+        idx = np.concatenate([lo, hi])
+        sgn = np.concatenate([np.ones(lo.size), -np.ones(hi.size)])
+        offs = np.concatenate([-lb[lo], ub[hi]])
+        mi = idx.size
+        x = np.array(x0, dtype=np.float64)
+        x[fixed] = lbx[fixed]
+        self._p[:] = p
+        if mi == 0:
+            return IpmResult(x, np.zeros(m0), np.zeros(n), 0, "No_Inequality_Rows")
+        lin_i = self.linear[idx]
+        _, gv = self._fg(x)
+        c = sgn * gv[idx] + offs
+        w = np.maximum(c, PUSH)
+        if lam_g0 is not None and np.any(lam_g0):
+            lam0 = np.concatenate([lam_g0, np.zeros(n)])
+            z = np.maximum(np.concatenate([np.maximum(-lam0[lo], 0.0), np.maximum(lam0[hi], 0.0)]), PUSH)
+        else:
+            z = np.ones(mi)
+        theta_start = max(1.0, float(np.abs(c - w).sum()))
+        theta_max = THETA_MAX_FACTOR * theta_start
+        theta_min = THETA_MIN_FACTOR * theta_start
+        status = "Maximum_Iterations_Exceeded"
+        it = 0
+        for it in range(max_iter + 1):
+            self._x[:] = x
+            self._lam[:] = np.bincount(idx, -sgn * z, minlength=m)
+            self._eval_full()
+            o = self._out
+            if not np.all(np.isfinite(o)):
+                status = "Invalid_Number_Detected"
+                break
+            fv = float(o[0])
+            gf = o[1 : 1 + n].copy()
+            gv = o[1 + n : 1 + n + m]
+            k = 1 + n + m
+            jv = o[k : k + self._nj].copy()
+            hv = o[k + self._nj :]
+            c = sgn * gv[idx] + offs
+            rp = c - w
+            zg = np.bincount(idx, sgn * z, minlength=m)
+            rd = gf - np.bincount(jc, jv * zg[jr], minlength=n)
+            rd[fixed] = 0.0
+            mu = float(w @ z) / mi
+            s_d = max(100.0, float(z.sum()) / mi) / 100.0
+            if (float(np.abs(rd).max()) / s_d <= TOL_DUAL and max(0.0, -float(c.min())) <= TOL_VIOL
+                    and float((w * z).max()) <= TOL_COMPL):
+                status = "Solve_Succeeded"
+                break
+            if it == max_iter:
+                break
+            # condensed system M = H + J^T diag(D_g) J, fixed variables' rows and columns identity
+            D = z / w
+            Dg = np.bincount(idx, D, minlength=m)
+            M = _bincount(self._pair_at, Dg[self._pair_row] * jv[self._ia] * jv[self._ib], n * n)
+            M[self._h_at] += hv
+            M[self._h_mirror] += hv[self._h_off]
+            M = M.reshape(n, n)
+            M[fixed, :] = 0.0
+            M[:, fixed] = 0.0
+            M[fixed, fixed] = 1.0
+            sc = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))
+            Ms = M * sc[:, None] * sc[None, :]
+            cf = _factor(Ms, sc)
+            if cf is None:
+                status = "Factorization_Failed"
+                break
+            step = _Step(self, x, w, z, c, rp, gf, jv, D, sc, cf, idx, sgn, fixed)
+            _, dwa, dza, _ = step.direction(np.zeros(mi))
+            ap = _max_step(w, dwa, 0.995)
+            ad = _max_step(z, dza, 0.995)
+            mu_aff = float((w + ap * dwa) @ (z + ad * dza)) / mi
+            mu_t = max(min(1.0, mu_aff / mu) ** 3 * mu, MU_MIN)
+            tau = max(TAU_MIN, 1.0 - mu)
+            accepted = None
+            for t in (mu_t - dwa * dza, np.full(mi, mu_t)):
+                dx, dw, dz, dc = step.direction(t)
+                ap = _max_step(w, dw, tau)
+                keep = lin_i & (c > 0)
+                if keep.any():
+                    ap = min(ap, _max_step(c[keep], dc[keep], tau))
+                accepted = self._line_search(x, w, rp, fv, gf, dx, dw, ap, mu_t, idx, sgn, offs, theta_min,
+                                             theta_max)
+                if accepted is not None:
+                    break
+            if accepted is None:
+                status = "Line_Search_Failed"
+                break
+            x, w = accepted
+            z = z + _max_step(z, dz, tau) * dz
+            mu_n = float(w @ z) / mi
+            z = np.clip(z, mu_n / (1e10 * w), 1e10 * mu_n / w)
+        lam_all = _bincount(idx, -sgn * z, m)
+        lam_g = lam_all[:m0].copy()
+        lam_x = lam_all[m0:].copy()
+        if status == "Solve_Succeeded":
+            # the fixed variables' multipliers close grad f + J^T lam_g + lam_x = 0 (gf, jv: at this x and z)
+            lam_x[fixed] = -(gf + np.bincount(jc, jv * lam_all[jr], minlength=n))[fixed]
+        return IpmResult(x, lam_g, lam_x, it, status)
+
+    def _line_search(self, x: FloatArray, w: FloatArray, rp: FloatArray, fv: float, gf: FloatArray,
+                     dx: FloatArray, dw: FloatArray, a: float, mu_t: float, idx: IntArray, sgn: FloatArray,
+                     offs: FloatArray, theta_min: float, theta_max: float) -> tuple[FloatArray, FloatArray] | None:
+        theta0 = float(np.abs(rp).sum())
+        phi0 = fv - mu_t * float(np.log(w).sum())
+        dphi = float(gf @ dx) - mu_t * float((dw / w).sum())
+        while a >= ALPHA_MIN:
+            xn = x + a * dx
+            fn, gn = self._fg(xn)
+            cn = sgn * gn[idx] + offs
+            wn = np.maximum(w + a * dw, cn)
+            theta = float(np.abs(cn - wn).sum())
+            with np.errstate(invalid="ignore", divide="ignore"):
+                phi = fn - mu_t * float(np.log(wn).sum())
+            if np.isfinite(phi) and theta <= theta_max:
+                switching = dphi < 0 and math.log(a) + 2.3 * math.log(-dphi) > 1.1 * math.log(max(theta0, 1e-300))
+                if switching and theta0 <= theta_min:
+                    if phi <= phi0 + ARMIJO * a * dphi:
+                        return xn, wn
+                elif theta <= (1 - GAMMA) * theta0 or phi <= phi0 - GAMMA * theta0:
+                    return xn, wn
+            a *= 0.5
+        return None
+
+
+def _view(a: FloatArray) -> memoryview:
+    """A float64 array as the buffer CasADi reads or writes in place."""
+    return memoryview(cast(Any, a))
+
+
+def _bincount(at: IntArray, weights: FloatArray, size: int) -> FloatArray:
+    """Sums of weights per index in [0, size)."""
+    return np.asarray(np.bincount(at, weights, minlength=size), dtype=np.float64)
+
+
+def _factor(Ms: FloatArray, sc: FloatArray) -> Any:
+    """Cholesky of the scaled system, with delta I added to the unscaled one (delta from DELTA0, x8) until it
+    factors; None if no delta up to DELTA_MAX does."""
+    delta = 0.0
+    while delta <= DELTA_MAX:
+        try:
+            return sla.cho_factor(Ms + np.diag(delta * sc * sc) if delta else Ms, check_finite=False)
+        except np.linalg.LinAlgError:
+            delta = 8.0 * delta if delta else DELTA0
+    return None
+
+
+def _max_step(v: FloatArray, dv: FloatArray, tau: float) -> float:
+    """Largest step in (0, 1] with v + a dv >= (1 - tau) v (v > 0)."""
+    r = float((dv / v).min()) if v.size else 0.0
+    return 1.0 if r >= -tau else -tau / r
+
+
+class _Step:
+    """The Newton directions of one iteration (one factorisation, several right-hand sides)."""
+
+    def __init__(self, ipm: DenseIpm, x: FloatArray, w: FloatArray, z: FloatArray, c: FloatArray,
+                 rp: FloatArray, gf: FloatArray, jv: FloatArray, D: FloatArray, sc: FloatArray, cf: Any,
+                 idx: IntArray, sgn: FloatArray, fixed: NDArray[np.bool_]) -> None:
+        self.ipm, self.w, self.z, self.rp, self.gf, self.jv, self.D = ipm, w, z, rp, gf, jv, D
+        self.sc, self.cf, self.idx, self.sgn, self.fixed = sc, cf, idx, sgn, fixed
+
+    def direction(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """(dx, dw, dz, dc) for the centring target t (one per inequality)."""
+        ipm, idx, sgn = self.ipm, self.idx, self.sgn
+        y = np.bincount(idx, sgn * (t / self.w - self.D * self.rp), minlength=ipm.m)
+        rhs = -self.gf + np.bincount(ipm._jc, self.jv * y[ipm._jr], minlength=ipm.n)
+        rhs[self.fixed] = 0.0
+        dx = self.sc * sla.cho_solve(self.cf, self.sc * rhs, check_finite=False)
+        jdx = np.bincount(ipm._jr, self.jv * dx[ipm._jc], minlength=ipm.m)
+        dc = sgn * jdx[idx]
+        dw = dc + self.rp
+        dz = t / self.w - self.z - self.D * dw
+        return dx, dw, dz, dc
