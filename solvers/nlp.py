@@ -63,6 +63,7 @@ diagnostics say which window and why.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import threading
@@ -274,22 +275,31 @@ IPOPT_SAFE_OPTIONS: dict[str, Any] = {**IPOPT_OPTIONS, "ipopt.tol": 1e-7, "ipopt
 
 
 #: Windows are solved first by ``solvers.ipm.DenseIpm`` (a condensed, dense interior point for few
-#: variables and many rows); a solve it does not finish goes to Ipopt as before (warm, then the safe
-#: settings).  Replayed windows (flower x10 and bench seeds 0-11, 156 solves at Ipopt's start points): all
-#: converged, objective within 1.1e-6 of Ipopt's or below it, 1.13 vs 2.90 s and 2.70 vs 9.41 s of CPU.
+#: variables and many rows); a solve it does not finish goes to Ipopt with IPOPT_SAFE_OPTIONS, cold.
+#: Replayed windows (flower x10 and bench seeds 0-11, 156 solves at Ipopt's start points): all converged,
+#: objective within 1.1e-6 of Ipopt's or below it, 1.13 vs 2.90 s and 2.70 vs 9.41 s of CPU.
 DENSE_IPM = True
 
 
 def _dense_solve(ipm: DenseIpm | None, x: FloatArray, p: FloatArray, lbx: FloatArray, ubx: FloatArray,
                  lbg: FloatArray, ubg: FloatArray, lam_g: FloatArray) -> IpmResult | None:
-    """``ipm.solve``, None without a dense solver; an arithmetic error in it is a failed solve (Ipopt then
-    solves the window from the same start)."""
+    """``ipm.solve`` from the given multipliers, and if that does not finish, from unit ones (``ipm.WARM_MU0``);
+    None without a dense solver.  An arithmetic error in it is a failed solve (Ipopt then solves the window
+    from the same start).  The result's iterations are both solves'."""
     if ipm is None:
         return None
-    try:
-        return ipm.solve(x, p, lbx, ubx, lbg, ubg, lam_g)
-    except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
-        return IpmResult(x, np.zeros(lbg.size), np.zeros(x.size), 0, f"{type(exc).__name__}: {exc}")
+
+    def one(lam: FloatArray | None) -> IpmResult:
+        try:
+            return ipm.solve(x, p, lbx, ubx, lbg, ubg, lam)
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            return IpmResult(x, np.zeros(lbg.size), np.zeros(x.size), 0, f"{type(exc).__name__}: {exc}")
+
+    res = one(lam_g if np.any(lam_g) else None)
+    if res.success or not np.any(lam_g):
+        return res
+    cold = one(None)
+    return dataclasses.replace(cold, iterations=res.iterations + cold.iterations)
 
 
 class NlpFailure(Exception):
@@ -1305,12 +1315,15 @@ class NlpRefiner:
                 res = {"x": dense.x, "lam_g": dense.lam_g, "lam_x": dense.lam_x}
                 st = {"success": True, "return_status": dense.status, "iter_count": dense.iterations}
                 self.stats.ipm_iterations += dense.iterations
+            elif dense is not None:
+                # not finished by the dense method (from the given multipliers, then from unit ones): it was the
+                # fast attempt, Ipopt's safe settings below are the retry (the fast Ipopt settings first cost
+                # 2 Ipopt solves per window that is infeasible after a tightening: 18.35 m path, 7 of 7 handed)
+                self.stats.ipm_iterations += dense.iterations
+                self.stats.ipm_handed += 1
+                res = {}
+                st = {"success": False, "return_status": dense.status, "iter_count": dense.iterations}
             else:
-                if dense is not None:
-                    # not finished by the dense method: Ipopt from the same start
-                    self.stats.ipm_iterations += dense.iterations
-                    self.stats.iterations += dense.iterations
-                    self.stats.ipm_handed += 1
                 solver = shape.solver
                 res = solver(**args)
                 st = solver.stats()
