@@ -183,7 +183,13 @@ class DenseIpm:
     def solve(self, x0: FloatArray, p: FloatArray, lbx: FloatArray, ubx: FloatArray, lbg: FloatArray,
               ubg: FloatArray, lam_g0: FloatArray | None = None, max_iter: int | None = None) -> IpmResult:
         """Solve from x0; lam_g0 (m0, Ipopt's convention) seeds the multipliers of the rows at a bound;
-        at most max_iter iterations (default MAX_ITER)."""
+        at most max_iter iterations (default MAX_ITER).  Floating-point overflow (slacks of a solve that is
+        failing reach ~1e-300) ends the solve as Invalid_Number_Detected, without warnings."""
+        with np.errstate(all="ignore"):
+            return self._solve(x0, p, lbx, ubx, lbg, ubg, lam_g0, max_iter)
+
+    def _solve(self, x0: FloatArray, p: FloatArray, lbx: FloatArray, ubx: FloatArray, lbg: FloatArray,
+               ubg: FloatArray, lam_g0: FloatArray | None, max_iter: int | None) -> IpmResult:
         n, m, m0 = self.n, self.m, self.m0
         max_iter = MAX_ITER if max_iter is None else max_iter
         jr, jc = self._jr, self._jc
@@ -259,6 +265,9 @@ class DenseIpm:
             M[fixed, fixed] = 1.0
             sc = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))
             Ms = M * sc[:, None] * sc[None, :]
+            if not np.all(np.isfinite(Ms)):
+                status = "Invalid_Number_Detected"
+                break
             cf = _factor(Ms, sc)
             if cf is None:
                 status = "Factorization_Failed"
