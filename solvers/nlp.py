@@ -29,10 +29,12 @@ is singular at rest (spec §10); rest intervals never enter an NLP window.
 Window: knot intervals [a, b) -> control points p_a .. p_{b+1}.  p_a, p_{a+1}
 are fixed (the inherited state: f and f' at knot a); p_b, p_{b+1} are fixed
 too, either to 0 (artificial rest at the window's far end) or to the LP's
-state at knot b (a join).  One CasADi ``nlpsol`` is built per window shape
-(knot intervals, moving axes, optional rows), with the geometry, drive
-coefficients and weights as parameters and the fixed control points and row
-bounds given per call, then re-called window after window.
+state at knot b (a join).  One solver is built per window shape (knot
+intervals, moving axes, optional rows), with the geometry, drive coefficients
+and weights as parameters and the fixed control points and row bounds given
+per call, then re-called window after window: the dense interior point of
+``solvers.ipm`` (``DENSE_IPM``), and CasADi ``nlpsol``s with Ipopt, built on
+first use, for the solves it does not finish.
 
 Between checkpoints the limits are verified on a VERIFY_SUBDIV-times finer
 grid (and both sides of geometry knots), bisected where the tangent turns
@@ -744,7 +746,7 @@ class NlpStats:
     ipm_handed: int = 0
 
 
-#: NLP shapes kept per thread across schedules (each ~0.3-0.6 s of CasADi/Ipopt set-up; a shape
+#: NLP shapes kept per thread across schedules (each ~0.15-0.3 s of CasADi set-up, Ipopt's more; a shape
 #: depends only on its key, every limit and geometry value is a parameter of the call)
 SHAPE_CACHE_SIZE = 16
 _SHAPE_CACHE = threading.local()
