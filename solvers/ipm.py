@@ -176,6 +176,7 @@ class DenseIpm:
         self._pair_at: IntArray = self._jc[self._ia] * self.n + self._jc[self._ib]
 
     def _fg(self, x: FloatArray) -> tuple[float, FloatArray]:
+        """f and the extended g at x; g is a view of the output buffer, valid until the next evaluation."""
         self._x[:] = x
         self._eval_fg()
         return float(self._out_fg[0]), self._out_fg[1:]
@@ -242,7 +243,7 @@ class DenseIpm:
             hv = o[k + self._nj :]
             c = sgn * gv[idx] + offs
             rp = c - w
-            zg = np.bincount(idx, sgn * z, minlength=m)
+            zg = -self._lam  # the rows' z summed over their two bounds, signed
             rd = gf - np.bincount(jc, jv * zg[jr], minlength=n)
             rd[fixed] = 0.0
             mu = float(w @ z) / mi
@@ -272,7 +273,7 @@ class DenseIpm:
             if cf is None:
                 status = "Factorization_Failed"
                 break
-            step = _Step(self, x, w, z, c, rp, gf, jv, D, sc, cf, idx, sgn, fixed)
+            step = _Step(self, w, z, rp, gf, jv, D, sc, cf, idx, sgn, fixed)
             _, dwa, dza, _ = step.direction(np.zeros(mi))
             ap = _max_step(w, dwa, 0.995)
             ad = _max_step(z, dza, 0.995)
@@ -361,9 +362,9 @@ def _max_step(v: FloatArray, dv: FloatArray, tau: float) -> float:
 class _Step:
     """The Newton directions of one iteration (one factorisation, several right-hand sides)."""
 
-    def __init__(self, ipm: DenseIpm, x: FloatArray, w: FloatArray, z: FloatArray, c: FloatArray,
-                 rp: FloatArray, gf: FloatArray, jv: FloatArray, D: FloatArray, sc: FloatArray, cf: Any,
-                 idx: IntArray, sgn: FloatArray, fixed: NDArray[np.bool_]) -> None:
+    def __init__(self, ipm: DenseIpm, w: FloatArray, z: FloatArray, rp: FloatArray, gf: FloatArray,
+                 jv: FloatArray, D: FloatArray, sc: FloatArray, cf: Any, idx: IntArray, sgn: FloatArray,
+                 fixed: NDArray[np.bool_]) -> None:
         self.ipm, self.w, self.z, self.rp, self.gf, self.jv, self.D = ipm, w, z, rp, gf, jv, D
         self.sc, self.cf, self.idx, self.sgn, self.fixed = sc, cf, idx, sgn, fixed
 
