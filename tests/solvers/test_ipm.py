@@ -14,8 +14,12 @@ from hypothesis import strategies as st
 
 from solvers.ipm import TOL_COMPL, TOL_VIOL, DenseIpm
 
-#: Distance of the solution from the analytic / Ipopt optimum (both stop at ~1e-7 complementarity).
+#: Distance of the solution from the analytic optimum (both stop at ~1e-7 complementarity).
 X_TOL = 1e-5
+#: ... and from Ipopt's on the random convex problems, whose objective is only weakly convex (curvature
+#: 0.2 from |x - c|^2 / 10): a weakly active row's slack ~ TOL_COMPL / z moves x; 1,000 random cases
+#: read up to 3.7e-5 (the objectives agree to 3e-9, under F_RTOL).
+X_TOL_RANDOM = 1e-4
 #: Relative objective gap to Ipopt's optimum on the convex problems.
 F_RTOL = 1e-7
 #: Stationarity residual |grad f + J^T lam_g + lam_x| of a returned point.
@@ -128,7 +132,7 @@ def test_convex_problems_reach_ipopts_optimum(seed: int, n: int, rows_per_var: i
     fun = ca.Function("f", [prob["x"], prob["p"]], [prob["f"]])
     f = float(fun(res.x, args["p"]))
     assert abs(f - f_ref) <= F_RTOL * max(1.0, abs(f_ref))
-    assert np.abs(res.x - x_ref).max() <= X_TOL
+    assert np.abs(res.x - x_ref).max() <= X_TOL_RANDOM
     _kkt(prob, args, res)
 
 
