@@ -3,8 +3,8 @@ r"""A dense, condensed primal-dual interior-point method for NLPs with few varia
 An NLP window (``solvers.nlp``) has ~40 variables (feed control points) and 1,200-1,700 rows (u, e, feed
 per checkpoint and axis).  Ipopt factors the (n + m)-sized augmented KKT system with MUMPS every iteration
 and spends ~3 ms an iteration on it, about 15 % of it in the function evaluations.  Here the rows are
-condensed into an n x n system, dense Cholesky, so an iteration costs ~1 ms (half of it the CasADi
-evaluation of the derivatives).  A solve that does not converge here is handed to Ipopt by the caller.
+condensed into an n x n system, dense Cholesky, so an iteration costs ~1.2 ms (about a third of it the
+CasADi evaluation of the derivatives, ~0.4 ms).  A solve that does not converge here is handed to Ipopt by the caller.
 
 Problem (CasADi's ``nlpsol`` form; x: n variables, p: parameters, g: m rows)::
 
@@ -114,7 +114,7 @@ class DenseIpm:
     def __init__(self, problem: dict[str, Any]) -> None:
         x, p, f, g = problem["x"], problem["p"], problem["f"], problem["g"]
         n, m0 = int(x.size1()), int(g.size1())
-        gx = ca.vertcat(g, x)  # the variables' own bounds are rows n.. of the extended g
+        gx = ca.vertcat(g, x)  # the variables' own bounds are rows m0.. of the extended g
         m = m0 + n
         lam = ca.SX.sym("lam", m)
         H, _ = ca.hessian(f + ca.dot(lam, gx), x)
