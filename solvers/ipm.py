@@ -3,12 +3,20 @@ r"""A dense, condensed primal-dual interior-point method for NLPs with few varia
 An NLP window (``solvers.nlp``) has ~40 variables (feed control points) and 1,200-1,700 rows (u, e, feed
 per checkpoint and axis).  Ipopt factors the (n + m)-sized augmented KKT system with MUMPS every iteration
 and spends ~3 ms an iteration on it, about 15 % of it in the function evaluations.  Here the rows are
-condensed into an n x n system, dense Cholesky, so an iteration costs ~1.2 ms (about a third of it the
-CasADi evaluation of the derivatives, ~0.4 ms).  A solve that does not converge here is handed to Ipopt by the caller.
+condensed into an n x n system, dense Cholesky, so an iteration costs ~1.1 ms (about a quarter of it the
+CasADi evaluation of the derivatives, ~0.3 ms).  A solve that does not converge here is handed to Ipopt by the caller.
 
 Problem (CasADi's ``nlpsol`` form; x: n variables, p: parameters, g: m rows)::
 
     min f(x, p)   s.t.   lbg <= g(x, p) <= ubg,   lbx <= x <= ubx
+
+Lifted variables: the problem may also give y (m_y SX symbols) and L (m_y x n, constant), with f and g written
+in y and x for y = L x (an NLP window's rows read its control points only through the feed spline's value
+and derivatives at each checkpoint, ``solvers.nlp``).  The derivatives are then taken in v = (y, x), where
+each row reads ~3 variables, and carried to x inside the same CasADi function as products with the constant
+L_v = [L; I]:  J = J_v L_v,  H = L_v^T H_v L_v.  Against the Hessian taken in x directly (forward over reverse
+through L x): 64 replayed window solves (flower x10) 4.38 -> 3.95 G instructions (callgrind), the CasADi
+evaluation 1.91 -> 1.42 G of it; a window shape builds 10-30 % faster.
 
 Variables with lbx = ubx are fixed and eliminated.  The other finite bounds of x are rows of their own
 (g is extended by x).  Every finite bound is one inequality c_i(x) >= 0 with slack w_i > 0 and multiplier
@@ -50,8 +58,10 @@ from typing import Any, cast
 
 import casadi as ca
 import numpy as np
-import scipy.linalg as sla
+import scipy.sparse as sp
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dpotrf as _potrf
+from scipy.linalg.lapack import dpotrs as _potrs
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -114,12 +124,22 @@ class DenseIpm:
     def __init__(self, problem: dict[str, Any]) -> None:
         x, p, f, g = problem["x"], problem["p"], problem["f"], problem["g"]
         n, m0 = int(x.size1()), int(g.size1())
+        y = problem.get("y")
+        if y is None:
+            v, Lf = x, sp.identity(n, format="csr")
+        else:
+            v = ca.vertcat(y, x)
+            Lf = sp.vstack([sp.csr_matrix(problem["L"]), sp.identity(n)], format="csr")
+        #: v = L x, dense (few variables; a scipy.sparse product costs ~0.1 ms a call)
+        self._L: FloatArray = np.asarray(Lf.toarray(), dtype=np.float64)
         gx = ca.vertcat(g, x)  # the variables' own bounds are rows m0.. of the extended g
         m = m0 + n
         lam = ca.SX.sym("lam", m)
-        H, _ = ca.hessian(f + ca.dot(lam, gx), x)
-        J: Any = ca.jacobian(gx, x)
-        Hl: Any = ca.tril(H)
+        Hv, _ = ca.hessian(f + ca.dot(lam, gx), v)
+        Jv: Any = ca.jacobian(gx, v)
+        Ld = ca.DM(sp.csc_matrix(Lf))
+        J: Any = ca.mtimes(Jv, Ld)
+        Hl: Any = ca.tril(ca.mtimes(ca.mtimes(Ld.T, Hv), Ld))
         self.n, self.m, self.m0 = n, m, m0
         jr, jc = J.sparsity().get_triplet()
         self._jr: IntArray = np.asarray(jr, dtype=np.int64)
@@ -130,15 +150,15 @@ class DenseIpm:
         off = hr_a != hc_a
         self._h_off = off
         self._h_mirror: IntArray = (hc_a * n + hr_a)[off]
+        self._nj = self._jr.size
         self._pairs(m)
         #: rows whose value is linear in x (feed rows, the variables' own): kept feasible by the step rule
-        self.linear = ~np.asarray(ca.which_depends(gx, x, 2, True), dtype=bool)
-        self._nj = self._jr.size
-        full = ca.Function("ipm_full", [x, p, lam],
-                           [ca.vertcat(f, ca.gradient(f, x), gx, ca.vertcat(*J.nonzeros()),
+        self.linear = ~np.asarray(ca.which_depends(gx, v, 2, True), dtype=bool)
+        full = ca.Function("ipm_full", [v, p, lam],
+                           [ca.vertcat(f, ca.gradient(f, v), gx, ca.vertcat(*J.nonzeros()),
                                        ca.vertcat(*Hl.nonzeros()))])
-        fg = ca.Function("ipm_fg", [x, p], [ca.vertcat(f, gx)])
-        self._x: FloatArray = np.zeros(n)
+        fg = ca.Function("ipm_fg", [v, p], [ca.vertcat(f, gx)])
+        self._v: FloatArray = np.zeros(int(v.size1()))
         self._p: FloatArray = np.zeros(int(p.size1()))
         self._lam: FloatArray = np.zeros(m)
         self._out: FloatArray = np.zeros(int(full.size1_out(0)))
@@ -146,11 +166,11 @@ class DenseIpm:
         self._buf_full: Any
         self._buf_fg: Any
         self._buf_full, self._eval_full = full.buffer()
-        for i, a in enumerate((self._x, self._p, self._lam)):
+        for i, a in enumerate((self._v, self._p, self._lam)):
             self._buf_full.set_arg(i, _view(a))
         self._buf_full.set_res(0, _view(self._out))
         self._buf_fg, self._eval_fg = fg.buffer()
-        self._buf_fg.set_arg(0, _view(self._x))
+        self._buf_fg.set_arg(0, _view(self._v))
         self._buf_fg.set_arg(1, _view(self._p))
         self._buf_fg.set_res(0, _view(self._out_fg))
 
@@ -175,9 +195,13 @@ class DenseIpm:
         self._pair_row: IntArray = self._jr[self._ia]
         self._pair_at: IntArray = self._jc[self._ia] * self.n + self._jc[self._ib]
 
+    def _lx(self, x: FloatArray) -> FloatArray:
+        """v = L x."""
+        return np.asarray(self._L @ x, dtype=np.float64)
+
     def _fg(self, x: FloatArray) -> tuple[float, FloatArray]:
         """f and the extended g at x; g is a view of the output buffer, valid until the next evaluation."""
-        self._x[:] = x
+        self._v[:] = self._lx(x)
         self._eval_fg()
         return float(self._out_fg[0]), self._out_fg[1:]
 
@@ -194,6 +218,7 @@ class DenseIpm:
         n, m, m0 = self.n, self.m, self.m0
         max_iter = MAX_ITER if max_iter is None else max_iter
         jr, jc = self._jr, self._jc
+        nv = self._v.size
         fixed = lbx == ubx
         lo_x = np.where(fixed, -np.inf, lbx)
         hi_x = np.where(fixed, np.inf, ubx)
@@ -228,7 +253,7 @@ class DenseIpm:
         status = "Maximum_Iterations_Exceeded"
         it = 0
         for it in range(max_iter + 1):
-            self._x[:] = x
+            self._v[:] = self._lx(x)
             self._lam[:] = np.bincount(idx, -sgn * z, minlength=m)
             self._eval_full()
             o = self._out
@@ -236,9 +261,9 @@ class DenseIpm:
                 status = "Invalid_Number_Detected"
                 break
             fv = float(o[0])
-            gf = o[1 : 1 + n].copy()
-            gv = o[1 + n : 1 + n + m]
-            k = 1 + n + m
+            gf = o[1 : 1 + nv] @ self._L
+            gv = o[1 + nv : 1 + nv + m]
+            k = 1 + nv + m
             jv = o[k : k + self._nj].copy()
             hv = o[k + self._nj :]
             c = sgn * gv[idx] + offs
@@ -346,10 +371,10 @@ def _factor(Ms: FloatArray, sc: FloatArray) -> Any:
     factors; None if no delta up to DELTA_MAX does."""
     delta = 0.0
     while delta <= DELTA_MAX:
-        try:
-            return sla.cho_factor(Ms + np.diag(delta * sc * sc) if delta else Ms, check_finite=False)
-        except np.linalg.LinAlgError:
-            delta = 8.0 * delta if delta else DELTA0
+        c, info = _potrf(Ms + np.diag(delta * sc * sc) if delta else Ms, lower=0, clean=0)
+        if info == 0:
+            return c
+        delta = 8.0 * delta if delta else DELTA0
     return None
 
 
@@ -374,7 +399,7 @@ class _Step:
         y = np.bincount(idx, sgn * (t / self.w - self.D * self.rp), minlength=ipm.m)
         rhs = -self.gf + np.bincount(ipm._jc, self.jv * y[ipm._jr], minlength=ipm.n)
         rhs[self.fixed] = 0.0
-        dx = self.sc * sla.cho_solve(self.cf, self.sc * rhs, check_finite=False)
+        dx = self.sc * _potrs(self.cf, self.sc * rhs, lower=0)[0]
         jdx = np.bincount(ipm._jr, self.jv * dx[ipm._jc], minlength=ipm.m)
         dc = sgn * jdx[idx]
         dw = dc + self.rp

@@ -484,10 +484,15 @@ class _Shape:
         wt = take(K)
         wf = take(K)
         coef = [take(8) for _ in axes]
-        fh = ca.mtimes(ca.DM(self.B0), x)
+        # the rows read x through (B0 x, B1 x, B2 x) at the checkpoints: symbols y of their own, so that the
+        # dense method takes derivatives per checkpoint (``DenseIpm``'s lifted variables, y = L x); Ipopt's
+        # problem has L x substituted (``_problem``)
+        y = ca.SX.sym("y", 3 * K)
+        self._L = sp.hstack([sp.vstack([self.B0, B1, B2]), sp.csr_matrix((3 * K, self.n_rise))], format="csr")
+        fh = y[:K]
         f = Fs * fh
-        f1 = Fs * inv_d * ca.mtimes(ca.DM(B1), x)
-        f2 = Fs * inv_d * inv_d * ca.mtimes(ca.DM(B2), x)
+        f1 = Fs * inv_d * y[K : 2 * K]
+        f2 = Fs * inv_d * inv_d * y[2 * K :]
         kept, _, _ = knot_twins(n, N)
         sel = [int(i) for i in kept]
         rest_time: Any = 0.0
@@ -530,14 +535,15 @@ class _Shape:
         rows += rest_rows
         g = ca.vertcat(*rows)
         obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh) + rest_time
-        self._problem = {"x": xx, "p": P, "f": obj, "g": g}
+        self._lifted = {"x": xx, "y": y, "L": self._L, "p": P, "f": obj, "g": g}
         self.rows = int(g.size1())
         self.base_rows = nxt
         #: rows after the slots (``_rest_rows``): one per rest end, then the rest points' (per moving axis u,
         #: e, [a, j], each over the rest points: ``_exact_rows``, ``_exact_bounds``)
         self.n_rest = int(ca.vertcat(*rest_rows).size1()) if rest_rows else 0
         #: the first solver of every solve (``DENSE_IPM``); Ipopt's are built on first use
-        self.ipm = DenseIpm(self._problem) if DENSE_IPM else None
+        self.ipm = DenseIpm(self._lifted) if DENSE_IPM else None
+        self._problem_x: dict[str, Any] | None = None
         self._solver: Any = None
         self._safe_solver: Any = None
         # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
@@ -551,6 +557,16 @@ class _Shape:
             # and a result must not depend on what this thread solved before
             warm_starting=False,
         )
+
+    @property
+    def _problem(self) -> dict[str, Any]:
+        """The NLP in x alone (Ipopt's): y = L x substituted (on first use)."""
+        if self._problem_x is None:
+            lf = self._lifted
+            xs = ca.mtimes(ca.DM(sp.csc_matrix(self._L)), lf["x"])
+            f, g = ca.substitute([lf["f"], lf["g"]], [lf["y"]], [xs])
+            self._problem_x = {"x": lf["x"], "p": lf["p"], "f": f, "g": g}
+        return self._problem_x
 
     @property
     def solver(self) -> Any:

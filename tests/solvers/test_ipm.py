@@ -155,3 +155,49 @@ def test_a_capped_solve_is_not_reported_solved(max_iter: int) -> None:
     res = DenseIpm(prob).solve(**args, max_iter=max_iter)
     assert not res.success
     assert res.iterations == max_iter
+
+
+def _lifted_problem(seed: int, n: int, m: int) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+    """The convex rows of ``_random_problem`` read through y = L x as an NLP window's do (``solvers.nlp``:
+    y = B0 x, B1 x, B2 x at its checkpoints): row k reads (y0, y1, y2)_k = (x_i + x_i+1) / 2, x_i+1 - x_i,
+    x_i - 2 x_i+1 + x_i+2 and is a . y_k + b |y_k|^2 <= 1.  Returns the lifted problem (f and g in y and x,
+    with "y" and "L"), the same problem in x alone (y = L x substituted) and the solve's arguments."""
+    rng = np.random.default_rng(seed)
+    x = ca.SX.sym("x", n)
+    p = ca.SX.sym("p", n)
+    y = ca.SX.sym("y", 3 * m)
+    L = np.zeros((3 * m, n))
+    rows = []
+    for k in range(m):
+        i = k % (n - 2)
+        L[3 * k, i : i + 2] = 0.5
+        L[3 * k + 1, i : i + 2] = [-1.0, 1.0]
+        L[3 * k + 2, i : i + 3] = [1.0, -2.0, 1.0]
+        yk = y[3 * k : 3 * k + 3]
+        a = rng.normal(size=3)
+        rows.append(ca.dot(ca.DM(a), yk) + rng.uniform(0.1, 1.0) * ca.sumsqr(yk))
+    g = ca.vertcat(*rows)
+    f = ca.sum1(p / (x + 1.0)) + ca.sumsqr(x - 0.5) / 10.0 + 0.01 * ca.sumsqr(y)
+    lbx = np.full(n, -0.9)
+    ubx = np.full(n, np.inf)
+    lbx[0] = ubx[0] = 0.0
+    args = {"x0": np.zeros(n), "p": rng.uniform(0.5, 2.0, n), "lbx": lbx, "ubx": ubx,
+            "lbg": np.full(m, -np.inf), "ubg": np.ones(m)}
+    f_x, g_x = ca.substitute([f, g], [y], [ca.mtimes(ca.DM(L), x)])
+    lifted = {"x": x, "p": p, "f": f, "g": g, "y": y, "L": L}
+    return lifted, {"x": x, "p": p, "f": f_x, "g": g_x}, args
+
+
+@settings(max_examples=HYPOTHESIS_EXAMPLES, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(4, 30), rows_per_var=st.integers(1, 12))
+def test_lifted_problems_reach_the_optimum_of_the_problem_in_x(seed: int, n: int, rows_per_var: int) -> None:
+    """Derivatives taken in (y, x) and carried to x through L are the problem's own: the lifted solve ends at
+    Ipopt's optimum of the problem written in x alone, a KKT point of it."""
+    lifted, plain, args = _lifted_problem(seed, n, n * rows_per_var)
+    res = DenseIpm(lifted).solve(**args)
+    assert res.success, res.status
+    x_ref, f_ref = _ipopt(plain, args)
+    fun = ca.Function("f", [plain["x"], plain["p"]], [plain["f"]])
+    assert abs(float(fun(res.x, args["p"])) - f_ref) <= F_RTOL * max(1.0, abs(f_ref))
+    assert np.abs(res.x - x_ref).max() <= X_TOL_RANDOM
+    _kkt(plain, args, res)
