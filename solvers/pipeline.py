@@ -123,6 +123,17 @@ OVERLAP_SAFETY = 2.0
 DEFAULT_LP_WINDOW = 200
 #: Default NLP window as a multiple of its overlap.
 NLP_WINDOW_PER_OVERLAP = 3
+#: ... and in a chain that holds at least one window this long (``NlpRefiner.chain_window``): the share
+#: of each window re-solved by the next (its overlap) drops from 1/3 to 1/6.  18.35 m path at 4.63 mm knots
+#: (chains of ~170 intervals, overlap 13), 1 worker, against 3 x everywhere: 157 -> 67 NLP windows,
+#: 4,105 -> 1,899 NLP iterations, 1 -> 0 fallbacks, 144.484 -> 143.686 s of motion; 4 x: 144.768 s, 5 x:
+#: 143.996 s (1 fallback each), 8 x: 145.963 s (1 fallback).  Not for the whole piece: a chain shorter than
+#: 6 overlaps would be one window of its own length and shape (bench seeds 0-59: +26 % lp+nlp CPU).
+NLP_LONG_WINDOW_PER_OVERLAP = 6
+#: ... and only on a piece of at least this many long windows, over which their shapes' builds (0.5-0.9 s
+#: each at 78-145 intervals) pay off: bench seeds 30 and 47 (one chain of ~150 intervals each) took
+#: 6.0 -> 10.7 s and 6.3 -> 12.0 s with long windows, for the same motion.
+NLP_LONG_WINDOW_MIN_COUNT = 8
 #: Share of the reported progress given to the LP stage when the NLP follows.
 LP_PROGRESS_SHARE = 0.1
 #: Utilisation at or above which a constraint is reported as binding.
@@ -175,7 +186,9 @@ class Options:
         lp_overlap: LP window overlap in knot intervals; default from the stopping distance.
         jerk: include the pseudo-jerk stage.
         solver: "highs" or "clarabel".
-        nlp_window: NLP window size in knot intervals; default 3 x nlp_overlap.
+        nlp_window: NLP window size in knot intervals; default 3 x nlp_overlap, and 6 x in a chain of at
+            least that many intervals on a piece of at least 8 such windows (NLP_LONG_WINDOW_PER_OVERLAP,
+            NLP_LONG_WINDOW_MIN_COUNT); given, it is used everywhere.
         nlp_overlap: NLP window overlap in knot intervals; default from the stopping distance.
         nlp_workers: processes solving independent NLP chains in parallel (forked; 1: in this process);
             with more than 1, a piece's chains are handed to them while the LP still solves its later
@@ -372,6 +385,8 @@ class WindowPlan:
     overlap: int
     nlp_window: int
     nlp_overlap: int
+    #: the window of a chain that holds one (``NlpRefiner.chain_window``); None: ``nlp_window`` everywhere
+    nlp_long_window: int | None = None
 
 
 def plan_piece(
@@ -391,7 +406,10 @@ def plan_piece(
     window = max(opt.lp_window, 3 * overlap)
     nlp_overlap = opt.nlp_overlap if opt.nlp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
     nlp_window = opt.nlp_window if opt.nlp_window is not None else NLP_WINDOW_PER_OVERLAP * nlp_overlap
-    return WindowPlan(d, n_int, window, overlap, max(nlp_window, 2 * nlp_overlap), nlp_overlap)
+    nlp_long: int | None = NLP_LONG_WINDOW_PER_OVERLAP * nlp_overlap
+    if opt.nlp_window is not None or n_int < NLP_LONG_WINDOW_MIN_COUNT * NLP_LONG_WINDOW_PER_OVERLAP * nlp_overlap:
+        nlp_long = None
+    return WindowPlan(d, n_int, window, overlap, max(nlp_window, 2 * nlp_overlap), nlp_overlap, nlp_long)
 
 
 def phase_intervals(toolpath: Toolpath, piece: Piece, n0: int) -> int:
@@ -705,7 +723,7 @@ def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
 
 def _refine_piece(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lp_prof: PieceProfile, joins: list[int],
-    nlp_lim: NlpLimits, refiners: dict[tuple[int, int], NlpRefiner], stats: NlpStats,
+    nlp_lim: NlpLimits, refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats,
     on_chain: Callable[[float], None] | None = None, verify_s: FloatArray | None = None,
     pipe: ChainPipeline | None = None,
 ) -> PieceProfile:
@@ -828,19 +846,20 @@ def _slower_spans(lp_prof: PieceProfile, prof: PieceProfile, joins: list[int]) -
 
 def _refiner(
     piece: Piece, machine: Machine, opt: Options, n_int: int | None, nlp_lim: NlpLimits,
-    refiners: dict[tuple[int, int], NlpRefiner], stats: NlpStats,
+    refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats,
 ) -> NlpRefiner:
     """The refiner of the piece's NLP window shape on n_int knot intervals (from ``refiners``, or new)."""
     plan = plan_piece(piece, machine, opt, n_int)
-    key = (plan.nlp_window, plan.nlp_overlap)
+    key = (plan.nlp_window, plan.nlp_overlap, plan.nlp_long_window)
     if key not in refiners:
-        refiners[key] = NlpRefiner(nlp_lim, opt.nlp_checkpoints_per_interval, *key, fault=opt.nlp_fault, stats=stats)
+        refiners[key] = NlpRefiner(nlp_lim, opt.nlp_checkpoints_per_interval, plan.nlp_window, plan.nlp_overlap,
+                                   fault=opt.nlp_fault, stats=stats, long_window=plan.nlp_long_window)
     return refiners[key]
 
 
 def _chain_pipeline(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, nlp_lim: NlpLimits,
-    refiners: dict[tuple[int, int], NlpRefiner], stats: NlpStats, n_int: int | None,
+    refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats, n_int: int | None,
 ) -> ChainPipeline:
     """NLP chains solved in opt.nlp_workers forked processes as the LP's windows make them final, on the
     piece's first knot plan, ``n_int`` intervals (None: its plan's; ``_refine_piece`` falls back to solving
@@ -1140,7 +1159,7 @@ def schedule_stream(
         v_step_limit(machine, opt.sample_period, opt.jerk, True, opt.nlp_kinematic, share=NLP_V_STEP_SHARE),
     ) if nlp else None
     # shared by the first NLP solve of every piece, in path order (repairs get their own)
-    refiners: dict[tuple[int, int], NlpRefiner] = {}
+    refiners: dict[tuple[int, int, int | None], NlpRefiner] = {}
     # progress: the LP stage is LP_PROGRESS_SHARE of each piece's work when the NLP follows
     lp_share = LP_PROGRESS_SHARE if nlp else 1.0
     total = toolpath.length

@@ -226,11 +226,32 @@ def test_prebuild_builds_the_window_shapes_for_the_moving_axes() -> None:
     for tp, axes in ((ex.flower(1), (0, 1)), (Toolpath([ex.line((0.0, 0.0, 0.0), (300.0, 0.0, 0.0))]), (0,))):
         geometry = _local(tp, tp.pieces[0])
         ref = nlp.NlpRefiner(lim, 4, 12, 4)
-        ref.prebuild(geometry, 1.0, 0, 14)
+        ref.prebuild(geometry, 1.0, 0, 14, 60)
         assert ref.shapes == {}
-        ref.prebuild(geometry, 1.0, 0, 60)
+        ref.prebuild(geometry, 1.0, 0, 60, 60)
         assert set(ref.shapes) == {(12, axes, False, False, False), (12, axes, True, False, False)}
         assert [sh.slotted for sh in ref.shapes.values()] == [False, True]
+        # with a long window: a chain holding one builds it, a shorter chain the short window
+        ref = nlp.NlpRefiner(lim, 4, 12, 4, long_window=24)
+        ref.prebuild(geometry, 1.0, 0, 24, 60)  # knots 1 .. 24: 23 intervals, not a long window
+        assert set(ref.shapes) == {(12, axes, False, False, False), (12, axes, True, False, False)}
+        ref = nlp.NlpRefiner(lim, 4, 12, 4, long_window=24)
+        ref.prebuild(geometry, 1.0, 0, 60, 60)
+        assert set(ref.shapes) == {(24, axes, False, False, False), (24, axes, True, False, False)}
+
+
+def test_chain_window_is_long_only_where_the_chain_holds_one() -> None:
+    """``NlpRefiner.chain_window``: the long window where the chain's grid between the rest intervals
+    (knots 1 .. n_int - 1) holds it, else the short one; without a long window always the short one."""
+    from solvers import nlp
+
+    lim = nlp.NlpLimits.from_machine(router(), False, False)
+    ref = nlp.NlpRefiner(lim, 4, 12, 4, long_window=24)
+    assert ref.chain_window(0, 25, 100) == 24   # knots 1 .. 25
+    assert ref.chain_window(0, 24, 100) == 12   # knots 1 .. 24: 23 intervals
+    assert ref.chain_window(76, 100, 100) == 12  # knots 76 .. 99
+    assert ref.chain_window(75, 100, 100) == 24
+    assert nlp.NlpRefiner(lim, 4, 12, 4).chain_window(0, 100, 100) == 12
 
 
 def test_pipelined_chain_reading_past_the_final_lp_is_solved_again(monkeypatch: pytest.MonkeyPatch) -> None:
