@@ -130,8 +130,10 @@ class DenseIpm:
         else:
             v = ca.vertcat(y, x)
             Lf = sp.vstack([sp.csr_matrix(problem["L"]), sp.identity(n)], format="csr")
-        #: v = L x, dense (few variables; a scipy.sparse product costs ~0.1 ms a call)
-        self._L: FloatArray = np.asarray(Lf.toarray(), dtype=np.float64)
+        #: v = L x and L^T (CSR both: a product is one pass over ~3 non-zeros a row; a dense L starts BLAS
+        #: threads and grows with the window squared, scipy's L.T builds a matrix per call)
+        self._L: sp.csr_matrix = Lf
+        self._LT: sp.csr_matrix = sp.csr_matrix(Lf.T)
         gx = ca.vertcat(g, x)  # the variables' own bounds are rows m0.. of the extended g
         m = m0 + n
         lam = ca.SX.sym("lam", m)
@@ -261,7 +263,7 @@ class DenseIpm:
                 status = "Invalid_Number_Detected"
                 break
             fv = float(o[0])
-            gf = o[1 : 1 + nv] @ self._L
+            gf = np.asarray(self._LT @ o[1 : 1 + nv], dtype=np.float64)
             gv = o[1 + nv : 1 + nv + m]
             k = 1 + nv + m
             jv = o[k : k + self._nj].copy()

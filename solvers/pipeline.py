@@ -134,6 +134,11 @@ NLP_LONG_WINDOW_PER_OVERLAP = 6
 #: each at 78-145 intervals) pay off: bench seeds 30 and 47 (one chain of ~150 intervals each) took
 #: 6.0 -> 10.7 s and 6.3 -> 12.0 s with long windows, for the same motion.
 NLP_LONG_WINDOW_MIN_COUNT = 8
+#: ... and at most this many knot intervals, the long window used only where that is still at least 4 x the
+#: overlap: the dense method's Cholesky is cubic in the window's control points.  At the default knots
+#: (2.31 mm, overlap 26) a 156-interval window took the NLP stage 11.2 -> 12.4 s (94 vs 172 windows),
+#: with BLAS threads (27 s of CPU in 17.5 s).
+NLP_LONG_WINDOW_MAX = 80
 #: Share of the reported progress given to the LP stage when the NLP follows.
 LP_PROGRESS_SHARE = 0.1
 #: Utilisation at or above which a constraint is reported as binding.
@@ -187,8 +192,8 @@ class Options:
         jerk: include the pseudo-jerk stage.
         solver: "highs" or "clarabel".
         nlp_window: NLP window size in knot intervals; default 3 x nlp_overlap, and 6 x in a chain of at
-            least that many intervals on a piece of at least 8 such windows (NLP_LONG_WINDOW_PER_OVERLAP,
-            NLP_LONG_WINDOW_MIN_COUNT); given, it is used everywhere.
+            least that many intervals on a piece of at least 8 such windows, where that is at most 80
+            intervals (NLP_LONG_WINDOW_PER_OVERLAP, _MIN_COUNT, _MAX); given, it is used everywhere.
         nlp_overlap: NLP window overlap in knot intervals; default from the stopping distance.
         nlp_workers: processes solving independent NLP chains in parallel (forked; 1: in this process);
             with more than 1, a piece's chains are handed to them while the LP still solves its later
@@ -406,8 +411,9 @@ def plan_piece(
     window = max(opt.lp_window, 3 * overlap)
     nlp_overlap = opt.nlp_overlap if opt.nlp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
     nlp_window = opt.nlp_window if opt.nlp_window is not None else NLP_WINDOW_PER_OVERLAP * nlp_overlap
-    nlp_long: int | None = NLP_LONG_WINDOW_PER_OVERLAP * nlp_overlap
-    if opt.nlp_window is not None or n_int < NLP_LONG_WINDOW_MIN_COUNT * NLP_LONG_WINDOW_PER_OVERLAP * nlp_overlap:
+    nlp_long: int | None = min(NLP_LONG_WINDOW_PER_OVERLAP * nlp_overlap, NLP_LONG_WINDOW_MAX)
+    if (opt.nlp_window is not None or nlp_long is None or nlp_long < 4 * nlp_overlap
+            or n_int < NLP_LONG_WINDOW_MIN_COUNT * nlp_long):
         nlp_long = None
     return WindowPlan(d, n_int, window, overlap, max(nlp_window, 2 * nlp_overlap), nlp_overlap, nlp_long)
 
