@@ -15,7 +15,7 @@ in y and x for y = L x (an NLP window's rows read its control points only throug
 and derivatives at each checkpoint, ``solvers.nlp``).  The derivatives are then taken in v = (y, x), where
 each row reads ~3 variables, and carried to x inside the same CasADi function as products with the constant
 L_v = [L; I]:  J = J_v L_v,  H = L_v^T H_v L_v.  Against the Hessian taken in x directly (forward over reverse
-through L x): 64 replayed window solves (flower x10) 4.38 -> 3.95 G instructions (callgrind), the CasADi
+through L x): 64 replayed window solves (flower x10) 4.38 -> 3.98 G instructions (callgrind), the CasADi
 evaluation 1.91 -> 1.42 G of it; a window shape builds 10-30 % faster.
 
 Variables with lbx = ubx are fixed and eliminated.  The other finite bounds of x are rows of their own

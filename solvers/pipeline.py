@@ -125,10 +125,11 @@ DEFAULT_LP_WINDOW = 200
 NLP_WINDOW_PER_OVERLAP = 3
 #: ... and in a chain that holds at least one window this long (``NlpRefiner.chain_window``): the share
 #: of each window re-solved by the next (its overlap) drops from 1/3 to 1/6.  18.35 m path at 4.63 mm knots
-#: (chains of ~170 intervals, overlap 13), 1 worker, against 3 x everywhere: 157 -> 67 NLP windows,
-#: 4,105 -> 1,899 NLP iterations, 1 -> 0 fallbacks, 144.484 -> 143.686 s of motion; 4 x: 144.768 s, 5 x:
-#: 143.996 s (1 fallback each), 8 x: 145.963 s (1 fallback).  Not for the whole piece: a chain shorter than
-#: 6 overlaps would be one window of its own length and shape (bench seeds 0-59: +26 % lp+nlp CPU).
+#: (chains of ~170 intervals, overlap 13), 1 worker, against 3 x everywhere: 157 -> 68 NLP windows,
+#: 4,105 -> 1,925 NLP iterations, 1 -> 0 fallbacks, 144.484 -> 143.687 s of motion, 11.0 -> 9.3-10.2 s;
+#: every window 4 x: 144.768 s, 5 x: 143.996 s (1 fallback each), 8 x: 145.963 s (1 fallback).  Not for the
+#: whole piece: a chain shorter than 6 overlaps would be one window of its own length and shape (bench seeds
+#: 0-59 with every window 6 x: +26 % lp+nlp CPU).
 NLP_LONG_WINDOW_PER_OVERLAP = 6
 #: ... and only on a piece of at least this many long windows, over which their shapes' builds (0.5-0.9 s
 #: each at 78-145 intervals) pay off: bench seeds 30 and 47 (one chain of ~150 intervals each) took
@@ -411,11 +412,10 @@ def plan_piece(
     window = max(opt.lp_window, 3 * overlap)
     nlp_overlap = opt.nlp_overlap if opt.nlp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
     nlp_window = opt.nlp_window if opt.nlp_window is not None else NLP_WINDOW_PER_OVERLAP * nlp_overlap
-    nlp_long: int | None = min(NLP_LONG_WINDOW_PER_OVERLAP * nlp_overlap, NLP_LONG_WINDOW_MAX)
-    if (opt.nlp_window is not None or nlp_long is None or nlp_long < 4 * nlp_overlap
-            or n_int < NLP_LONG_WINDOW_MIN_COUNT * nlp_long):
-        nlp_long = None
-    return WindowPlan(d, n_int, window, overlap, max(nlp_window, 2 * nlp_overlap), nlp_overlap, nlp_long)
+    long = min(NLP_LONG_WINDOW_PER_OVERLAP * nlp_overlap, NLP_LONG_WINDOW_MAX)
+    use_long = opt.nlp_window is None and long >= 4 * nlp_overlap and n_int >= NLP_LONG_WINDOW_MIN_COUNT * long
+    return WindowPlan(d, n_int, window, overlap, max(nlp_window, 2 * nlp_overlap), nlp_overlap,
+                      long if use_long else None)
 
 
 def phase_intervals(toolpath: Toolpath, piece: Piece, n0: int) -> int:

@@ -560,3 +560,22 @@ def test_context_around_a_window_is_the_motion_outside_it() -> None:
     t, v, acc = mo.joined(np.array([0.0, 1.0]), np.full((2, 3), 7.0), np.zeros((2, 3)))
     assert np.all(np.diff(t) > 0) and t.size == v.shape[0] == acc.shape[0] == mo.left_size + 2 + mo.right_t.size
     np.testing.assert_array_equal(v[mo.left_size : mo.left_size + 2], 7.0)  # the window's own, in its place
+
+
+def test_long_nlp_windows_only_on_long_pieces_within_the_cap() -> None:
+    """``plan_piece``: the long NLP window (6 x the overlap) on a piece of at least NLP_LONG_WINDOW_MIN_COUNT
+    of them (the 18.35 m path at 4.63 mm knots), not on one flower loop, not where 6 x the overlap is over
+    NLP_LONG_WINDOW_MAX (the default knots, overlap twice as many intervals) and not with nlp_window given."""
+    from solvers import pipeline as P
+
+    m = router()
+    long_tp = ex.flower(45)
+    plan = P.plan_piece(long_tp.pieces[0], m, Options(knot_spacing=4.63))
+    assert plan.nlp_long_window == P.NLP_LONG_WINDOW_PER_OVERLAP * plan.nlp_overlap <= P.NLP_LONG_WINDOW_MAX
+    assert plan.n_int >= P.NLP_LONG_WINDOW_MIN_COUNT * plan.nlp_long_window
+    default = P.plan_piece(long_tp.pieces[0], m, Options())
+    assert P.NLP_LONG_WINDOW_PER_OVERLAP * default.nlp_overlap > P.NLP_LONG_WINDOW_MAX
+    assert default.nlp_long_window is None
+    assert P.plan_piece(long_tp.pieces[0], m, Options(knot_spacing=4.63, nlp_window=60)).nlp_long_window is None
+    one = ex.flower(1)
+    assert P.plan_piece(one.pieces[0], m, Options(knot_spacing=4.63)).nlp_long_window is None
