@@ -66,6 +66,7 @@ diagnostics say which window and why.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import math
 import threading
@@ -430,6 +431,60 @@ def eval_f(p: FloatArray, k: NDArray[np.int64], tau: FloatArray, d: float) -> ki
     return 0.5 * (c0 + c1) + tau * (a1 + 0.5 * a2 * tau), (a1 + a2 * tau) / d, a2 / (d * d)
 
 
+@functools.cache
+def _checkpoint_function(na: int, with_aj: bool, values_only: bool = False) -> Any:
+    """The rows of one NLP checkpoint (``_Shape._mapped_problem``), as a CasADi function of
+    (y_k (3), its parameters (4 na + 2), the window's (2 + 8 na)[, lam_k (R)]).
+
+    Out (one column): the R rows (``_Shape._axis_rows`` at the point, then the scaled feed f^), then with
+    ``values_only`` the term w_time / (f^ + DELTA_F) - w_feed f^; else their Jacobian in y_k (R x 3, column
+    by column), the term, its gradient (3) and the Hessian of term + lam_k^T rows in y_k (3 x 3, column by
+    column), by automatic differentiation of this one point (a derivation written out by hand measured
+    320 instructions against 337 with 2 axes: not worth its code)."""
+    y3 = ca.SX.sym("y", 3)
+    pk = ca.SX.sym("pk", 4 * na + 2)
+    gl = ca.SX.sym("gl", 2 + 8 * na)
+    Fs, inv_d = gl[0], gl[1]
+    fh = y3[0]
+    f, f1, f2 = Fs * fh, Fs * inv_d * y3[1], Fs * inv_d * inv_d * y3[2]
+    axes = range(na)
+    rows = _Shape._axis_rows(f, f1, f2, [pk[i] for i in axes], [pk[na + i] for i in axes],
+                             [pk[2 * na + i] for i in axes], [pk[3 * na + i] for i in axes],
+                             [gl[2 + 8 * i : 10 + 8 * i] for i in axes], with_aj)
+    r = ca.vertcat(*rows, fh)
+    term = pk[4 * na] / (fh + DELTA_F) - pk[4 * na + 1] * fh
+    if values_only:
+        return ca.Function("nlp_checkpoint", [y3, pk, gl], [ca.vertcat(r, term)])
+    lk = ca.SX.sym("lam", r.size1())
+    h, _ = ca.hessian(term + ca.dot(lk, r), y3)
+    return ca.Function("nlp_checkpoint_d", [y3, pk, gl, lk],
+                       [ca.vertcat(r, ca.vec(ca.densify(ca.jacobian(r, y3))), term, ca.gradient(term, y3),
+                                   ca.vec(ca.densify(h)))])
+
+
+@functools.cache
+def _interval_function(na: int, with_aj: bool, N: int, values_only: bool = False) -> Any:
+    """``_checkpoint_function`` over the N + 1 checkpoints of one knot interval (each argument and the
+    result with one column per checkpoint; the window's parameters once), as one SX function: mapped over
+    the window's intervals it is called n times instead of n (N + 1), and reads the window's parameters
+    once per interval."""
+    base = _checkpoint_function(na, with_aj, values_only)
+    ins = [ca.SX.sym(f"i{i}", int(base.size1_in(i)), 1 if i == 2 else N + 1) for i in range(base.n_in())]
+    return ca.Function("nlp_interval" + ("" if values_only else "_d"), ins, [base.map(N + 1)(*ins)])
+
+
+def _gathered(nr: int, nc: int, rows: NDArray[np.int64], cols: NDArray[np.int64], src: NDArray[np.int64],
+              values: Any) -> Any:
+    """An nr x nc sparse MX whose entry (rows[i], cols[i]) is values[src[i]] (no position twice)."""
+    spy, mapping = ca.Sparsity.triplet(nr, nc, rows.tolist(), cols.tolist(), True)
+    mp = np.asarray(mapping, dtype=np.int64)
+    if spy.nnz() != mp.size:
+        raise ValueError("a position given twice")
+    order = np.empty_like(mp)
+    order[mp] = np.arange(mp.size)
+    return ca.MX(spy, values[src[order].tolist()])
+
+
 class _Shape:
     """The NLP of one window shape: n knot intervals, N + 1 checkpoints each, given moving axes.
 
@@ -542,7 +597,17 @@ class _Shape:
         #: e, [a, j], each over the rest points: ``_exact_rows``, ``_exact_bounds``)
         self.n_rest = int(ca.vertcat(*rest_rows).size1()) if rest_rows else 0
         #: the first solver of every solve (``DENSE_IPM``); Ipopt's are built on first use
-        self.ipm = DenseIpm(self._lifted) if DENSE_IPM else None
+        self.ipm: DenseIpm | None = None
+        if DENSE_IPM:
+            # checkpoints of a rest interval: their rows and feed are the rest's (``_rest_rows``), not the map's
+            own = np.zeros(K, dtype=bool)
+            for is_rest, kk in ((head, 0), (tail, n - 1)):
+                if is_rest:
+                    own[kk * (N + 1) : (kk + 1) * (N + 1)] = True
+            oi = np.flatnonzero(own).tolist()
+            rest_obj = (ca.sum1(wt[oi] / (fh[oi] + DELTA_F)) - ca.sum1(wf[oi] * fh[oi]) + rest_time
+                        if oi else ca.SX(0.0))
+            self.ipm = DenseIpm(self._mapped_problem(g, rest_obj, own, na))
         self._problem_x: dict[str, Any] | None = None
         self._solver: Any = None
         self._safe_solver: Any = None
@@ -557,6 +622,110 @@ class _Shape:
             # and a result must not depend on what this thread solved before
             warm_starting=False,
         )
+
+    def _mapped_problem(self, g: Any, rest_obj: Any, own: NDArray[np.bool_], na: int) -> dict[str, Any]:
+        r"""The window's NLP for ``DenseIpm`` with its derivatives given (MX): the rows of the checkpoints by one
+        function of a knot interval's checkpoints, mapped over the window's n intervals; only the other rows
+        by automatic differentiation.
+
+        At checkpoint k the rows (``_axis_rows``: per moving axis u, e_hi, e_lo, [a, j_hi, j_lo]; then the
+        scaled feed) and the travel-time term w_time / (f^ + DELTA_F) - w_feed f^ read the lifted variables
+        y_k = (f^, f^', f^''), the checkpoint's parameters (x_s, x_ss, x_sss_hi, x_sss_lo per moving axis,
+        w_time, w_feed) and the window's (Fs, 1/d, the axes' coefficients).  ``_checkpoint_function`` gives at
+        one checkpoint the R rows, their Jacobian in y_k (R x 3), the term, its gradient and the Hessian in
+        y_k of term + lam_k^T rows (lam_k: the rows' multipliers, 0 for a row the window leaves out: the knot
+        twins' u, a and feed rows); ``_interval_function`` over an interval's N + 1 checkpoints, mapped over
+        the n intervals, is built once per (axes, rows, N) for every window length.  Automatic
+        differentiation over the whole window (SX) took ~2/3 of a shape's 0.2-0.45 s build.
+
+        The rows of the rest intervals' checkpoints (``own``), the cut slots' and the rest ends' rows and the
+        rest intervals' travel time (``rest_obj``) are differentiated as before (SX), then gathered with the
+        map's into g (m0), grad f, J_v (m0 x n_v) and H_v (n_v x n_v) in v = (y, x); ``DenseIpm`` carries
+        them to x with L."""
+        K, n, N = self.K, self.n, self.N
+        lf = self._lifted
+        nx = int(lf["x"].size1())
+        ny = 3 * K
+        nv = ny + nx
+        m0 = int(g.size1())
+        tmpl = _interval_function(na, self.with_aj, N)
+        R = int(tmpl.size1_in(3))
+        nout = int(tmpl.size1_out(0))
+        npk = 4 * na + 2
+        if self.row_index.shape[0] != R:
+            raise ValueError(f"checkpoint rows {self.row_index.shape[0]} != the map's {R}")
+        # g row -> (template row, checkpoint) where the map gives it
+        blk, cp = np.nonzero(self.row_index >= 0)
+        at = self.row_index[blk, cp]
+        keep = ~own[cp]
+        row_t = np.full(m0, -1, dtype=np.int64)
+        row_k = np.full(m0, -1, dtype=np.int64)
+        row_t[at[keep]], row_k[at[keep]] = blk[keep], cp[keep]
+        mr = np.flatnonzero(row_t >= 0)
+        ns_rows = np.flatnonzero(row_t < 0)
+        y = ca.MX.sym("y", ny)
+        x = ca.MX.sym("x", nx)
+        P = ca.MX.sym("P", int(lf["p"].size1()))
+        lam = ca.MX.sym("lam", m0)
+        Y = ca.reshape(y, K, 3).T
+        PK = ca.reshape(P[2 : 2 + npk * K], K, npk).T
+        GL = ca.vertcat(P[0:2], P[2 + npk * K : 2 + npk * K + 8 * na])
+        # the multipliers per (template row, checkpoint), 0 where the map's row is not in g
+        lidx = np.full((K, R), m0, dtype=np.int64)
+        lidx[row_k[mr], row_t[mr]] = mr
+        LK = ca.reshape(ca.vertcat(lam, ca.MX(1, 1))[lidx.ravel().tolist()], R, K)
+        # entry o of checkpoint k at k nout + o (the map over intervals keeps the checkpoints' columns)
+        out = ca.vec(tmpl.map(n)(Y, PK, GL, LK))
+        out_fg = ca.vec(_interval_function(na, self.with_aj, N, values_only=True).map(n)(Y, PK, GL))
+        kk = np.flatnonzero(~own)
+        # the other rows and the rest intervals' term, in v (SX)
+        v_sx = ca.vertcat(lf["y"], lf["x"])
+        lam_ns = ca.SX.sym("lam_ns", ns_rows.size)
+        g_ns = g[ns_rows.tolist()] if ns_rows.size else ca.SX(0, 1)
+        h_ns, _ = ca.hessian(rest_obj + ca.dot(lam_ns, g_ns), v_sx)
+        ns = ca.Function("ns_rows", [v_sx, lf["p"], lam_ns],
+                         [ca.vertcat(rest_obj, g_ns), ca.densify(ca.gradient(rest_obj, v_sx)),
+                          ca.jacobian(g_ns, v_sx), h_ns])
+        ns_val, ns_grad, ns_jac, ns_hess = ns(ca.vertcat(y, x), P, lam[ns_rows.tolist()])
+        ns_fg = ca.Function("ns_rows_fg", [v_sx, lf["p"]], [ca.vertcat(rest_obj, g_ns)])(ca.vertcat(y, x), P)
+        linear_ns = ~np.asarray(ca.which_depends(g_ns, v_sx, 2, True), dtype=bool)
+
+        def values(outv: Any, per_k: int, o_term: int, nsv: Any) -> tuple[Any, Any]:
+            """(f, g) from the map's values (per_k a checkpoint, the term at o_term) and the other rows'."""
+            src = np.empty(m0, dtype=np.int64)
+            src[mr] = row_k[mr] * per_k + row_t[mr]
+            src[ns_rows] = int(outv.size1()) + 1 + np.arange(ns_rows.size)
+            vals = ca.vertcat(outv, nsv)
+            return ca.sum1(vals[(kk * per_k + o_term).tolist()]) + nsv[0], vals[src.tolist()]
+
+        f_fg, g_fg = values(out_fg, R + 1, R, ns_fg)
+        f_d, g_d = values(out, nout, 4 * R, ns_val)
+        o_grad, o_hess = 4 * R + 1, 4 * R + 4
+        # grad f in v: the map's in y, plus the others' (dense)
+        gy = np.full(ny, int(out.size1()), dtype=np.int64)
+        for c in range(3):
+            gy[c * K + kk] = kk * nout + o_grad + c
+        grad = ca.vertcat(ca.vertcat(out, ca.MX(1, 1))[gy.tolist()], ca.MX.zeros(nx, 1)) + ns_grad
+        # J_v: a map's row reads y at its checkpoint (entry (r, c) of its R x 3 block at R + c R + r); the
+        # other rows are ns_jac's
+        ji = [mr, mr, mr]
+        jc = [c * K + row_k[mr] for c in range(3)]
+        js = [row_k[mr] * nout + R + c * R + row_t[mr] for c in range(3)]
+        nr, nc = (np.asarray(a, dtype=np.int64) for a in ns.sparsity_out(2).get_triplet())
+        jac = _gathered(m0, nv, np.concatenate([*ji, ns_rows[nr]]), np.concatenate([*jc, nc]),
+                        np.concatenate([*js, int(out.size1()) + np.arange(nr.size)]),
+                        ca.vertcat(out, ns_jac.nz[:]))
+        # H_v: the map's 3 x 3 blocks in y (entry (a, b) at o_hess + a + 3 b), plus ns_hess
+        a3, b3 = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+        hess = _gathered(nv, nv, (a3.ravel()[:, None] * K + kk[None, :]).ravel(),
+                         (b3.ravel()[:, None] * K + kk[None, :]).ravel(),
+                         (kk[None, :] * nout + o_hess + (a3 + 3 * b3).ravel()[:, None]).ravel(), out) + ns_hess
+        lin = np.zeros(m0, dtype=bool)
+        lin[mr] = row_t[mr] == R - 1   # the scaled feed rows
+        lin[ns_rows] = linear_ns
+        return {"x": x, "y": y, "L": self._L, "p": P, "f": f_fg, "g": g_fg,
+                "derivatives": {"f": f_d, "g": g_d, "lam": lam, "grad": grad, "jac": jac, "hess": hess,
+                                "linear": lin}}
 
     @property
     def _problem(self) -> dict[str, Any]:

@@ -1,0 +1,61 @@
+"""An NLP window's derivatives from the mapped checkpoint function (``nlp._Shape._mapped_problem``, what the
+dense interior point evaluates) against CasADi's automatic differentiation of the same window written as one
+SX problem (``_Shape._lifted``, the independent oracle: ``DenseIpm`` differentiates it itself), at random
+points, for every kind of shape: plain, with cut slots, from and to rest, with the a / j rows, 1-3 axes."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from solvers import nlp
+from solvers.ipm import DenseIpm
+
+#: Agreement of values and derivatives, relative to max(1, |oracle|) (both are float64 evaluations of the
+#: same expressions in a different order: ~1e-15 relative read on 78-interval windows).
+REL_TOL = 1e-11
+HYPOTHESIS_EXAMPLES = 25
+
+
+def _evaluated(d: DenseIpm, x: np.ndarray, p: np.ndarray, lam: np.ndarray) -> list[np.ndarray]:
+    """f, grad f, g (extended), J and H (lower) at x in x's coordinates, from one evaluation of each
+    of d's functions; g and f also from its value-only function."""
+    d._v[:] = d._lx(x)
+    d._p[:] = p
+    d._lam[:] = lam
+    d._eval_full()
+    d._eval_fg()
+    n, nv, m = d.n, d._v.size, d.m
+    o = d._out
+    k = 1 + nv + m
+    J = np.zeros((m, n))
+    J[d._jr, d._jc] = o[k : k + d._nj]
+    H = np.zeros(n * n)
+    H[d._h_at] = o[k + d._nj :]
+    return [o[:1], d._LT @ o[1 : 1 + nv], o[1 + nv : k], J, H.reshape(n, n), d._out_fg.copy()]
+
+
+@settings(max_examples=HYPOTHESIS_EXAMPLES, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(4, 24), N=st.integers(2, 5),
+       axes=st.sampled_from([(0,), (2,), (0, 1), (0, 1, 2)]), with_aj=st.booleans(), slotted=st.booleans(),
+       head=st.booleans(), tail=st.booleans())
+def test_mapped_derivatives_equal_the_whole_windows_automatic_ones(
+    seed: int, n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool, head: bool, tail: bool,
+) -> None:
+    shape = nlp._Shape(n, N, axes, with_aj, slotted, head, tail)
+    mapped = shape.ipm
+    assert mapped is not None
+    oracle = DenseIpm(shape._lifted)
+    rng = np.random.default_rng(seed)
+    assert (mapped.n, mapped.m) == (oracle.n, oracle.m)
+    np.testing.assert_array_equal(mapped.linear, oracle.linear)
+    for _ in range(3):
+        x = rng.uniform(0.2, 1.5, mapped.n)
+        p = rng.uniform(0.2, 1.5, mapped._p.size)
+        lam = rng.uniform(-1.0, 1.0, mapped.m)
+        for name, got, want in zip(("f", "grad", "g", "J", "H", "fg"), _evaluated(mapped, x, p, lam),
+                                   _evaluated(oracle, x, p, lam), strict=True):
+            assert np.all(np.isfinite(got)), name
+            err = np.max(np.abs(got - want) / np.maximum(1.0, np.abs(want)))
+            assert err <= REL_TOL, (name, err)
