@@ -678,17 +678,23 @@ class _Shape:
         out = ca.vec(tmpl.map(n)(Y, PK, GL, LK))
         out_fg = ca.vec(_interval_function(na, self.with_aj, N, values_only=True).map(n)(Y, PK, GL))
         kk = np.flatnonzero(~own)
-        # the other rows and the rest intervals' term, in v (SX)
+        # the other rows and the rest intervals' term, in v (SX; a plain window has none)
         v_sx = ca.vertcat(lf["y"], lf["x"])
-        lam_ns = ca.SX.sym("lam_ns", ns_rows.size)
         g_ns = g[ns_rows.tolist()] if ns_rows.size else ca.SX(0, 1)
-        h_ns, _ = ca.hessian(rest_obj + ca.dot(lam_ns, g_ns), v_sx)
-        ns = ca.Function("ns_rows", [v_sx, lf["p"], lam_ns],
-                         [ca.vertcat(rest_obj, g_ns), ca.densify(ca.gradient(rest_obj, v_sx)),
-                          ca.jacobian(g_ns, v_sx), h_ns])
-        ns_val, ns_grad, ns_jac, ns_hess = ns(ca.vertcat(y, x), P, lam[ns_rows.tolist()])
-        ns_fg = ca.Function("ns_rows_fg", [v_sx, lf["p"]], [ca.vertcat(rest_obj, g_ns)])(ca.vertcat(y, x), P)
-        linear_ns = ~np.asarray(ca.which_depends(g_ns, v_sx, 2, True), dtype=bool)
+        jac_ns = ca.jacobian(g_ns, v_sx)
+        linear_ns = (~np.asarray(ca.which_depends(g_ns, v_sx, 2, True), dtype=bool) if ns_rows.size
+                     else np.zeros(0, dtype=bool))
+        others = bool(ns_rows.size) or bool(own.any())
+        ns_val: Any = ca.MX.zeros(1, 1)
+        ns_fg: Any = ns_val
+        ns_jac: Any = ca.MX(jac_ns.sparsity())
+        if others:
+            lam_ns = ca.SX.sym("lam_ns", ns_rows.size)
+            h_ns, _ = ca.hessian(rest_obj + ca.dot(lam_ns, g_ns), v_sx)
+            ns = ca.Function("ns_rows", [v_sx, lf["p"], lam_ns],
+                             [ca.vertcat(rest_obj, g_ns), ca.densify(ca.gradient(rest_obj, v_sx)), jac_ns, h_ns])
+            ns_val, ns_grad, ns_jac, ns_hess = ns(ca.vertcat(y, x), P, lam[ns_rows.tolist()])
+            ns_fg = ca.Function("ns_rows_fg", [v_sx, lf["p"]], [ca.vertcat(rest_obj, g_ns)])(ca.vertcat(y, x), P)
 
         def values(outv: Any, per_k: int, o_term: int, nsv: Any) -> tuple[Any, Any]:
             """(f, g) from the map's values (per_k a checkpoint, the term at o_term) and the other rows'."""
@@ -705,13 +711,13 @@ class _Shape:
         gy = np.full(ny, int(out.size1()), dtype=np.int64)
         for c in range(3):
             gy[c * K + kk] = kk * nout + o_grad + c
-        grad = ca.vertcat(ca.vertcat(out, ca.MX(1, 1))[gy.tolist()], ca.MX.zeros(nx, 1)) + ns_grad
+        grad = ca.vertcat(ca.vertcat(out, ca.MX(1, 1))[gy.tolist()], ca.MX.zeros(nx, 1))
         # J_v: a map's row reads y at its checkpoint (entry (r, c) of its R x 3 block at R + c R + r); the
         # other rows are ns_jac's
         ji = [mr, mr, mr]
         jc = [c * K + row_k[mr] for c in range(3)]
         js = [row_k[mr] * nout + R + c * R + row_t[mr] for c in range(3)]
-        nr, nc = (np.asarray(a, dtype=np.int64) for a in ns.sparsity_out(2).get_triplet())
+        nr, nc = (np.asarray(a, dtype=np.int64) for a in jac_ns.sparsity().get_triplet())
         jac = _gathered(m0, nv, np.concatenate([*ji, ns_rows[nr]]), np.concatenate([*jc, nc]),
                         np.concatenate([*js, int(out.size1()) + np.arange(nr.size)]),
                         ca.vertcat(out, ns_jac.nz[:]))
@@ -719,7 +725,10 @@ class _Shape:
         a3, b3 = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
         hess = _gathered(nv, nv, (a3.ravel()[:, None] * K + kk[None, :]).ravel(),
                          (b3.ravel()[:, None] * K + kk[None, :]).ravel(),
-                         (kk[None, :] * nout + o_hess + (a3 + 3 * b3).ravel()[:, None]).ravel(), out) + ns_hess
+                         (kk[None, :] * nout + o_hess + (a3 + 3 * b3).ravel()[:, None]).ravel(), out)
+        if others:
+            grad = grad + ns_grad
+            hess = hess + ns_hess
         lin = np.zeros(m0, dtype=bool)
         lin[mr] = row_t[mr] == R - 1   # the scaled feed rows
         lin[ns_rows] = linear_ns
