@@ -21,7 +21,7 @@ evaluation 1.91 -> 1.42 G of it; a window shape builds 10-30 % faster.
 Given derivatives: the problem may instead carry ``derivatives`` (MX, in v = (y, x) and its own multiplier
 symbol ``lam`` of g): f and g as computed alongside them, grad f, J_v (m x n_v), H_v (n_v x n_v, full) and which
 rows are linear; nothing is differentiated here (``solvers.nlp`` maps one checkpoint's derivatives over a
-window: a window shape builds in ~1/3 of the time, each evaluation costs ~10-20 % more).
+window: a window shape builds in ~1/3 of the time, each evaluation costs ~10-40 % more).
 
 Variables with lbx = ubx are fixed and eliminated.  The other finite bounds of x are rows of their own
 (g is extended by x).  Every finite bound is one inequality c_i(x) >= 0 with slack w_i > 0 and multiplier
