@@ -47,6 +47,7 @@ from solvers.errors import InfeasibleError, SolverFailure
 from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
 
 #: A HiGHS run is stopped after this much wall time plus HIGHS_TIME_PER_ROW_S a row, and the window is
 #: solved once more from scratch with the other presolve setting (``_highs_run``).  Bench seed 949 (lp): a
@@ -407,6 +408,9 @@ class WindowLP:
         self.Q = 1.0
         self._fine_g: tuple[FloatArray, PathSamples] | None = None
         self._step_cache: tuple[FloatArray, FloatArray, FloatArray] | None = None
+        self._vstep_cache: FloatArray | None = None
+        #: velocity_bound of the verification grid's geometry (``_fine_geometry``), as (geometry, bound)
+        self._fine_ub: tuple[PathSamples, FloatArray] | None = None
         #: knot intervals after k0 on which the previous window's solution and q* are inherited
         self.inherited = INHERITED_INTERVALS
 
@@ -419,6 +423,16 @@ class WindowLP:
             bspline.design(k, W1, sp_.k0, sp_.ncols),
             bspline.design(k, W2, sp_.k0, sp_.ncols),
         )
+
+    def _basis(self, s: FloatArray) -> tuple[IntArray, FloatArray, FloatArray, FloatArray]:
+        """``bspline.basis`` at s in this window: k (K,), W0, W1, W2 (K, 3)."""
+        sp_ = self.spec
+        return bspline.basis(s, sp_.d, sp_.n_int, sp_.k0, sp_.k1 - 1)
+
+    def _combo(self, basis: tuple[IntArray, FloatArray, FloatArray, FloatArray], *coef: FloatArray) -> sp.csr_matrix:
+        """sum_i diag(coef_i) B_i (B_0, B_1, B_2 the designs of q, q', q'' at the basis' points), as CSR."""
+        k, *W = basis
+        return bspline.combination(k, list(zip(coef, W, strict=False)), self.spec.k0, self.spec.ncols)
 
     def _add(self, rows: _Rows, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, s: FloatArray) -> None:
         """Add rows at points s; on inherited intervals widen them to admit the previous solution."""
@@ -450,12 +464,13 @@ class WindowLP:
             g, ub = g.subset(~rest), ub[~rest]
             if g.s.size == 0:
                 return
-        B0, B1, _ = self._mats(g.s)
-        self._add(rows, B0, np.zeros(ub.size), ub / Q, g.s)
+        basis = self._basis(g.s)
+        self._add(rows, bspline.design(basis[0], basis[1], self.spec.k0, self.spec.ncols), np.zeros(ub.size),
+                  ub / Q, g.s)
         for ax in range(3):
             if not axis_moves(g, ax):
                 continue
-            A = (sp.diags(g.d2[:, ax]) @ B0 + sp.diags(0.5 * g.d1[:, ax]) @ B1) * (Q / self.lim.amax[ax])
+            A = self._combo(basis, g.d2[:, ax], 0.5 * g.d1[:, ax]) * (Q / self.lim.amax[ax])
             one = np.ones(g.s.size)
             self._add(rows, A, -one, one, g.s)
             self._add_coupled(rows, A, g.s, self._vstep_coupling(g.s, ax, self.lim.amax[ax], V_KERNEL_A, 1))
@@ -501,12 +516,12 @@ class WindowLP:
         without X stays too: a little conservative, not needed for the bound.)"""
         dr = self.lim.rest_drive
         assert dr is not None
-        B0, B1, B2 = self._mats(g.s)
+        basis = self._basis(g.s)
         for ax in range(3):
             if not axis_moves(g, ax):
                 continue
             xs = g.d1[:, ax]
-            A = (sp.diags(g.d2[:, ax]) @ B0 + sp.diags(0.5 * xs) @ B1) * Q
+            A = self._combo(basis, g.d2[:, ax], 0.5 * xs) * Q
             unsure = np.abs(xs) < SIGN_EPS
             sg_hi = np.where(unsure, 1.0, np.sign(xs))
             sg_lo = np.where(unsure, -1.0, np.sign(xs))
@@ -523,7 +538,7 @@ class WindowLP:
                 er = dr["Kv"][ax] * xs * R
                 self._add(rows, A * (dr["Ka"][ax] / E), (-E - er) / E, (E - er) / E, g.s)
             else:
-                X = (sp.diags(g.d3[:, ax]) @ B0 + sp.diags(1.5 * g.d2[:, ax]) @ B1 + sp.diags(0.5 * xs) @ B2) * Q
+                X = self._combo(basis, g.d3[:, ax], 1.5 * g.d2[:, ax], 0.5 * xs) * Q
                 er = dr["Kv"][ax] * xs * R
                 self._add(rows, (A * dr["Ka"][ax] + sp.diags(R * dr["Kj"][ax]) @ X) / E, (-E - er) / E,
                           (E - er) / E, g.s)
@@ -542,12 +557,12 @@ class WindowLP:
             return
         g = g.subset(keep)
         rq = np.sqrt(qstar[keep])
-        B0, B1, B2 = self._mats(g.s)
+        basis = self._basis(g.s)
         for ax in range(3):
             if not axis_moves(g, ax):
                 continue
-            J = sp.diags(g.d3[:, ax]) @ B0 + sp.diags(1.5 * g.d2[:, ax]) @ B1 + sp.diags(0.5 * g.d1[:, ax]) @ B2
-            A = sp.diags(rq * Q / self.lim.jmax[ax]) @ J
+            J = self._combo(basis, g.d3[:, ax], 1.5 * g.d2[:, ax], 0.5 * g.d1[:, ax])
+            A = sp.csr_matrix((J.data * np.repeat(rq * Q / self.lim.jmax[ax], 3), J.indices, J.indptr), shape=J.shape)
             one = np.ones(g.s.size)
             self._add(rows, A, -one, one, g.s)
             # next to a curvature jump, |j| + the step's share <= jmax (``_step_jerk``); next to a
@@ -760,9 +775,13 @@ class WindowLP:
         return np.full(br.size, np.inf) if self.lim.a_step is None else step_cap(self.lim.a_step, jump)
 
     def _vstep_caps(self) -> FloatArray:
-        """Cap on q at each break from the velocity step, min_x (v_step_x / |jump of x_s|)^2, (nb,)."""
-        br, _, jump1 = self._steps()
-        return np.full(br.size, np.inf) if self.lim.v_step is None else step_cap(self.lim.v_step, jump1) ** 2
+        """Cap on q at each break from the velocity step, min_x (v_step_x / |jump of x_s|)^2, (nb,) (computed
+        once per window: every row and check near a break reads it)."""
+        if self._vstep_cache is None:
+            br, _, jump1 = self._steps()
+            self._vstep_cache = (np.full(br.size, np.inf) if self.lim.v_step is None
+                                 else step_cap(self.lim.v_step, jump1) ** 2)
+        return self._vstep_cache
 
     def _vstep_terms(
         self, s: FloatArray, ax: int, limit: float, kernel: float, power: int
@@ -998,7 +1017,9 @@ class WindowLP:
     def _violations(self, c: FloatArray, g: PathSamples, c_star: FloatArray | None) -> NDArray[np.bool_]:
         f, v, a, j = axis_kinematics(g, *self._eval(c, g.s))
         tol = 1.0 + VERIFY_TOL
-        bad = f * f > velocity_bound(g, self.lim) * tol**2
+        if self._fine_ub is None or self._fine_ub[0] is not g:
+            self._fine_ub = (g, velocity_bound(g, self.lim))
+        bad = f * f > self._fine_ub[1] * tol**2
         lim = self.lim
         rest = self._rest_mask(g.s)
         if rest.any():  # next to a rest end: the drive's u and e (``_rest_drive_rows``), not a and j

@@ -1917,6 +1917,10 @@ class NlpRefiner:
         e_s = np.zeros((n_u, 3))
         u_s = np.zeros((n_u, 3))
         for i in range(3):
+            if not (v[:, i].any() or acc[:, i].any()):
+                # a standing axis: the means below are exact zeros, so e = 0 and u = c (the same values)
+                u_s[valid, i] = abs(lim.c[i]) / lim.umax[i]
+                continue
             vm = np.convolve(np.interp(tu, t, v[:, i]), box, mode="same")
             am = np.convolve(np.interp(tu, t, acc[:, i]), hat, mode="same")
             jm = np.zeros(n_u)
