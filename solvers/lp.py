@@ -415,19 +415,19 @@ class WindowLP:
         self.inherited = INHERITED_INTERVALS
 
     # ----- row blocks ---------------------------------------------------------
-    def _mats(self, s: FloatArray) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
-        sp_ = self.spec
-        k, W0, W1, W2 = bspline.basis(s, sp_.d, sp_.n_int, sp_.k0, sp_.k1 - 1)
-        return (
-            bspline.design(k, W0, sp_.k0, sp_.ncols),
-            bspline.design(k, W1, sp_.k0, sp_.ncols),
-            bspline.design(k, W2, sp_.k0, sp_.ncols),
-        )
-
     def _basis(self, s: FloatArray) -> tuple[IntArray, FloatArray, FloatArray, FloatArray]:
         """``bspline.basis`` at s in this window: k (K,), W0, W1, W2 (K, 3)."""
         sp_ = self.spec
         return bspline.basis(s, sp_.d, sp_.n_int, sp_.k0, sp_.k1 - 1)
+
+    def _design(self, k: IntArray, W: FloatArray) -> sp.csr_matrix:
+        """``bspline.design`` in this window's columns."""
+        return bspline.design(k, W, self.spec.k0, self.spec.ncols)
+
+    def _mats(self, s: FloatArray) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
+        """The designs B0, B1, B2 of q, q', q'' at s."""
+        k, W0, W1, W2 = self._basis(s)
+        return self._design(k, W0), self._design(k, W1), self._design(k, W2)
 
     def _combo(self, basis: tuple[IntArray, FloatArray, FloatArray, FloatArray], *coef: FloatArray) -> sp.csr_matrix:
         """sum_i diag(coef_i) B_i (B_0, B_1, B_2 the designs of q, q', q'' at the basis' points), as CSR."""
@@ -465,8 +465,7 @@ class WindowLP:
             if g.s.size == 0:
                 return
         basis = self._basis(g.s)
-        self._add(rows, bspline.design(basis[0], basis[1], self.spec.k0, self.spec.ncols), np.zeros(ub.size),
-                  ub / Q, g.s)
+        self._add(rows, self._design(basis[0], basis[1]), np.zeros(ub.size), ub / Q, g.s)
         for ax in range(3):
             if not axis_moves(g, ax):
                 continue
