@@ -9,7 +9,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from solvers.ipm import TOL_COMPL, TOL_VIOL, DenseIpm
@@ -18,8 +18,11 @@ from solvers.ipm import TOL_COMPL, TOL_VIOL, DenseIpm
 X_TOL = 1e-5
 #: ... and from Ipopt's on the random convex problems, whose objective is only weakly convex (curvature
 #: 0.2 from |x - c|^2 / 10): a weakly active row's slack ~ TOL_COMPL / z moves x; 1,000 random cases
-#: read up to 3.7e-5 (the objectives agree to 3e-9, under F_RTOL).
-X_TOL_RANDOM = 1e-4
+#: read up to 3.7e-5 (the objectives agree to 3e-9, under F_RTOL).  The lifted case seed 4, n 4, 7 rows a
+#: variable reads 1.02e-4 (objective 1.1e-8 over Ipopt's, 3.5e-9 relative; the same against Ipopt with
+#: bound_relax_factor 0 and constr_viol_tol 1e-12, so it is this method's stopping point, not Ipopt's):
+#: 300 other random lifted cases read up to 2.7e-5.
+X_TOL_RANDOM = 2e-4
 #: Relative objective gap to Ipopt's optimum on the convex problems.
 F_RTOL = 1e-7
 #: Stationarity residual |grad f + J^T lam_g + lam_x| of a returned point.
@@ -190,6 +193,7 @@ def _lifted_problem(seed: int, n: int, m: int) -> tuple[dict[str, Any], dict[str
 
 @settings(max_examples=HYPOTHESIS_EXAMPLES, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), n=st.integers(4, 30), rows_per_var=st.integers(1, 12))
+@example(seed=4, n=4, rows_per_var=7)  # (the farthest from Ipopt's x found: X_TOL_RANDOM)
 def test_lifted_problems_reach_the_optimum_of_the_problem_in_x(seed: int, n: int, rows_per_var: int) -> None:
     """Derivatives taken in (y, x) and carried to x through L are the problem's own: the lifted solve ends at
     Ipopt's optimum of the problem written in x alone, a KKT point of it."""
