@@ -39,7 +39,8 @@ def child(mode: str, loops: int, method: str) -> None:
     from solvers.pipeline import Options, SampleBlock, schedule, schedule_stream
 
     tp = ex.flower(loops)
-    opt = Options(method=method, knot_spacing=KNOT)
+    # one process (no forked NLP workers, whose memory this process's VmHWM would not count)
+    opt = Options(method=method, knot_spacing=KNOT, nlp_workers=1)
     rss_before = proc_status_mb("VmRSS")
     if not reset_hwm():
         raise SystemExit("cannot reset VmHWM (/proc/self/clear_refs)")

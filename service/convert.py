@@ -94,6 +94,8 @@ def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
         checkpoints_per_interval=o.checkpoints_per_interval,
         jerk=o.jerk,
         solver=o.solver,
+        # one job per core already (``service.executor``: FEEDSCHED_WORKERS solver processes, daemonic)
+        nlp_workers=1,
     )
     return tp, machine, opts
 

@@ -32,6 +32,8 @@ window seam) - a change of the repair semantics, not only of the plumbing.
 from __future__ import annotations
 
 import math
+import multiprocessing
+import os
 import time
 import weakref
 from collections.abc import Callable, Iterator
@@ -131,6 +133,11 @@ NLP_WINDOW_PER_OVERLAP = 3
 #: whole piece: a chain shorter than 6 overlaps would be one window of its own length and shape (bench seeds
 #: 0-59 with every window 6 x: +26 % lp+nlp CPU).
 NLP_LONG_WINDOW_PER_OVERLAP = 6
+#: Most NLP workers ``Options(nlp_workers=None)`` starts: 2, the configuration measured (2 cores here).  With
+#: 2 the 18.35 m flower chain computes in 3.7-4.2 % of its motion time against 6.1-7.3 % with 1 (README,
+#: issue 3), and the parent's LP is then the critical path: more workers could gain only on the NLP work
+#: left after the LP (~1.5 s of ~5.5 s).
+NLP_AUTO_WORKERS_MAX = 2
 #: ... and only on a piece of at least this many long windows, over which their shapes' builds (0.5-0.9 s
 #: each at 78-145 intervals) pay off: bench seeds 30 and 47 (one chain of ~150 intervals each) took
 #: 6.0 -> 10.7 s and 6.3 -> 12.0 s with long windows, for the same motion.
@@ -178,6 +185,19 @@ REPAIR_SUBDIV = 8
 SAMPLE_CHUNK = 100_000
 
 
+def auto_nlp_workers() -> int:
+    """NLP workers by default: the cores this process may run on (its CPU affinity), at most
+    NLP_AUTO_WORKERS_MAX; 1 in a daemonic process, which may not start a pool (the service's solver
+    processes, and the benches' case workers, each of which is one job on one core already)."""
+    if multiprocessing.current_process().daemon:
+        return 1
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, NLP_AUTO_WORKERS_MAX))
+
+
 @dataclass(frozen=True)
 class Options:
     """Scheduling options (all lengths mm, times s).
@@ -198,7 +218,10 @@ class Options:
         nlp_overlap: NLP window overlap in knot intervals; default from the stopping distance.
         nlp_workers: processes solving independent NLP chains in parallel (forked; 1: in this process);
             with more than 1, a piece's chains are handed to them while the LP still solves its later
-            windows (``nlp.ChainPipeline``).  The feed is the same bit for bit.
+            windows (``nlp.ChainPipeline``).  The feed is the same bit for bit.  Default
+            ``auto_nlp_workers()``: the cores this process may run on, at most NLP_AUTO_WORKERS_MAX, and 1
+            in a daemonic process (the service's solver processes, which run one job per core already).
+            A daemonic process solves the chains itself whatever is given (it may not start a pool).
         nlp_checkpoints_per_interval: N of the NLP (each interval is also checked at both knots,
             and the limits are verified between checkpoints).
         nlp_axis_velocity: also hold |v| <= the LP's vmax per axis in the NLP (off: the NLP limits
@@ -220,7 +243,7 @@ class Options:
     nlp_window: int | None = None
     nlp_overlap: int | None = None
     nlp_checkpoints_per_interval: int = 4
-    nlp_workers: int = 1
+    nlp_workers: int = field(default_factory=lambda: auto_nlp_workers())
     nlp_axis_velocity: bool = False
     nlp_kinematic: bool = False
     max_samples: int | None = None
@@ -748,7 +771,7 @@ def _refine_piece(
         if pipe is not None:
             pipe.close()  # (its chains were on other knots)
         refiner = _refiner(piece, machine, opt, lp_prof.n_int, nlp_lim, refiners, stats)
-        p, mask, rise = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain, opt.nlp_workers,
+        p, mask, rise = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain, _workers(opt),
                                        verify_s, _standing_ends(toolpath, piece))
     # the rest intervals the NLP solved (``solvers.nlp.REST_ENDS``) as q control points; a span reverted to
     # the LP's feed below takes the LP's rest interval next to it back too
@@ -873,7 +896,12 @@ def _chain_pipeline(
     plan = plan_piece(piece, machine, opt, n_int, toolpath)
     refiner = _refiner(piece, machine, opt, plan.n_int, nlp_lim, refiners, stats)
     return ChainPipeline(refiner, _local(toolpath, piece), plan.d, plan.n_int, _breaks(toolpath, piece),
-                         opt.nlp_workers, _standing_ends(toolpath, piece))
+                         _workers(opt), _standing_ends(toolpath, piece))
+
+
+def _workers(opt: Options) -> int:
+    """The NLP workers to start: opt.nlp_workers, 1 in a daemonic process (which may not start a pool)."""
+    return 1 if multiprocessing.current_process().daemon else opt.nlp_workers
 
 
 def _standing_ends(toolpath: Toolpath, piece: Piece) -> tuple[bool, bool]:
@@ -1204,7 +1232,7 @@ def schedule_stream(
         first = rest_intervals(piece, machine, opt)
         # with NLP workers, the chains go to them while the LP still solves the later windows
         pipe = (_chain_pipeline(toolpath, piece, machine, opt, nlp_lim, refiners, nlp_stats, first)
-                if nlp_stats is not None and nlp_lim is not None and opt.nlp_workers > 1 else None)
+                if nlp_stats is not None and nlp_lim is not None and _workers(opt) > 1 else None)
         try:
             t0 = time.perf_counter()
             fallbacks = stats.get("rest_plan_fallbacks", 0)

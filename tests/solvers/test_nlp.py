@@ -198,7 +198,7 @@ def test_parallel_chains_give_the_same_schedule(monkeypatch: pytest.MonkeyPatch)
     (``nlp.ChainPipeline``): bit-identical feed, same counters, limits hold."""
     tp = ex.flower(2)
     m = router()
-    seq = schedule(tp, m, Options(method="lp+nlp", lp_window=60))
+    seq = schedule(tp, m, Options(method="lp+nlp", lp_window=60, nlp_workers=1))
     log = _pipeline_log(monkeypatch)
     par = schedule(tp, m, Options(method="lp+nlp", lp_window=60, nlp_workers=2))
     assert seq.summary["windows"] >= 3
@@ -212,6 +212,48 @@ def test_parallel_chains_give_the_same_schedule(monkeypatch: pytest.MonkeyPatch)
     for k in ("nlp_windows", "nlp_iterations", "nlp_cut_rounds", "nlp_failures"):
         assert par.summary[k] == seq.summary[k], k
     _check_drive(m, par)
+
+
+def _daemon_schedule(conn: Any) -> None:
+    """In a daemonic process: the default workers, and the flower x2's feed asked with 2 workers."""
+    sch = schedule(ex.flower(2), router(), Options(method="lp+nlp", lp_window=60, nlp_workers=2))
+    conn.send((Options().nlp_workers, [pr.p for pr in sch.profiles]))
+    conn.close()
+
+
+def test_default_nlp_workers_follow_the_cores_and_stay_one_in_a_daemonic_process(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``Options().nlp_workers``: this process's cores (CPU affinity), at most NLP_AUTO_WORKERS_MAX; a daemonic
+    process (the service's solver processes) may not start a pool, so it solves the chains itself even when
+    asked for 2, and gets the same feed bit for bit."""
+    import multiprocessing
+    import os
+
+    from solvers import pipeline
+
+    monkeypatch.undo()  # (tests/conftest.py keeps the chains in this process)
+    assert pipeline.NLP_AUTO_WORKERS_MAX == 2
+    assert Options().nlp_workers == min(len(os.sched_getaffinity(0)), 2)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(16)))
+    assert Options().nlp_workers == 2
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3})
+    assert Options().nlp_workers == 1
+    monkeypatch.undo()
+    ctx = multiprocessing.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_daemon_schedule, args=(send,), daemon=True)
+    proc.start()
+    send.close()
+    workers, ps = recv.recv()
+    proc.join(60)
+    assert proc.exitcode == 0
+    assert workers == 1
+    seq = schedule(ex.flower(2), router(), Options(method="lp+nlp", lp_window=60, nlp_workers=1))
+    assert len(ps) == len(seq.profiles)
+    for a, b in zip(seq.profiles, ps, strict=True):
+        assert a.p is not None and b is not None
+        np.testing.assert_array_equal(a.p, b)
 
 
 def test_prebuild_builds_the_window_shapes_for_the_moving_axes() -> None:
@@ -263,7 +305,7 @@ def test_pipelined_chain_reading_past_the_final_lp_is_solved_again(monkeypatch: 
     monkeypatch.setattr(nlp, "CONTEXT_SAMPLES", 3000.0)
     tp = ex.flower(2)
     m = router()
-    seq = schedule(tp, m, Options(method="lp+nlp", lp_window=60))
+    seq = schedule(tp, m, Options(method="lp+nlp", lp_window=60, nlp_workers=1))
     log = _pipeline_log(monkeypatch)
     par = schedule(tp, m, Options(method="lp+nlp", lp_window=60, nlp_workers=2))
     assert log["early"][0] >= 1
