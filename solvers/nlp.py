@@ -84,7 +84,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import maximum_filter1d
 
 from geometry.toolpath import PathSamples
-from solvers import bspline, kinematics
+from solvers import bspline, ccompile, kinematics
 from solvers.ipm import DenseIpm, IpmResult
 from solvers.lp import SIGN_EPS, V_KERNEL_A, V_KERNEL_JC, axis_moves, step_cap, tangent_jump
 from solvers.machine import Machine
@@ -467,10 +467,11 @@ def _interval_function(na: int, with_aj: bool, N: int, values_only: bool = False
     """``_checkpoint_function`` over the N + 1 checkpoints of one knot interval (each argument and the
     result with one column per checkpoint; the window's parameters once), as one SX function: mapped over
     the window's intervals it is called n times instead of n (N + 1), and reads the window's parameters
-    once per interval."""
+    once per interval.  Compiled to C (``solvers.ccompile``: the same values, ~12 x faster with 2 axes)."""
     base = _checkpoint_function(na, with_aj, values_only)
     ins = [ca.SX.sym(f"i{i}", int(base.size1_in(i)), 1 if i == 2 else N + 1) for i in range(base.n_in())]
-    return ca.Function("nlp_interval" + ("" if values_only else "_d"), ins, [base.map(N + 1)(*ins)])
+    name = f"nlp_interval{'' if values_only else '_d'}_{na}{'aj' if with_aj else ''}_{N}"
+    return ccompile.compiled(ca.Function(name, ins, [base.map(N + 1)(*ins)]))
 
 
 def _gathered(nr: int, nc: int, rows: NDArray[np.int64], cols: NDArray[np.int64], src: NDArray[np.int64],
