@@ -19,10 +19,15 @@ from typing import Any
 from service.convert import Budget, Result, check_budget, columns_of, from_schedule, meta_of, ndjson_rows, to_problem
 from service.errors import problem_from_exception
 from service.schemas import ScheduleRequest
-from solvers.pipeline import SampleBlock, schedule, schedule_stream
+from solvers import nlp
+from solvers.pipeline import Options, SampleBlock, schedule, schedule_stream
 
 #: Seconds between checks that the parent process is still alive.
 PARENT_POLL_S = 0.25
+
+# the NLP's compiled derivative functions for the default options, once here: the forkserver imports this
+# module, so every solver process starts with them loaded
+nlp.warm_interval_functions(Options().nlp_checkpoints_per_interval)
 
 
 class Cancelled(Exception):

@@ -462,8 +462,13 @@ def _checkpoint_function(na: int, with_aj: bool, values_only: bool = False) -> A
                                    ca.vec(ca.densify(h)))])
 
 
-@functools.cache
 def _interval_function(na: int, with_aj: bool, N: int, values_only: bool = False) -> Any:
+    """``_interval_functions`` (cached by its arguments given in full, however they are given here)."""
+    return _interval_functions(int(na), bool(with_aj), int(N), bool(values_only))
+
+
+@functools.cache
+def _interval_functions(na: int, with_aj: bool, N: int, values_only: bool) -> Any:
     """``_checkpoint_function`` over the N + 1 checkpoints of one knot interval (each argument and the
     result with one column per checkpoint; the window's parameters once), as one SX function: mapped over
     the window's intervals it is called n times instead of n (N + 1), and reads the window's parameters
@@ -472,6 +477,16 @@ def _interval_function(na: int, with_aj: bool, N: int, values_only: bool = False
     ins = [ca.SX.sym(f"i{i}", int(base.size1_in(i)), 1 if i == 2 else N + 1) for i in range(base.n_in())]
     name = f"nlp_interval{'' if values_only else '_d'}_{na}{'aj' if with_aj else ''}_{N}"
     return ccompile.compiled(ca.Function(name, ins, [base.map(N + 1)(*ins)]))
+
+
+def warm_interval_functions(N: int = 4, axes: Sequence[int] = (1, 2, 3)) -> None:
+    """Build (and compile: ``solvers.ccompile``) the interval functions of windows moving ``axes`` axes at N
+    checkpoints an interval, without the kinematic rows (the defaults), so that processes forked afterwards
+    start with them: the service's forkserver, whose every job would otherwise generate their C again
+    (~50 ms for 2 axes)."""
+    for na in axes:
+        for values_only in (False, True):
+            _interval_function(na, False, N, values_only)
 
 
 def _gathered(nr: int, nc: int, rows: NDArray[np.int64], cols: NDArray[np.int64], src: NDArray[np.int64],

@@ -58,13 +58,13 @@ def test_schedule_is_the_same_compiled_or_not(monkeypatch: pytest.MonkeyPatch) -
     compiled = schedule(tp, m, Options(method="lp+nlp", lp_window=60))
     shapes = dict(nlp._SHAPE_CACHE.shapes)
     monkeypatch.setenv(ccompile.DISABLE_ENV, "1")
-    nlp._interval_function.cache_clear()
+    nlp._interval_functions.cache_clear()
     monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", type(nlp._SHAPE_CACHE.shapes)())
     try:
         plain = schedule(tp, m, Options(method="lp+nlp", lp_window=60))
         assert not nlp._interval_function(2, False, 4).is_a("External")
     finally:
-        nlp._interval_function.cache_clear()
+        nlp._interval_functions.cache_clear()
     assert shapes and compiled.summary["nlp_windows"] > 0
     np.testing.assert_array_equal(compiled.samples.position, plain.samples.position)
     assert compiled.summary["nlp_iterations"] == plain.summary["nlp_iterations"]
@@ -107,3 +107,24 @@ def test_without_a_compiler_or_when_disabled_the_function_is_used_as_given(
     monkeypatch.setattr(ccompile, "_compiler", lambda: str(bad))
     assert ccompile.compiled(fun) is fun
     assert not [p for p in (tmp_path / "c").glob("*") if p.suffix in (".so", ".part")]
+
+
+def test_the_service_worker_module_loads_the_default_interval_functions() -> None:
+    """``service.worker`` (which the service's forkserver imports) builds the default options' interval
+    functions at import, so a solver process forked from it does not build them again (a fresh process)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import service.worker\n"
+        "from solvers import nlp\n"
+        "m = nlp._interval_functions.cache_info().misses\n"
+        "assert m >= 6, m\n"
+        "for na in (1, 2, 3):\n"
+        "    nlp._interval_function(na, False, 4)\n"
+        "    nlp._interval_function(na, False, 4, values_only=True)\n"
+        "assert nlp._interval_functions.cache_info().misses == m\n"
+    )
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
