@@ -133,10 +133,10 @@ NLP_WINDOW_PER_OVERLAP = 3
 #: whole piece: a chain shorter than 6 overlaps would be one window of its own length and shape (bench seeds
 #: 0-59 with every window 6 x: +26 % lp+nlp CPU).
 NLP_LONG_WINDOW_PER_OVERLAP = 6
-#: Most NLP workers ``Options(nlp_workers=None)`` starts: 2, the configuration measured (2 cores here).  With
-#: 2 the 18.35 m flower chain computes in 3.7-4.2 % of its motion time against 6.1-7.3 % with 1 (README,
-#: issue 3), and the parent's LP is then the critical path: more workers could gain only on the NLP work
-#: left after the LP (~1.5 s of ~5.5 s).
+#: Most NLP workers ``Options()`` starts by default (``auto_nlp_workers``): 2, the configuration measured
+#: (2 cores here).  With 2 the 18.35 m flower chain computed in 3.7-4.2 % of its motion time against 6.1-7.3 %
+#: with 1 (session 22, README issue 3), and the parent's LP is then the critical path: more workers could
+#: gain only on the NLP work left after the LP (~1.5 s of ~5.5 s).
 NLP_AUTO_WORKERS_MAX = 2
 #: ... and only on a piece of at least this many long windows, over which their shapes' builds (0.5-0.9 s
 #: each at 78-145 intervals) pay off: bench seeds 30 and 47 (one chain of ~150 intervals each) took
@@ -243,7 +243,7 @@ class Options:
     nlp_window: int | None = None
     nlp_overlap: int | None = None
     nlp_checkpoints_per_interval: int = 4
-    nlp_workers: int = field(default_factory=lambda: auto_nlp_workers())
+    nlp_workers: int = field(default_factory=auto_nlp_workers)
     nlp_axis_velocity: bool = False
     nlp_kinematic: bool = False
     max_samples: int | None = None
