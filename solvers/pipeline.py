@@ -189,7 +189,7 @@ def auto_nlp_workers() -> int:
     """NLP workers by default: the cores this process may run on (its CPU affinity), at most
     NLP_AUTO_WORKERS_MAX; 1 in a daemonic process, which may not start a pool (the service's solver
     processes, and the benches' case workers, each of which is one job on one core already)."""
-    if multiprocessing.current_process().daemon:
+    if not _may_fork_pool():
         return 1
     try:
         cores = len(os.sched_getaffinity(0))
@@ -899,9 +899,14 @@ def _chain_pipeline(
                          _workers(opt), _standing_ends(toolpath, piece))
 
 
+def _may_fork_pool() -> bool:
+    """Whether this process may start a pool: not a daemonic one (multiprocessing forbids it children)."""
+    return not multiprocessing.current_process().daemon
+
+
 def _workers(opt: Options) -> int:
     """The NLP workers to start: opt.nlp_workers, 1 in a daemonic process (which may not start a pool)."""
-    return 1 if multiprocessing.current_process().daemon else opt.nlp_workers
+    return opt.nlp_workers if _may_fork_pool() else 1
 
 
 def _standing_ends(toolpath: Toolpath, piece: Piece) -> tuple[bool, bool]:
