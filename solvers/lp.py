@@ -21,6 +21,8 @@ velocity bound (mm^2/s^2), so all rows are O(1).
         the window may be given a smaller per-axis a_rest there (``WindowSpec.a_rest_start/end``)
       artificial window end: c_{k1} = c_{k1+1} = 0 (q = q' = 0, discarded)
       inherited window start: c_{k0}, c_{k0+1} fixed (q, q' continuous)
+      seam window end (``WindowSpec.end_fixed``): c_{k1}, c_{k1+1} fixed to the
+        solution that goes on from there (q, q' continuous)
 
 Since q <= q*, the true jerk |sqrt(q)(...)| <= the pseudo-jerk, so jmax holds
 at checkpoints.  Between checkpoints the limits are verified on a 4x finer
@@ -167,6 +169,11 @@ class WindowSpec:
             made feasible against it), so stage 2 stays feasible.
         a_rest_start, a_rest_end: per-axis rest acceleration (3,) at a rest start / end
             instead of ``LimitSet.a_rest`` (a corner shares the step with the next piece), or None.
+        end_fixed: (c_k1, c_k1+1) of the solution that goes on after k1 (a seam window joining two
+            chains of windows, ``pipeline._solve_windows``), or None (end_rest / an artificial end).
+        next_c, next_qstar: (k0_next, control points) of that solution and its stage-1 q*: on the
+            last ``inherited`` knot intervals the rows are widened to admit it and the jerk rows use
+            its q*, as prev_c and prev_qstar do at the start.
     """
 
     index: int
@@ -183,6 +190,9 @@ class WindowSpec:
     #: keep the control point next to a rest end above a floor too (q' > 0 there); the pipeline
     #: asks for it only once refining the knots has not made the feed leave rest
     rest_floor: bool = False
+    end_fixed: tuple[float, float] | None = None
+    next_c: tuple[int, FloatArray] | None = None
+    next_qstar: tuple[int, FloatArray] | None = None
 
     @property
     def ncols(self) -> int:
@@ -271,6 +281,17 @@ def v_step_limit(
         drive = np.minimum(by_e, by_u)
         dv = np.minimum(dv, drive) if kinematic else drive
     return np.asarray(share * dv, dtype=np.float64)
+
+
+def _admit(
+    A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, near: NDArray[np.bool_], x: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Rows lo <= A y <= hi widened at the ``near`` rows to admit the point x."""
+    val = A[near] @ x
+    lo, hi = lo.copy(), hi.copy()
+    lo[near] = np.minimum(lo[near], val)
+    hi[near] = np.maximum(hi[near], val)
+    return lo, hi
 
 
 class _Rows:
@@ -435,7 +456,8 @@ class WindowLP:
         return bspline.combination(k, list(zip(coef, W, strict=False)), self.spec.k0, self.spec.ncols)
 
     def _add(self, rows: _Rows, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, s: FloatArray) -> None:
-        """Add rows at points s; on inherited intervals widen them to admit the previous solution."""
+        """Add rows at points s; on inherited intervals widen them to admit the previous solution (and on
+        the last ones before a seam window's fixed end, the next one)."""
         spec = self.spec
         if spec.prev_c is not None:
             near = s < self._inherited_end(spec.prev_c) * spec.d
@@ -444,11 +466,15 @@ class WindowLP:
                 x = np.zeros(spec.ncols)
                 m = min(spec.ncols, c_prev.size - (spec.k0 - k_prev))
                 x[:m] = c_prev[spec.k0 - k_prev : spec.k0 - k_prev + m] / self.Q
-                val = A[near] @ x
-                lo = lo.copy()
-                hi = hi.copy()
-                lo[near] = np.minimum(lo[near], val)
-                hi[near] = np.maximum(hi[near], val)
+                lo, hi = _admit(A, lo, hi, near, x)
+        if spec.next_c is not None:
+            near = s > self._next_start(spec.next_c) * spec.d
+            if near.any():
+                k_next, c_next = spec.next_c
+                x = np.zeros(spec.ncols)
+                a = max(0, k_next - spec.k0)  # (the next solution's columns from the window's, or later)
+                x[a:] = c_next[spec.k0 + a - k_next : spec.k0 + spec.ncols - k_next] / self.Q
+                lo, hi = _admit(A, lo, hi, near, x)
         rows.add(A, lo, hi)
 
     def _stage1_rows(self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray | None) -> None:
@@ -588,6 +614,11 @@ class WindowLP:
         spec = self.spec
         return bspline.evaluate(c, s, spec.d, k_lo=spec.k0, k_hi=spec.k1 - 1, col0=spec.k0)
 
+    def _next_start(self, nxt: tuple[int, FloatArray]) -> int:
+        """The knot from which a seam window's next solution ``nxt`` = (k0_next, control points) is
+        inherited: ``self.inherited`` intervals before k1, within that solution."""
+        return max(self.spec.k1 - self.inherited, nxt[0])
+
     def _inherited_end(self, prev: tuple[int, FloatArray]) -> int:
         """The knot up to which the previous window's ``prev`` = (k0_prev, control points) is inherited:
         ``self.inherited`` intervals after k0, within the previous window."""
@@ -604,6 +635,13 @@ class WindowLP:
             if near.any():
                 q[near] = bspline.evaluate(
                     c_prev, s[near], spec.d, k_lo=spec.k0, k_hi=spec.k1 - 1, col0=k_prev
+                )[0]
+        if spec.next_qstar is not None:
+            k_next, c_next = spec.next_qstar
+            near = s > self._next_start(spec.next_qstar) * spec.d
+            if near.any():
+                q[near] = bspline.evaluate(
+                    c_next, s[near], spec.d, k_lo=spec.k0, k_hi=spec.k1 - 1, col0=k_next
                 )[0]
         return q
 
@@ -644,6 +682,8 @@ class WindowLP:
             floor_cols[:2] = False
         if spec.end_rest:
             col_lo[-1] = -np.inf
+        elif spec.end_fixed is not None:
+            col_lo[-2:] = col_hi[-2:] = np.asarray(spec.end_fixed) / Q
         else:
             col_lo[-2:] = col_hi[-2:] = 0.0
         floor_cols[-2:] = False

@@ -32,6 +32,7 @@ window seam) - a change of the repair semantics, not only of the plumbing.
 from __future__ import annotations
 
 import math
+import mmap
 import multiprocessing
 import os
 import time
@@ -222,6 +223,9 @@ class Options:
             ``auto_nlp_workers()``: the cores this process may run on, at most NLP_AUTO_WORKERS_MAX, and 1
             in a daemonic process (the service's solver processes, which run one job per core already).
             A daemonic process solves the chains itself whatever is given (it may not start a pool).
+            With more than 1 the second core also takes, in one forked process each, the second chain of
+            a long piece's LP windows under method lp (``_chain_split``) and the second half of a
+            piece's time samples (``_sample_piece``): again the same output bit for bit.
         nlp_checkpoints_per_interval: N of the NLP (each interval is also checked at both knots,
             and the limits are verified between checkpoints).
         nlp_axis_velocity: also hold |v| <= the LP's vmax per axis in the NLP (off: the NLP limits
@@ -609,6 +613,163 @@ def _refined(
     return prof, joins
 
 
+#: A piece whose LP plan (method lp) has at least this many windows is solved as two chains of windows
+#: joined by a seam window (``_solve_windows``): the second chain in a forked process when
+#: ``Options.nlp_workers`` > 1, else after the first in this one (the same feed either way).
+LP_CHAIN_MIN_WINDOWS = 4
+
+
+@dataclass(frozen=True)
+class _WindowWalk:
+    """What every LP window of one knot plan of a piece shares (``_solve_windows``)."""
+
+    geometry: Any
+    breaks: FloatArray
+    plan: WindowPlan
+    opt: Options
+    lim: LimitSet
+    verify: FloatArray | None
+    cache: dict[tuple[int, int, int, bool], tuple[Any, FloatArray, WindowResult]] | None
+    rest_floor: bool
+    a_rest_start: FloatArray | None
+    a_rest_end: FloatArray | None
+
+    def window(
+        self, stats: dict[str, Any], k0: int, k1: int, start: tuple[float, float] | None,
+        prev_qstar: tuple[int, FloatArray] | None, prev_c: tuple[int, FloatArray] | None,
+        end_fixed: tuple[int, FloatArray, FloatArray] | None = None,
+    ) -> tuple[WindowSpec, WindowResult]:
+        """One window over knot intervals [k0, k1) (from the cache if its inputs are bit-equal to a cached
+        one's).  ``end_fixed``: (k0_next, c_next, c*_next), the control points and stage-1 q* (both from
+        knot k0_next on) of the solution a seam window joins at k1."""
+        plan, N = self.plan, self.opt.checkpoints_per_interval
+        spec = WindowSpec(stats["windows"], k0, k1, plan.d, plan.n_int, start, k1 == plan.n_int, prev_qstar, prev_c,
+                          self.a_rest_start if k0 == 0 else None, self.a_rest_end, self.rest_floor)
+        if end_fixed is not None:
+            kn, cn, qn = end_fixed
+            spec = replace(spec, end_fixed=(float(cn[k1 - kn]), float(cn[k1 - kn + 1])), next_c=(kn, cn),
+                           next_qstar=(kn, qn))
+        s_check = np.linspace(k0 * plan.d, k1 * plan.d, (k1 - k0) * N + 1)
+        verify = self.verify
+        v_in = np.zeros(0) if verify is None else verify[(verify > k0 * plan.d) & (verify < k1 * plan.d)]
+        # everything the window inherits: its start state and the previous window's c and q* over
+        # the inherited intervals, and a seam window's next c and q* (bit-equal inputs give the same LP,
+        # so its result is reused)
+        st0 = np.array(start if start is not None else (np.nan, np.nan))
+        st = [st0, _inherited(prev_c, k0), _inherited(prev_qstar, k0)]
+        if end_fixed is not None:
+            st += [end_fixed[1][k0 - end_fixed[0]: k1 + 2 - end_fixed[0]],
+                   end_fixed[2][k0 - end_fixed[0]: k1 + 2 - end_fixed[0]]]
+        key = (plan.n_int, k0, k1, self.rest_floor)
+        stv = np.concatenate(st)
+        cache = self.cache
+        hit = cache.get(key) if cache is not None else None
+        if hit is not None and np.array_equal(hit[0], stv, equal_nan=True) and np.array_equal(hit[1], v_in):
+            return spec, hit[2]
+        t0 = time.perf_counter()
+        # only the window's own breaks (WindowLP looks at no others): masking all of a long piece's
+        # breaks in every window grew with the square of the path length
+        b0, b1 = np.searchsorted(self.breaks, (k0 * plan.d, k1 * plan.d))
+        res = WindowLP(spec, self.lim, self.geometry, self.opt.solver, self.breaks[b0:b1], v_in).solve(s_check)
+        stats["window_times"].append(time.perf_counter() - t0)
+        stats["windows"] += 1
+        stats["iterations"] += res.iterations
+        stats["cut_rounds"] += res.cut_rounds
+        stats["cut_points"] += res.added_points
+        stats["unverified"] += res.unverified
+        if cache is not None:
+            cache[key] = (stv, v_in, res)
+        return spec, res
+
+    def walk(
+        self, c: FloatArray, stats: dict[str, Any], k0: int, start: tuple[float, float] | None,
+        prev_qstar: tuple[int, FloatArray] | None, prev_c: tuple[int, FloatArray] | None,
+        on_window: Callable[[float], None] | None, floored: list[int] | None,
+        on_lp: Callable[[FloatArray, list[int]], None] | None = None, stop: int | None = None,
+        solved: list[WindowResult] | None = None,
+    ) -> tuple[list[int], _WalkState | None]:
+        """Windows from knot k0 on, each starting where the previous one's overlap begins, into c (the piece's
+        control points): to the piece end, or (``stop``) until they are final up to knot ``stop``.
+        Returns the knots where consecutive windows meet and, with ``stop``, the state a window starting
+        there inherits (None if the piece end came first).  ``solved``, if given, gets each window's result."""
+        plan = self.plan
+        joins: list[int] = []
+        while True:
+            k1 = min(k0 + plan.window, plan.n_int)
+            # avoid a last window shorter than the overlap: stretch this one instead
+            if 0 < plan.n_int - k1 < plan.overlap + 3:
+                k1 = plan.n_int
+            spec, res = self.window(stats, k0, k1, start, prev_qstar, prev_c)
+            if solved is not None:
+                solved.append(res)
+            if floored is not None and res.floored:
+                floored.append(spec.index)
+            if spec.end_rest:
+                c[k0 : k1 + 2] = res.c
+                return joins, None
+            k_next = k1 - plan.overlap
+            if self.opt.method == "lp+nlp":
+                k_next = _join_knot(self.geometry, res.c, k0, k_next, plan, self.lim)
+            joins.append(k_next)
+            if on_window is not None:
+                on_window(k_next * plan.d)
+            c[k0 : k_next + 2] = res.c[: k_next - k0 + 2]
+            if k0 == 0 and start is None:
+                c[0] = -c[1]  # (rest at the piece start, as below: set now for on_lp's first chain)
+            if on_lp is not None:
+                on_lp(c, joins)
+            start = (float(res.c[k_next - k0]), float(res.c[k_next - k0 + 1]))
+            prev_qstar = (k0, res.c_star)
+            prev_c = (k0, res.c)
+            k0 = k_next
+            if stop is not None and k0 >= stop:
+                return joins, _WalkState(k0, start, prev_qstar, prev_c)
+
+
+@dataclass(frozen=True)
+class _WalkState:
+    """Where a walk of LP windows stopped (``_WindowWalk.walk``): the next window's start knot and inheritance."""
+
+    k0: int
+    start: tuple[float, float]
+    prev_qstar: tuple[int, FloatArray]
+    prev_c: tuple[int, FloatArray]
+
+
+def _plan_starts(plan: WindowPlan) -> list[int]:
+    """The knots where a method-lp walk over the whole piece starts its windows (``_WindowWalk.walk``)."""
+    k0, out = 0, []
+    while True:
+        out.append(k0)
+        k1 = min(k0 + plan.window, plan.n_int)
+        if 0 < plan.n_int - k1 < plan.overlap + 3 or k1 == plan.n_int:
+            return out
+        k0 = k1 - plan.overlap
+
+
+def _chain_split(plan: WindowPlan, opt: Options) -> tuple[int, int, int] | None:
+    """Two chains of LP windows for a piece of method lp with at least LP_CHAIN_MIN_WINDOWS windows:
+    (k_split, k_b, k_seam) -- the first chain's windows are final up to knot k_split, the second chain
+    starts at rest at k_b = k_split - overlap, and the seam window spans [k_split, k_seam]; None: one chain.
+
+    The second chain's start at rest reaches the feed it would have had within the overlap (twice the
+    stopping distance, the same argument as for a window's artificial end), so from k_split on it is the
+    feed the first chain would have walked into, up to the LP's choices among equal optima; the seam
+    window joins the two states (c_k, c_k+1 fixed at both ends).  Balanced for two processes: the first
+    chain has ceil((n + 1) / 2) of the n windows (it also solves the short seam)."""
+    if opt.method != "lp":
+        return None
+    starts = _plan_starts(plan)
+    if len(starts) < LP_CHAIN_MIN_WINDOWS:
+        return None
+    k_split = starts[(len(starts) + 1) // 2]
+    ov = plan.overlap
+    seam = min(ov, plan.window - 2 * ov - 2)  # (inside the second chain's first final stretch)
+    if seam < 4:
+        return None
+    return k_split, k_split - ov, k_split + seam
+
+
 def _solve_windows(
     toolpath: Toolpath, piece: Piece, plan: WindowPlan, opt: Options, lim: LimitSet, stats: dict[str, Any],
     on_window: Callable[[float], None] | None, verify: FloatArray | None,
@@ -623,77 +784,114 @@ def _solve_windows(
     ``cache`` (kept across calls for one piece) maps (n_int, k0, k1, rest_floor) to what the window inherits,
     the extra verification points inside it and its result: a window whose inputs are bit-equal
     to a cached one is not solved again (a repair round re-solves the windows with new
-    verification points and those whose inherited state they changed)."""
-    geometry = _local(toolpath, piece)
-    breaks = _breaks(toolpath, piece)
-    joins: list[int] = []
-    c = np.zeros(plan.n_int + 2)
-    k0 = 0
-    start: tuple[float, float] | None = None
-    prev_qstar: tuple[int, FloatArray] | None = None
-    prev_c: tuple[int, FloatArray] | None = None
-    N = opt.checkpoints_per_interval
+    verification points and those whose inherited state they changed).
+
+    A long piece of method lp is walked as two chains (``_chain_split``), the second one in a forked
+    process with ``Options.nlp_workers`` > 1 (the same feed as in this process).  If the second chain or
+    the seam window fails, the first chain walks on over the second one's knots instead (counted in
+    ``stats["lp_seam_fallbacks"]``)."""
     # the step at a corner is shared by the pieces on both sides, under either method (until session 6
     # only under lp+nlp: bench seed 1723, lp, a 5.8 degree corner with x moving on through it, stepped by
     # 2 a_rest = jmax Ts and the third difference across it read 1.018 x jmax; sharing costs test-profile
     # lp cases with corners 1.4 % of motion time, geometric mean over 47)
-    a_rest_start = _corner_rest(toolpath, piece, lim, at_end=False)
-    a_rest_end = _corner_rest(toolpath, piece, lim, at_end=True)
-    while True:
-        k1 = min(k0 + plan.window, plan.n_int)
-        # avoid a last window shorter than the overlap: stretch this one instead
-        if 0 < plan.n_int - k1 < plan.overlap + 3:
-            k1 = plan.n_int
-        spec = WindowSpec(stats["windows"], k0, k1, plan.d, plan.n_int, start, k1 == plan.n_int, prev_qstar, prev_c,
-                          a_rest_start, a_rest_end, rest_floor)
-        s_check = np.linspace(k0 * plan.d, k1 * plan.d, (k1 - k0) * N + 1)
-        v_in = np.zeros(0) if verify is None else verify[(verify > k0 * plan.d) & (verify < k1 * plan.d)]
-        # everything the window inherits: its start state and the previous window's c and q* over
-        # the inherited intervals (bit-equal inputs give the same LP, so its result is reused)
-        st0 = np.array(start if start is not None else (np.nan, np.nan))
-        st = np.concatenate([st0, _inherited(prev_c, k0), _inherited(prev_qstar, k0)])
-        key = (plan.n_int, k0, k1, rest_floor)
-        hit = cache.get(key) if cache is not None else None
-        if hit is not None and np.array_equal(hit[0], st, equal_nan=True) and np.array_equal(hit[1], v_in):
-            res = hit[2]
-        else:
-            t0 = time.perf_counter()
-            # only the window's own breaks (WindowLP looks at no others): masking all of a long piece's
-            # breaks in every window grew with the square of the path length
-            b0, b1 = np.searchsorted(breaks, (k0 * plan.d, k1 * plan.d))
-            res = WindowLP(spec, lim, geometry, opt.solver, breaks[b0:b1], v_in).solve(s_check)
-            stats["window_times"].append(time.perf_counter() - t0)
-            stats["windows"] += 1
-            stats["iterations"] += res.iterations
-            stats["cut_rounds"] += res.cut_rounds
-            stats["cut_points"] += res.added_points
-            stats["unverified"] += res.unverified
-            if cache is not None:
-                cache[key] = (st, v_in, res)
-        if floored is not None and res.floored:
-            floored.append(spec.index)
-        if spec.end_rest:
-            c[k0 : k1 + 2] = res.c
-            break
-        k_next = k1 - plan.overlap
-        if opt.method == "lp+nlp":
-            k_next = _join_knot(geometry, res.c, k0, k_next, plan, lim)
-        joins.append(k_next)
-        if on_window is not None:
-            on_window(k_next * plan.d)
-        c[k0 : k_next + 2] = res.c[: k_next - k0 + 2]
-        if k0 == 0:
-            c[0] = -c[1]  # (rest at the piece start, as below: set now for on_lp's first chain)
-        if on_lp is not None:
-            on_lp(c, joins)
-        start = (float(res.c[k_next - k0]), float(res.c[k_next - k0 + 1]))
-        prev_qstar = (k0, res.c_star)
-        prev_c = (k0, res.c)
-        k0 = k_next
+    ww = _WindowWalk(_local(toolpath, piece), _breaks(toolpath, piece), plan, opt, lim, verify, cache, rest_floor,
+                     _corner_rest(toolpath, piece, lim, at_end=False), _corner_rest(toolpath, piece, lim, at_end=True))
+    c = np.zeros(plan.n_int + 2)
+    split = _chain_split(plan, opt) if on_lp is None else None
+    if split is None:
+        joins = ww.walk(c, stats, 0, None, None, None, on_window, floored, on_lp)[0]
+    else:
+        joins = _walk_chains(ww, c, split, stats, on_window, floored)
     # rest at both piece ends holds exactly (the LP meets it to solver tolerance)
     c[0] = -c[1]
     c[-1] = -c[-2]
     return PieceProfile(s_start=piece.s_start, length=piece.length, d=plan.d, c=c), joins
+
+
+def _second_chain(ww: _WindowWalk, k_b: int, stats: dict[str, Any], floored: bool) -> dict[str, Any]:
+    """The second chain of ``_walk_chains`` from rest at knot k_b to the piece end: its control points
+    and its first window's stage-1 q* (both from k_b on), joins, the stats it added, the windows it solved
+    (cache entries) and whether any held control points at a floor."""
+    c = np.zeros(ww.plan.n_int + 2)
+    cache0 = dict(ww.cache) if ww.cache is not None else None
+    st = {k: (list(v) if isinstance(v, list) else v) for k, v in stats.items()}
+    fl: list[int] = []
+    solved: list[WindowResult] = []
+    joins = ww.walk(c, st, k_b, None, None, None, None, fl if floored else None, solved=solved)[0]
+    new = {k: v for k, v in (ww.cache or {}).items() if cache0 is None or cache0.get(k) is not v}
+    return {"c": c[k_b:], "c_star": solved[0].c_star, "joins": joins, "floored": fl, "cache": new,
+            "stats": {k: (v[len(stats.get(k, [])):] if isinstance(v, list) else v - stats.get(k, 0))
+                      for k, v in st.items() if isinstance(v, (int, float, list))}}
+
+
+def _walk_chains(
+    ww: _WindowWalk, c: FloatArray, split: tuple[int, int, int], stats: dict[str, Any],
+    on_window: Callable[[float], None] | None, floored: list[int] | None,
+) -> list[int]:
+    """``_solve_windows`` on two chains (``_chain_split``): the first from the piece start to k_split, the
+    second from rest at k_b to the end (forked with ``Options.nlp_workers`` > 1), then the seam window
+    [k_split, k_seam] from the first chain's state to the second chain's control points."""
+    k_split, k_b, k_seam = split
+    stats["lp_chains"] = stats.get("lp_chains", 0) + 1
+    pipe = proc = None
+    if _workers(ww.opt) > 1:
+        ctx = multiprocessing.get_context("fork")
+        pipe, child_end = ctx.Pipe(duplex=False)
+
+        def run() -> None:
+            try:
+                out: Any = ("ok", _second_chain(ww, k_b, stats, floored is not None))
+            except Exception as exc:  # (reported to the parent, which then walks on itself)
+                out = ("error", repr(exc))
+            child_end.send(out)
+            child_end.close()
+
+        proc = ctx.Process(target=run, daemon=True)
+        proc.start()
+        child_end.close()
+    second: dict[str, Any] | None = None
+    try:
+        joins, state = ww.walk(c, stats, 0, None, None, None, on_window, floored, stop=k_split)
+        if pipe is not None:
+            try:
+                tag, payload = pipe.recv()
+            except EOFError:  # (the process died)
+                tag, payload = "error", "the second chain's process ended without a result"
+            second = payload if tag == "ok" else None
+        else:
+            try:
+                second = _second_chain(ww, k_b, stats, floored is not None)
+            except (InfeasibleError, SolverFailure):
+                second = None
+    finally:
+        if proc is not None and pipe is not None:
+            if proc.is_alive() and second is None:
+                proc.terminate()
+            proc.join()
+            pipe.close()
+    if state is None:  # pragma: no cover - k_split is a window start inside the piece (_chain_split)
+        raise SolverFailure("LP chain split past the piece end", window=stats["windows"])
+    if second is not None:
+        for k, v in second["stats"].items():
+            stats[k] = stats.get(k, [] if isinstance(v, list) else 0) + v
+        if ww.cache is not None:
+            ww.cache.update(second["cache"])
+        try:
+            spec, res = ww.window(stats, k_split, k_seam, state.start, state.prev_qstar, state.prev_c,
+                                  end_fixed=(k_b, second["c"], second["c_star"]))
+        except (InfeasibleError, SolverFailure):
+            second = None
+    if second is None:  # the first chain walks on
+        stats["lp_seam_fallbacks"] = stats.get("lp_seam_fallbacks", 0) + 1
+        more, _ = ww.walk(c, stats, state.k0, state.start, state.prev_qstar, state.prev_c, on_window, floored)
+        return joins + more
+    if floored is not None:
+        floored += second["floored"] + ([spec.index] if res.floored else [])
+    c[k_split:k_seam] = res.c[: k_seam - k_split]
+    c[k_seam:] = second["c"][k_seam - k_b :]
+    if on_window is not None:
+        on_window(float(ww.plan.n_int * ww.plan.d))
+    return joins + [k_split, k_seam] + [k for k in second["joins"] if k > k_seam]
 
 
 def _corner_rest(toolpath: Toolpath, piece: Piece, lim: LimitSet, at_end: bool) -> FloatArray | None:
@@ -925,21 +1123,65 @@ def first_sample_at(t: float, Ts: float) -> int:
     return k
 
 
+#: Samples from which ``_sample_piece`` gives the second half of a piece's samples to a forked process
+#: (``Options.nlp_workers`` > 1): the values are elementwise in t (the same bit for bit however they are
+#: split), and below this the fork (~5-15 ms) costs about what it saves.
+SAMPLE_SPLIT_MIN = 20_000
+
+
 def _sample_piece(
     toolpath: Toolpath, piece: Piece, prof: PieceProfile, tm: PieceTiming, t0: float, k_lo: int, k_hi: int,
-    Ts: float,
+    Ts: float, workers: int = 1,
 ) -> TimeSamples:
     """Time reconstruction (spec §7) of one piece at t_k = k Ts, k_lo <= k < k_hi, the piece starting at t0 (s).
 
     The global grid continues across pieces: t_k is k Ts, never re-based per piece.  Without u and e
-    (elementwise in v, a, j: added where the samples are released)."""
+    (elementwise in v, a, j: added where the samples are released).  With ``workers`` > 1 and at least
+    SAMPLE_SPLIT_MIN samples, a forked process computes the second half (if it fails, this one does)."""
     t = np.arange(k_lo, k_hi, dtype=np.float64) * Ts
     K = t.size
-    # filled chunk by chunk (no list of chunks joined at the end: that held the piece's columns twice)
-    s_out, feed = np.empty(K), np.empty(K)
-    pos, vel, acc, jerk = (np.empty((K, 3)) for _ in range(4))
-    for a in range(0, K, SAMPLE_CHUNK):
-        b = min(K, a + SAMPLE_CHUNK)
+    widths = (1, 1, 3, 3, 3, 3)  # s, feed, position, velocity, acceleration, jerk
+    split = workers > 1 and K >= SAMPLE_SPLIT_MIN and _may_fork_pool()
+    if split:  # in one shared anonymous mapping, which the forked process fills too (nothing copied back)
+        buf = mmap.mmap(-1, 8 * K * sum(widths))
+        offs = np.cumsum([0, *widths]) * 8 * K
+        cols = tuple(np.frombuffer(buf, dtype=np.float64, count=K * w, offset=int(o)).reshape((K, w) if w > 1 else K)
+                     for w, o in zip(widths, offs, strict=False))
+    else:
+        # filled chunk by chunk (no list of chunks joined at the end: that held the piece's columns twice)
+        cols = tuple(np.empty((K, w) if w > 1 else K) for w in widths)
+    mid = K // 2 if split else K
+    proc = None
+    if split:
+        proc = multiprocessing.get_context("fork").Process(
+            target=_fill_samples, args=(toolpath, piece, prof, tm, t0, t[mid:], tuple(c[mid:] for c in cols)),
+            daemon=True,
+        )
+        proc.start()
+    try:
+        _fill_samples(toolpath, piece, prof, tm, t0, t[:mid], tuple(c[:mid] for c in cols))
+    except BaseException:
+        if proc is not None:
+            proc.terminate()
+            proc.join()
+        raise
+    if proc is not None:
+        proc.join()
+        if proc.exitcode != 0:  # (the process failed: this one samples its half)
+            _fill_samples(toolpath, piece, prof, tm, t0, t[mid:], tuple(c[mid:] for c in cols))
+    s_out, feed, pos, vel, acc, jerk = cols
+    return TimeSamples(t=t, s=s_out, feed=feed, position=pos, velocity=vel, acceleration=acc, jerk=jerk)
+
+
+def _fill_samples(
+    toolpath: Toolpath, piece: Piece, prof: PieceProfile, tm: PieceTiming, t0: float, t: FloatArray,
+    cols: tuple[FloatArray, ...],
+) -> None:
+    """``_sample_piece``'s columns (s, feed, position, velocity, acceleration, jerk) at global times t, into
+    cols, SAMPLE_CHUNK samples at a time."""
+    s_out, feed, pos, vel, acc, jerk = cols
+    for a in range(0, t.size, SAMPLE_CHUNK):
+        b = min(t.size, a + SAMPLE_CHUNK)
         s_local = np.clip(tm.s_at(t[a:b] - t0), 0.0, piece.length)
         g, f, v, ac, jk = _kinematics(toolpath, piece, prof, s_local)
         s_out[a:b] = s_local + piece.s_start
@@ -948,7 +1190,6 @@ def _sample_piece(
         vel[a:b] = v
         acc[a:b] = ac
         jerk[a:b] = jk
-    return TimeSamples(t=t, s=s_out, feed=feed, position=pos, velocity=vel, acceleration=acc, jerk=jerk)
 
 
 def _promised(lim: LimitSet, opt: Options, machine: Machine) -> verify.Limits:
@@ -1098,7 +1339,7 @@ class _Carry:
 
 def _piece_blocks(
     toolpath: Toolpath, piece: Piece, prof: PieceProfile, timing: PieceTiming, t0: float, k_lo: int, k_hi: int,
-    block: int, carry: _Carry, last: bool, limits: verify.Limits, lim: LimitSet, Ts: float,
+    block: int, carry: _Carry, last: bool, limits: verify.Limits, lim: LimitSet, Ts: float, workers: int = 1,
 ) -> Iterator[tuple[TimeSamples, _Recheck, _Carry, bool]]:
     """The piece's own samples k_lo <= k < k_hi in blocks of ``block`` (a multiple of SAMPLE_CHUNK, so the
     chunks of ``_sample_piece`` and hence every value are those of the piece sampled at once), each
@@ -1113,7 +1354,7 @@ def _piece_blocks(
     for a in starts:
         b = min(k_hi, a + block)
         final = b >= k_hi
-        own = _sample_piece(toolpath, piece, prof, timing, t0, a, b, Ts)
+        own = _sample_piece(toolpath, piece, prof, timing, t0, a, b, Ts, workers)
         seq = own if carry.held is None else concat_samples([carry.held, own])
         del own  # (a copy in seq unless nothing was held)
         if last and final and seq.t.size:
@@ -1185,7 +1426,7 @@ def schedule_stream(
     )
     stats: dict[str, Any] = {
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
-        "unverified": 0, "window_times": [], "sample_repairs": 0,
+        "unverified": 0, "window_times": [], "sample_repairs": 0, "lp_chains": 0, "lp_seam_fallbacks": 0,
     }
     if opt.method == "lp+nlp" and not machine.has_drives:
         raise InvalidMachineError(
@@ -1277,7 +1518,7 @@ def schedule_stream(
             bad: list[FloatArray] = []
             worst: tuple[str, str, float, float, float] = ("", "", -np.inf, 0.0, 0.0)
             for item in _piece_blocks(toolpath, piece, prof, timing, t_end, k_next, k_hi, n_block, carry, last,
-                                      limits, lim, Ts):
+                                      limits, lim, Ts, _workers(opt)):
                 seq, chk, _, final = item
                 # (bench seed 1291: the jerk 1.29 x of a piece's last samples, found only once they were
                 # checked with the next piece, which could not repair them)
@@ -1327,7 +1568,7 @@ def schedule_stream(
         report(piece.s_end / total)
         # the piece held at once is released as checked; a longer one is sampled again, block by block
         blocks = kept if kept else _piece_blocks(toolpath, piece, prof, timing, t0_piece, k_lo, k_hi, n_block,
-                                                 carry, last, limits, lim, Ts)
+                                                 carry, last, limits, lim, Ts, _workers(opt))
         for seq, chk, carry_b, _ in blocks:
             n_rel = chk.n_released
             carry = carry_b
@@ -1365,6 +1606,10 @@ def schedule_stream(
         "cut_rounds": stats["cut_rounds"],
         "cut_points": stats["cut_points"],
         "unverified_points": stats["unverified"],
+        # pieces whose LP windows were walked as two chains joined by a seam window (``_chain_split``), and
+        # those of them whose second chain or seam failed (the first chain then walked on alone)
+        "lp_chains": stats["lp_chains"],
+        "lp_seam_fallbacks": stats["lp_seam_fallbacks"],
         # most rounds of re-solving a piece whose samples were over a limit (solvers.verify)
         "sample_repairs": stats["sample_repairs"],
         "control_points": int(sum(p.c.size for p in profiles)),
