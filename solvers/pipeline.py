@@ -756,8 +756,12 @@ def _chain_split(plan: WindowPlan, opt: Options) -> tuple[int, int, int] | None:
     stopping distance, the same argument as for a window's artificial end), so from k_split on it is the
     feed the first chain would have walked into, up to the LP's choices among equal optima; the seam
     window joins the two states (c_k, c_k+1 fixed at both ends).  Balanced for two processes: the first
-    chain has ceil((n + 1) / 2) of the n windows (it also solves the short seam)."""
-    if opt.method != "lp":
+    chain has ceil((n + 1) / 2) of the n windows (it also solves the short seam).
+
+    Only on the overlap derived from the stopping distance: with a shorter ``Options.lp_overlap`` the
+    second chain's start is not forgotten by the split knot (random bench paths, overlap 10 intervals: most
+    seams infeasible, and the others up to +0.9 % of motion against one chain)."""
+    if opt.method != "lp" or opt.lp_overlap is not None:
         return None
     starts = _plan_starts(plan)
     if len(starts) < LP_CHAIN_MIN_WINDOWS:

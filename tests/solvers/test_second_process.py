@@ -117,14 +117,16 @@ def test_failed_forked_chain_walks_on_as_one_chain(monkeypatch: pytest.MonkeyPat
     _same_feed(sch, one)
 
 
-def test_lp_nlp_and_short_pieces_walk_one_chain() -> None:
-    """The NLP hands out its chains while the LP walks (``on_lp``), and a piece of fewer than
-    LP_CHAIN_MIN_WINDOWS windows gains nothing from a second chain."""
-    assert pipeline._chain_split(pipeline.WindowPlan(1.0, 2000, 200, 20, 60, 20), Options(method="lp+nlp")) is None
+def test_lp_nlp_short_pieces_and_given_overlaps_walk_one_chain() -> None:
+    """The NLP hands out its chains while the LP walks (``on_lp``); a piece of fewer than
+    LP_CHAIN_MIN_WINDOWS windows gains nothing from a second chain; a given overlap may be shorter than the
+    stopping distance the second chain's start needs to be forgotten."""
+    many = pipeline.WindowPlan(1.0, 2000, 200, 20, 60, 20)
+    assert pipeline._chain_split(many, Options(method="lp+nlp")) is None
+    assert pipeline._chain_split(many, Options(method="lp", lp_overlap=20)) is None
     few = pipeline.WindowPlan(1.0, 3 * 180, 200, 20, 60, 20)
     assert len(pipeline._plan_starts(few)) < pipeline.LP_CHAIN_MIN_WINDOWS
     assert pipeline._chain_split(few, Options(method="lp")) is None
-    many = pipeline.WindowPlan(1.0, 2000, 200, 20, 60, 20)
     starts = pipeline._plan_starts(many)
     k_split, k_b, k_seam = pipeline._chain_split(many, Options(method="lp")) or (0, 0, 0)
     assert k_split in starts and k_b == k_split - 20 and k_split < k_seam <= k_b + 200 - 20 - 2
