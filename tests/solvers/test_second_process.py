@@ -66,18 +66,30 @@ def test_two_chains_hold_the_limits_and_cost_no_motion(monkeypatch: pytest.Monke
     assert not np.array_equal(chains.profiles[0].c, one.profiles[0].c)
 
 
-def test_forked_second_chain_gives_the_same_feed(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The second chain and the second half of the samples in forked processes: the same schedule."""
-    seq = _run(nlp_workers=1)
+def _split_samples(monkeypatch: pytest.MonkeyPatch, break_forked: bool = False) -> list[int]:
+    """Pieces of 1,000 samples or more split their sampling; returns the sizes of the halves this process
+    fills (``break_forked``: the forked process's half fails)."""
     calls: list[int] = []
     orig = pipeline._fill_samples
+    me = os.getpid()
 
     def fill(*args: Any) -> None:
-        calls.append(args[5].size)
+        if os.getpid() != me:
+            if break_forked:
+                raise RuntimeError("sampling process broken by the test")
+        else:
+            calls.append(args[5].size)
         orig(*args)
 
     monkeypatch.setattr(pipeline, "_fill_samples", fill)
     monkeypatch.setattr(pipeline, "SAMPLE_SPLIT_MIN", 1000)
+    return calls
+
+
+def test_forked_second_chain_gives_the_same_feed(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The second chain and the second half of the samples in forked processes: the same schedule."""
+    seq = _run(nlp_workers=1)
+    calls = _split_samples(monkeypatch)
     par = _run(nlp_workers=2)
     assert calls and sum(calls) < seq.samples.t.size  # (half of them were sampled by the other process)
     assert par.summary["lp_chains"] == 1 and par.summary["lp_seam_fallbacks"] == 0
@@ -178,15 +190,7 @@ def test_split_sampling_gives_the_same_samples(monkeypatch: pytest.MonkeyPatch) 
     elementwise in t)."""
     tp, prof, K = _piece()
     one = _sample(tp, prof, K, 1)
-    calls: list[int] = []
-    orig = pipeline._fill_samples
-
-    def fill(*args: Any) -> None:
-        calls.append(args[5].size)
-        orig(*args)
-
-    monkeypatch.setattr(pipeline, "_fill_samples", fill)
-    monkeypatch.setattr(pipeline, "SAMPLE_SPLIT_MIN", 1000)
+    calls = _split_samples(monkeypatch)
     two = _sample(tp, prof, K, 2)
     assert calls == [K // 2]  # (this process's half: the other one was the forked process's)
     for col in COLUMNS:
@@ -196,16 +200,8 @@ def test_split_sampling_gives_the_same_samples(monkeypatch: pytest.MonkeyPatch) 
 def test_failed_sampling_process_leaves_its_half_to_this_one(monkeypatch: pytest.MonkeyPatch) -> None:
     tp, prof, K = _piece()
     one = _sample(tp, prof, K, 1)
-    orig = pipeline._fill_samples
-    me = os.getpid()
-
-    def fill(*args: Any) -> None:
-        if os.getpid() != me:
-            raise RuntimeError("sampling process broken by the test")
-        orig(*args)
-
-    monkeypatch.setattr(pipeline, "_fill_samples", fill)
-    monkeypatch.setattr(pipeline, "SAMPLE_SPLIT_MIN", 1000)
+    calls = _split_samples(monkeypatch, break_forked=True)
     two = _sample(tp, prof, K, 2)
+    assert calls == [K // 2, K - K // 2]  # (its own half, then the failed process's)
     for col in COLUMNS:
         np.testing.assert_array_equal(getattr(two, col), getattr(one, col), err_msg=col)
