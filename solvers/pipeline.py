@@ -695,10 +695,7 @@ class _WindowWalk:
         plan = self.plan
         joins: list[int] = []
         while True:
-            k1 = min(k0 + plan.window, plan.n_int)
-            # avoid a last window shorter than the overlap: stretch this one instead
-            if 0 < plan.n_int - k1 < plan.overlap + 3:
-                k1 = plan.n_int
+            k1 = _window_end(plan, k0)
             spec, res = self.window(stats, k0, k1, start, prev_qstar, prev_c)
             if solved is not None:
                 solved.append(res)
@@ -736,13 +733,20 @@ class _WalkState:
     prev_c: tuple[int, FloatArray]
 
 
+def _window_end(plan: WindowPlan, k0: int) -> int:
+    """The end knot of the LP window starting at knot k0: plan.window intervals on, or the piece end if
+    that would leave a last window shorter than the overlap (this one is stretched instead)."""
+    k1 = min(k0 + plan.window, plan.n_int)
+    return plan.n_int if 0 < plan.n_int - k1 < plan.overlap + 3 else k1
+
+
 def _plan_starts(plan: WindowPlan) -> list[int]:
     """The knots where a method-lp walk over the whole piece starts its windows (``_WindowWalk.walk``)."""
     k0, out = 0, []
     while True:
         out.append(k0)
-        k1 = min(k0 + plan.window, plan.n_int)
-        if 0 < plan.n_int - k1 < plan.overlap + 3 or k1 == plan.n_int:
+        k1 = _window_end(plan, k0)
+        if k1 == plan.n_int:
             return out
         k0 = k1 - plan.overlap
 
