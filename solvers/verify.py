@@ -120,15 +120,21 @@ class RowCheck:
         return (KINDS[kind] if kind >= 0 else "none", "xyz"[axis] if axis >= 0 else "", float(self.util[k]), k)
 
 
-def _fd(p: FloatArray, k: NDArray[np.int64], Ts: float) -> tuple[FloatArray, ...]:
-    """At padded indices k of the rest-padded positions p: backward v, central a, the third
-    difference over k-1..k+2, and for the drive model the central v and j (each (len(k), 3))."""
-    v = (p[k] - p[k - 1]) / Ts
-    v_next = (p[k + 1] - p[k]) / Ts
-    a = (p[k + 1] - 2.0 * p[k] + p[k - 1]) / Ts**2
-    j = (p[k + 2] - 3.0 * p[k + 1] + 3.0 * p[k] - p[k - 1]) / Ts**3
-    j_prev = (p[k + 1] - 3.0 * p[k] + 3.0 * p[k - 1] - p[k - 2]) / Ts**3
-    return v, a, j, 0.5 * (v + v_next), 0.5 * (j + j_prev)
+def _fd(
+    p: FloatArray, lo: int, hi: int, Ts: float, central: bool
+) -> tuple[FloatArray, FloatArray, FloatArray, tuple[FloatArray, FloatArray, FloatArray] | None]:
+    """At padded indices k = lo .. hi - 1 of the rest-padded positions p (lo >= 2, hi + 2 <= len(p)):
+    backward v, central a, the third difference over k-1..k+2, and if ``central`` (for the drive model)
+    the central (v, a, j) (each (hi - lo, 3); slices, not gathered copies: the same values)."""
+    pm2, pm1, p0, pp1, pp2 = (p[lo + d : hi + d] for d in (-2, -1, 0, 1, 2))
+    v = (p0 - pm1) / Ts
+    a = (pp1 - 2.0 * p0 + pm1) / Ts**2
+    j = (pp2 - 3.0 * pp1 + 3.0 * p0 - pm1) / Ts**3
+    if not central:
+        return v, a, j, None
+    v_next = (pp1 - p0) / Ts
+    j_prev = (pp1 - 3.0 * p0 + 3.0 * pm1 - pm2) / Ts**3
+    return v, a, j, (0.5 * (v + v_next), a, 0.5 * (j + j_prev))
 
 
 def rest_padded(position: FloatArray) -> FloatArray:
@@ -159,10 +165,10 @@ def check_rows(
     for c0 in range(0, K, CHUNK):
         c1 = min(K, c0 + CHUNK)
         sl = slice(c0, c1)
-        v_fd, a_fd, j_fd, v_c, j_c = _fd(padded, np.arange(c0, c1) + REST_PAD, Ts)
+        v_fd, a_fd, j_fd, vaj_c = _fd(padded, c0 + REST_PAD, c1 + REST_PAD, Ts, lim.drive is not None)
         # kind, analytic, fd, limit (the differences' u and e from the central v and j)
         per = [(kd, an, fd, limit) for (kd, an, limit), (_, fd, _) in zip(
-            _terms(v[sl], a[sl], j[sl], lim), _terms(v_fd, a_fd, j_fd, lim, (v_c, a_fd, j_c)), strict=True)]
+            _terms(v[sl], a[sl], j[sl], lim), _terms(v_fd, a_fd, j_fd, lim, vaj_c), strict=True)]
         for kd, an, fd, limit in per:
             ua = np.abs(an) / limit
             uf = np.abs(fd) / limit

@@ -13,6 +13,7 @@ from scipy.integrate import quad
 from geometry import examples
 from geometry.arclength import ArcLengthTable
 from geometry.nurbs import NurbsSegment
+from geometry.quadrature import QUINTIC_TOL
 from geometry.toolpath import Toolpath
 from tests.geometry.nurbs_factory import random_nurbs
 
@@ -250,6 +251,27 @@ def test_arc_length_round_trip(seed: int, degree: int, n_interior: int) -> None:
     # s(u) is increasing
     order = np.argsort(u)
     assert np.all(np.diff(s[order]) >= -1e-12)
+
+
+@pytest.mark.parametrize(("seed", "degree", "n_interior"), RANDOM_CASES)
+def test_exact_u_of_s_by_the_quintic_guess_is_the_newton_steps(seed: int, degree: int, n_interior: int) -> None:
+    """u_of_s(exact) takes the quintic guess in the intervals whose midpoint check holds it (most of them):
+    the same point as the Newton step's to within QUINTIC_TOL mm along the curve, or 2 units in the last
+    place of u where the speed is so high that those are more; the guess alone (the solvers') unchanged."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(seed)
+    seg = random_nurbs(rng, degree, n_interior, weight_range=(0.1, 10.0)).segment()
+    tab = ArcLengthTable.build(seg)
+    assert tab.table.quintic is not None and tab.table.quintic.mean() > 0.9
+    s = np.concatenate([np.linspace(0.0, tab.length, 5001), rng.uniform(0.0, tab.length, 5000)])
+    u = tab.u_of_s(s)
+    newton = replace(tab.table, quintic=None).inverse(s)
+    speed = seg.speed(newton)
+    tol = np.maximum(2.0 * QUINTIC_TOL, 2.0 * np.spacing(np.abs(newton)) * speed)
+    assert np.all(np.abs(u - newton) * speed <= tol)
+    assert u[0] == seg.domain[0] and u[5000] == seg.domain[1]
+    np.testing.assert_array_equal(tab.u_of_s(s, exact=False), replace(tab.table, quintic=None).inverse(s, False))
 
 
 @pytest.mark.parametrize(("seed", "degree", "n_interior"), RANDOM_CASES)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geometry.quadrature import MAX_BISECTIONS, MonotoneTable, gauss_legendre
+from geometry.quadrature import MAX_BISECTIONS, QUINTIC_TOL, MonotoneTable, gauss_legendre
 from solvers.timing import PieceProfile, PieceTiming
 
 #: F(x) = integral_0^x f against the closed form, relative (the table's rule is 1e-13)
@@ -18,6 +18,11 @@ INVERSE_ABS_TOL = 1e-11
 def _f(x: np.ndarray) -> np.ndarray:
     """f = 1 + 0.9 sin(7 x) + 30 exp(-200 (x - 0.3)^2) > 0: smooth with a sharp bump."""
     return np.asarray(1.0 + 0.9 * np.sin(7.0 * x) + 30.0 * np.exp(-200.0 * (x - 0.3) ** 2))
+
+
+def _df(x: np.ndarray) -> np.ndarray:
+    """f'(x) of ``_f``."""
+    return np.asarray(6.3 * np.cos(7.0 * x) - 12000.0 * (x - 0.3) * np.exp(-200.0 * (x - 0.3) ** 2))
 
 
 def _F(x: np.ndarray) -> np.ndarray:
@@ -99,3 +104,50 @@ def test_chunked_evaluation_builds_the_same_table(monkeypatch: pytest.MonkeyPatc
     assert sizes.count(7) > 100  # (the breakpoints and midpoints, in chunks)
     for col in ("x_b", "F_b", "f_b"):
         assert np.array_equal(getattr(chunked, col), getattr(whole, col)), col
+
+
+def _newton_only(table: MonotoneTable, y: np.ndarray) -> np.ndarray:
+    """The inverse by the cubic guess and the Newton step alone (the table without its quintic flags)."""
+    from dataclasses import replace
+
+    return replace(table, quintic=None).inverse(y)
+
+
+def test_quintic_guess_leaves_the_table_and_stands_for_the_newton_step() -> None:
+    """With f' given, the table is the same bit for bit (the solvers' cubic guess is unchanged), most
+    intervals take the quintic guess at 1e-10, and the inverse matches the closed form and the Newton
+    step's to within QUINTIC_TOL (in F's units, as the midpoint check measures it)."""
+    edges = np.linspace(0.0, 2.0, 5)
+    plain = MonotoneTable.build(_f, edges, min_intervals=2, guess_tol=1e-10)
+    table = MonotoneTable.build(_f, edges, min_intervals=2, guess_tol=1e-10, df=_df)
+    for col in ("x_b", "F_b", "f_b"):
+        np.testing.assert_array_equal(getattr(table, col), getattr(plain, col))
+    assert plain.quintic is None and table.quintic is not None
+    assert table.quintic.mean() > 0.9
+    x = np.linspace(0.0, 2.0, 20001)
+    y = _F(x)
+    got = table.inverse(y)
+    np.testing.assert_allclose(got, x, rtol=0.0, atol=INVERSE_ABS_TOL)
+    np.testing.assert_array_equal(table.inverse(y, newton=False), plain.inverse(y, newton=False))
+    j = np.clip(np.searchsorted(table.F_b, y, side="right") - 1, 0, table.F_b.size - 2)
+    q = table.quintic[j]
+    assert q.mean() > 0.9
+    miss = np.abs(got - _newton_only(table, y)) * _f(x)
+    assert miss[q].max() <= 2.0 * QUINTIC_TOL
+    # elsewhere the Newton step itself
+    np.testing.assert_array_equal(got[~q], _newton_only(table, y)[~q])
+
+
+def test_a_wrong_derivative_fails_the_midpoint_check_and_the_newton_step_takes_over() -> None:
+    """f' off by a constant: the quintic guess misses at the midpoints, so (almost) no interval is flagged
+    and the inverse is the Newton step's bit for bit where it is not."""
+    edges = np.linspace(0.0, 2.0, 5)
+    table = MonotoneTable.build(_f, edges, min_intervals=2, guess_tol=1e-10, df=lambda x: _df(x) + 50.0)
+    assert table.quintic is not None and table.quintic.mean() < 0.05
+    x = np.linspace(0.0, 2.0, 20001)
+    y = _F(x)
+    got = table.inverse(y)
+    np.testing.assert_allclose(got, x, rtol=0.0, atol=INVERSE_ABS_TOL)
+    j = np.clip(np.searchsorted(table.F_b, y, side="right") - 1, 0, table.F_b.size - 2)
+    q = table.quintic[j]
+    np.testing.assert_array_equal(got[~q], _newton_only(table, y)[~q])
