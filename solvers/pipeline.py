@@ -178,7 +178,10 @@ SAMPLE_REPAIR_ROUNDS = 2
 #: Where the NLP falls back to the LP's feed over such a jump the samples can read over emax (bench seed
 #: 7213: 1.020 x after both repair rounds, the NLP failing the whole piece each time).  The last repair
 #: round of an lp+nlp piece solves its LP with the step at this share instead (0.6 passes 7213; as the
-#: default share it cost 84 bench seeds +0.7 % of motion, geometric mean, up to +11 %).
+#: default share it cost 84 bench seeds +0.7 % of motion, geometric mean, up to +11 %).  The same round
+#: holds the acceleration step at a rest end (``LimitSet.a_rest``, the same budget) to this share: bench seed
+#: 122 (a 2.2 mm path on 1.27 um knots) read 1.0124 x servo error at its second-last sample, the stop,
+#: through both repair rounds (1.0082 x before session 23's dfa0a7a moved the NLP's iterates by rounding).
 REPAIR_STEP_SHARE = 0.6
 #: Points verified per sample gap next to a sample found over a limit.
 REPAIR_SUBDIV = 8
@@ -1549,7 +1552,8 @@ def schedule_stream(
             verify_s = np.union1d(verify_s, s_loc)
             lim_r = lim
             if nlp and rounds == SAMPLE_REPAIR_ROUNDS and lim.a_step is not None:
-                lim_r = replace(lim, a_step=lim.a_step * (REPAIR_STEP_SHARE / REST_SHARE))
+                lim_r = replace(lim, a_step=lim.a_step * (REPAIR_STEP_SHARE / REST_SHARE),
+                                a_rest=lim.a_rest * (REPAIR_STEP_SHARE / REST_SHARE))
                 cache = {}  # (its windows were solved with the full share)
             lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim_r, stats, None, verify_s, cache,
                                          None, first)

@@ -694,3 +694,17 @@ def test_lp_feed_kept_over_a_curvature_jump_holds_the_servo_error() -> None:
     tightening does not converge on this piece (43 mm knots)."""
     out = harness.run(gen.case(7213, "bench"), "lp+nlp")
     assert out.ok, out.describe()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_last_repair_round_also_tightens_the_rest_step() -> None:
+    """Bench seed 122 (lp+nlp), found in session 25: a 2.2 mm path (one piece on 1,742 knot intervals of
+    1.27 um) read a sampled servo error of 1.0124 x (axis x) at its second-last sample, where the feed comes to
+    rest between two samples, after both repair rounds (the rounds' points at the end changed nothing: 1.0124,
+    1.0125, 1.0125), a typed 422.  It read 1.0082 x, a pass, before session 23's dfa0a7a changed the NLP's
+    products' rounding (the same windows).  The rest end's acceleration step is held to ``lp.REST_SHARE`` of
+    the servo-error budget like a curvature jump's step, so the last repair round now holds it to
+    ``pipeline.REPAIR_STEP_SHARE`` as well: 1.0024 x (the rest end no longer the worst), motion +1 ms of 1.66 s.
+    Pieces that pass before the last round are unchanged."""
+    out = harness.run(gen.case(122, "bench"), "lp+nlp")
+    assert out.ok, out.describe()
