@@ -340,14 +340,19 @@ class _Rows:
         A = sp.vstack(self.blocks[first:], format="csr")
         A.data[np.abs(A.data) < TINY_COEF] = 0.0
         A.eliminate_zeros()
-        A = sp.csr_matrix(A @ sp.diags(self.col_scale))
+        # the column and row scalings multiply each entry once (the products A diag(sigma) and diag(r) A
+        # would give, entry for entry), in place on this matrix of its own
+        A.data *= self.col_scale[A.indices]
         lo, hi = np.concatenate(self.lo[first:]), np.concatenate(self.hi[first:])
         big = np.zeros(A.shape[0])
-        np.maximum.at(big, np.repeat(np.arange(A.shape[0]), np.diff(A.indptr)), np.abs(A.data))
+        full = np.diff(A.indptr) > 0
+        if full.any():
+            big[full] = np.maximum.reduceat(np.abs(A.data), A.indptr[:-1][full])
         big = np.maximum(big, np.where(np.isfinite(lo), np.abs(lo), 0.0))
         big = np.maximum(big, np.where(np.isfinite(hi), np.abs(hi), 0.0))
         r = 1.0 / np.where(big > 0.0, big, 1.0)
-        return sp.csr_matrix(sp.diags(r) @ A), lo * r, hi * r
+        A.data *= np.repeat(r, np.diff(A.indptr))
+        return A, lo * r, hi * r
 
 
 def axis_kinematics(
