@@ -116,11 +116,12 @@ V_STEP_MIN = 1e-3
 #: no failures, motion times within +-0.07 %: other optimal vertices); the LP's rows are already
 #: scaled and have no redundancy presolve could remove cheaply.
 PRESOLVE = "off"
-#: HiGHS's dual simplex edge weights (``simplex_dual_edge_weight_strategy``): 1 = Devex.  HiGHS's own choice
-#: (steepest edge, whose weights are set up anew for each model and after rows are added) took 22-26 %
-#: more HiGHS time for 2-3 % fewer iterations: the 18.35 m path lp with jerk 0.78-0.86 vs 0.61-0.66 s
-#: (4 runs alternated, 18,665 vs 18,975 iterations, the same motion to 1e-6 s), one flower loop v+a 16.8 vs
-#: 12.5 ms (medians of 10) and with jerk 37.4 vs 28.9 ms.  Dantzig (0) was not faster (session 24).
+#: HiGHS's dual simplex edge weights (``simplex_dual_edge_weight_strategy``): 1 = Devex.  Against HiGHS's own
+#: choice (steepest edge, whose weights are set up anew for each model and after rows are added), Devex takes
+#: 22-26 % less HiGHS time for 2-9 % more iterations: the 18.35 m path lp with jerk 0.61-0.66 vs 0.78-0.86 s
+#: (4 runs alternated, 18,975 vs 18,665 iterations, the same motion to 1e-6 s), one flower loop v+a 12.5 vs
+#: 16.8 ms (medians of 10; 542 vs 515 iterations) and with jerk 28.9 vs 37.4 ms (876 vs 807).  Dantzig (0)
+#: was not faster (session 24).
 DUAL_EDGE_WEIGHT = 1
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.

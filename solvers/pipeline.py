@@ -1551,9 +1551,10 @@ def schedule_stream(
             rounds += 1
             verify_s = np.union1d(verify_s, s_loc)
             lim_r = lim
-            if nlp and rounds == SAMPLE_REPAIR_ROUNDS and lim.a_step is not None:
-                lim_r = replace(lim, a_step=lim.a_step * (REPAIR_STEP_SHARE / REST_SHARE),
-                                a_rest=lim.a_rest * (REPAIR_STEP_SHARE / REST_SHARE))
+            if nlp and rounds == SAMPLE_REPAIR_ROUNDS:  # the steps at REPAIR_STEP_SHARE of the budget
+                share = REPAIR_STEP_SHARE / REST_SHARE
+                lim_r = replace(lim, a_rest=lim.a_rest * share,
+                                a_step=None if lim.a_step is None else lim.a_step * share)
                 cache = {}  # (its windows were solved with the full share)
             lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim_r, stats, None, verify_s, cache,
                                          None, first)
