@@ -116,13 +116,14 @@ V_STEP_MIN = 1e-3
 #: no failures, motion times within +-0.07 %: other optimal vertices); the LP's rows are already
 #: scaled and have no redundancy presolve could remove cheaply.
 PRESOLVE = "off"
-#: HiGHS's dual simplex edge weights (``simplex_dual_edge_weight_strategy``): 1 = Devex.  Against HiGHS's own
-#: choice (steepest edge, whose weights are set up anew for each model and after rows are added), Devex takes
-#: 22-26 % less HiGHS time for 2-9 % more iterations: the 18.35 m path lp with jerk 0.61-0.66 vs 0.78-0.86 s
-#: (4 runs alternated, 18,975 vs 18,665 iterations, the same motion to 1e-6 s), one flower loop v+a 12.5 vs
-#: 16.8 ms (medians of 10; 542 vs 515 iterations) and with jerk 28.9 vs 37.4 ms (876 vs 807).  Dantzig (0)
-#: was not faster (session 24).
-DUAL_EDGE_WEIGHT = 1
+#: HiGHS's dual simplex edge weights (``simplex_dual_edge_weight_strategy``): -1 = HiGHS's own choice, its
+#: default.  Devex (1) took 22-26 % less HiGHS time (18.35 m lp with jerk 0.61-0.66 vs 0.78-0.86 s, one flower
+#: loop v+a 12.5 vs 16.8 ms) for 2-9 % more iterations, but its other optimal vertices broke random bench cases
+#: that pass on the default (session 25): seed 894 lp stalled (``ScheduleError``: q reaches 0 inside the path)
+#: and seed 664 lp took 129.8 s of CPU against 33.4 s (a ``CaseTimeout`` in ``bench.random_cases``), 2 of ~1,500
+#: seeds; seed 93 lp, the other way, kept its 128-interval profile (-38.8 % of motion).  Dantzig (0) was not
+#: faster (session 24).
+DUAL_EDGE_WEIGHT = -1
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.
 COL_SCALE_MIN_BASIS = 0.1
