@@ -340,10 +340,12 @@ class _Rows:
         if len(self.blocks) <= first:
             return sp.csr_matrix((0, self.ncols)), np.zeros(0), np.zeros(0)
         A = sp.vstack(self.blocks[first:], format="csr")
+        if any(np.may_share_memory(A.data, b.data) for b in self.blocks[first:]):  # (scaled in place below)
+            A = A.copy()
         A.data[np.abs(A.data) < TINY_COEF] = 0.0
         A.eliminate_zeros()
         # the column and row scalings multiply each entry once (the products A diag(sigma) and diag(r) A
-        # would give, entry for entry), in place on this matrix of its own
+        # would give, entry for entry), in place: the stacked copy, never a block (they are built again)
         A.data *= self.col_scale[A.indices]
         lo, hi = np.concatenate(self.lo[first:]), np.concatenate(self.hi[first:])
         big = np.zeros(A.shape[0])
