@@ -89,9 +89,13 @@ STEP_SHARE = 0.25
 #: Peak of the third-difference kernel (a quadratic B-spline over 3 Ts) times Ts: a step A of the
 #: axis acceleration between samples adds up to STEP_KERNEL A / Ts to a sampled jerk.
 STEP_KERNEL = 0.75
-#: Curvature jumps whose step term would stay below this share of jmax even at q = Q get no
+#: Curvature jumps whose step term would stay below this share of jmax even at their largest q (``_break_qmax``) get no
 #: coupled jerk rows (``WindowLP._step_jerk``).
 STEP_JERK_MIN = 1e-3
+#: ... and those whose term stays within this share of jmax at their largest q are charged it as a constant
+STEP_CONST_SHARE = 0.25
+#: ... as long as the constants at one point add up to at most this share
+STEP_CONST_TOTAL = 0.5
 #: At a tangent break passed at speed (a junction turning by less than the corner tolerance) the
 #: axis velocity steps by f |jump of x_s|.  Sampled at Ts that step is an impulse: it adds up to
 #: V_KERNEL_A |step| / Ts to a second difference (the acceleration), up to V_KERNEL_J |step| / Ts^2
@@ -611,7 +615,19 @@ class WindowLP:
             step = self._step_jerk(g.s, ax)
             if step is not None:
                 near, M = step
-                parts.append((near, sp.csr_matrix(M @ self._mats(self._steps()[0])[0]) * Q, np.zeros(int(near.sum()))))
+                # a break whose share at its largest q is at most STEP_CONST_SHARE is charged that share as a
+                # constant, the others in q(s_b) (coupled, the LP trades q(s_b) against the points around it:
+                # it held breaks at their floor, a crawl); where the constants of several breaks would add up
+                # to over STEP_CONST_TOTAL, all of them stay coupled (bench seeds 71, 127 lp: 6-8 breaks within
+                # reach, 1.1-1.5 x jmax, infeasible)
+                qmax = self._break_qmax()
+                fixed = M.max(axis=0).toarray().ravel() * qmax <= STEP_CONST_SHARE
+                const = np.asarray(M @ np.where(fixed, qmax, 0.0), dtype=np.float64)
+                alone = const <= STEP_CONST_TOTAL
+                const = np.where(alone, const, 0.0)
+                Mc = sp.diags(np.where(alone, 0.0, 1.0)) @ M + sp.diags(alone.astype(np.float64)) @ M @ sp.diags(
+                    (~fixed).astype(np.float64))
+                parts.append((near, sp.csr_matrix(Mc @ self._mats(self._steps()[0])[0]) * Q, const))
             self._add_coupled(rows, A, g.s, _union(g.s.size, parts))
 
     def _rest_rows(self, rows: _Rows, s_rest: float, sign: float, Q: float, a_rest: FloatArray | None) -> float:
@@ -823,6 +839,11 @@ class WindowLP:
         rows.add(B0, np.full(int(keep.sum()), -np.inf), cap[keep] / Q)
         return float(np.min(cap[keep]))
 
+    def _break_qmax(self) -> FloatArray:
+        """The largest q each break may have (nb,): its velocity step's cap, its acceleration step's (both
+        rows of every model, ``_step_rows``) and Q."""
+        return np.minimum(np.minimum(self._vstep_caps(), self._step_caps()), self.Q)
+
     def _step_caps(self) -> FloatArray:
         """Cap on q at each break from the acceleration step, min_x a_step_x / |jump of x_ss|, (nb,)."""
         br, jump, _ = self._steps()
@@ -857,12 +878,16 @@ class WindowLP:
             return None
         br, _, jump1 = self._steps()
         q0 = np.minimum(self._vstep_caps(), self.Q)
+        # the break's largest feed (its acceleration step's cap too: ``_break_qmax``) decides whether its
+        # impulse counts and how far it reaches; the tangent stays at q0 (a point nearer the break's feed
+        # steepens the coupling, and the LP held such breaks at their floor: bench seed 894)
+        qmax = self._break_qmax()
         w = kernel * jump1[:, ax] / (Ts**power * limit)
-        live = w * np.sqrt(q0) > V_STEP_MIN
+        live = w * np.sqrt(qmax) > V_STEP_MIN
         if not live.any():
             return None
-        br, q0, w = br[live], q0[live], w[live]
-        reach = 3.0 * Ts * (np.sqrt(q0) + 3.0 * Ts * float(np.linalg.norm(self.lim.amax))) + BREAK_EPS_MM
+        br, q0, qmax, w = br[live], q0[live], qmax[live], w[live]
+        reach = 3.0 * Ts * (np.sqrt(qmax) + 3.0 * Ts * float(np.linalg.norm(self.lim.amax))) + BREAK_EPS_MM
         # breaks within twice the reach of each (counted against the largest reach: at most more)
         crowd = (np.searchsorted(br, br + reach + reach.max(), side="right")
                  - np.searchsorted(br, br - reach - reach.max(), side="left"))
@@ -941,8 +966,14 @@ class WindowLP:
         """The sampled jerk next to a curvature jump (bench seed 47): the axis acceleration steps by
         |jump_x| q(s_b) at the break s_b, and a third difference of the samples whose span (3 Ts)
         holds the break sees the jerk around it plus up to STEP_KERNEL |step| / Ts.  So at points
-        within 3 Ts of travel (at the window's largest feed sqrt(Q)) of a break the jerk rows become
+        within 3 Ts of travel of a break the jerk rows become
         |j(s)| + sum_b STEP_KERNEL |jump_bx| q(s_b) / Ts <= jmax_x.
+
+        The travel is bounded by the break's own largest feed (``_break_qmax``: its caps hold q(s_b) in
+        every model) plus what the acceleration limits add over 3 Ts, and by the window's largest feed
+        sqrt(Q).  Bounded by sqrt(Q) alone, a break capped at 0.08 mm/s next to a 2.7 um turn (bench seed
+        894 lp) coupled its q to the jerk rows of checkpoints 1.3 mm either side, and the LP held it at
+        its floor to give them its share: a 36 s crawl over 36 um.
 
         Returns (near (K,) bool: the points s that need it, M (near.sum(), nb): per unit jmax, the
         weight of q(s_b) in the sum), or None."""
@@ -952,11 +983,14 @@ class WindowLP:
         br, jump, _ = self._steps()
         jmax = self.lim.jmax[ax]
         wgt = STEP_KERNEL * jump[:, ax] / (Ts * jmax)
-        live = wgt * self.Q > STEP_JERK_MIN
+        qmax = self._break_qmax()
+        live = wgt * qmax > STEP_JERK_MIN
         if not live.any():
             return None
-        reach = 3.0 * Ts * np.sqrt(self.Q)
-        close = (np.abs(s[:, None] - br[None, :]) <= reach) & live[None, :]
+        # within 3 Ts of travel of the break: at most the window's largest feed, sqrt(Q), and at most its own
+        # largest feed (``_break_qmax``) plus what the acceleration limits add over 3 Ts
+        reach = 3.0 * Ts * np.minimum(np.sqrt(self.Q), np.sqrt(qmax) + 3.0 * Ts * float(np.linalg.norm(self.lim.amax)))
+        close = (np.abs(s[:, None] - br[None, :]) <= reach[None, :]) & live[None, :]
         near = close.any(axis=1)
         if not near.any():
             return None

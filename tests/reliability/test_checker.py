@@ -118,15 +118,23 @@ def test_points_on_the_curve_read_as_on_it_where_a_bracket_has_two_minima() -> N
     assert float(np.max(d)) <= ON_CURVE_MM
 
 
+#: Where bench seed 8542's lp schedule crawled before session 26 (mm of arc length), and points there.
+CRAWL_8542_MM = (134.96, 135.01)
+CRAWL_8542_POINTS = 40_000
+
+
 def test_vectorised_search_settles_samples_whose_feet_lie_outside_the_two_nearest_brackets() -> None:
     """Bench seed 8542 (lp): the check of 75,731 samples took 160 s of CPU, over the bench's budget (a
     'CaseTimeout', the schedule itself 2.5 s and within every limit).  The brackets of the two nearest dense
     points held no foot for 24,880 samples (40 um off), which fell to the per-point search of every bracket
     in reach.  The chunked search now covers the NEAREST_BRACKETS nearest: it must settle every sample
-    within PATH_TOL_MM by itself (the samples are C(s) to ~1e-12 mm)."""
+    within PATH_TOL_MM by itself (the samples are C(s) to ~1e-12 mm).
+
+    Those samples were a crawl over s = 134.96-135.01 mm (79.4 s of motion, 1.5 s since session 26's bounded
+    break couplings, ``lp.WindowLP._step_jerk``), so the test now takes points of the path there itself,
+    as densely as the crawl's samples."""
     case = gen.case(8542, "bench")
-    sch = schedule(case.toolpath(), case.lp_machine, Options(method="lp"))
-    x = sch.samples.position
+    x = case.toolpath().evaluate(np.linspace(*CRAWL_8542_MM, CRAWL_8542_POINTS)).position
     dense = checker.dense_polyline(case.segments)
     d0, j0 = cKDTree(dense.pts).query(x, k=checker.NEAREST_BRACKETS)
     best = np.asarray(d0[:, 0], dtype=np.float64).copy()

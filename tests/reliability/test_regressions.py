@@ -14,6 +14,7 @@ import pytest
 from geometry import primitives
 from geometry.nurbs import NurbsSegment
 from geometry.toolpath import Toolpath
+from solvers import pipeline
 from solvers.errors import ScheduleError
 from solvers.machine import Axis, AxisLimits, Machine, router
 from solvers.pipeline import Options, schedule
@@ -708,3 +709,52 @@ def test_last_repair_round_also_tightens_the_rest_step() -> None:
     Pieces that pass before the last round are unchanged."""
     out = harness.run(gen.case(122, "bench"), "lp+nlp")
     assert out.ok, out.describe()
+
+
+#: Seed 894's motion before the fix, s: the crawl alone took 75 s (feed under 5 um/s).
+CRAWL_MOTION_S = 79.7
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize("edge_weight", [-1, 1])
+def test_curvature_jump_at_a_tight_turn_couples_only_the_points_it_can_reach(
+    monkeypatch: pytest.MonkeyPatch, edge_weight: int
+) -> None:
+    """Bench seed 894 (lp), found in session 26: a knot at the apex of a 2.7 um radius turn (50 degrees within
+    5 um) where x_ss jumps by 360 /mm; the acceleration step caps the feed there at 0.08 mm/s.  The jerk rows
+    coupled to that step reached every checkpoint within 3 Ts of travel at the window's largest feed
+    (437 mm/s: 1.3 mm either side), and the LP held the break's control points at their floor to give those
+    rows its share: 79.7 s of motion for 18.6 mm, 75 s of it under 5 um/s, with HiGHS's own edge weights; with
+    Devex (``lp.DUAL_EDGE_WEIGHT`` = 1) another optimal vertex went below the floor and the feed stalled (a
+    typed error).  Now the reach is bounded by the break's own largest feed (its caps) plus what the
+    acceleration limits add over 3 Ts, and a break whose share stays within ``lp.STEP_CONST_SHARE`` is
+    charged it as a constant: 6.71 s with either, and the samples pass the independent checker.  (Two
+    dips at the floor remain, 0.24 and 0.62 s, where the cap at the apex holds the quadratic's
+    control points on a 76 um knot spacing: see the README.)"""
+    from solvers import lp
+
+    monkeypatch.setattr(lp, "DUAL_EDGE_WEIGHT", edge_weight)
+    case = gen.case(894, "bench")
+    sch = schedule(case.toolpath(), case.lp_machine, Options(method="lp", sample_period=TS))
+    assert sch.summary["motion_time"] < CRAWL_MOTION_S / 4.0, sch.summary["motion_time"]
+    out = harness.run(case, "lp")
+    assert out.ok, out.describe()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_short_piece_keeps_its_first_profile_when_refinements_are_slower() -> None:
+    """Bench seed 198 (lp), found in session 26: a 1.13 m piece planned on 16 knot intervals is solved on
+    ``pipeline.REST_MIN_INTERVALS`` (64) first; that profile held control points at their floor, so it was
+    dropped and the plan's knots refined (16: 20.3 ms, 32: 48.5 ms, where the refinements stopped as finer
+    knots no longer paid).  The 64-interval profile (13.3 ms) is now one of the candidates, and the fastest
+    that moves is kept: no slower than either knot spacing solved on its own (an explicit spacing is kept)."""
+    case = gen.case(198, "bench")
+    tp = case.toolpath()
+    n_plan = 16
+
+    def motion(knot_spacing: float | None) -> float:
+        opts = Options(method="lp", sample_period=TS, knot_spacing=knot_spacing)
+        return float(schedule(tp, case.lp_machine, opts).summary["motion_time"])
+
+    candidates = [motion(tp.length / n) for n in (n_plan, pipeline.REST_MIN_INTERVALS)]
+    assert motion(None) <= min(candidates) * (1.0 + 1e-9), candidates
