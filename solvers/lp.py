@@ -625,8 +625,7 @@ class WindowLP:
                 const = np.asarray(M @ np.where(fixed, qmax, 0.0), dtype=np.float64)
                 alone = const <= STEP_CONST_TOTAL
                 const = np.where(alone, const, 0.0)
-                Mc = sp.diags(np.where(alone, 0.0, 1.0)) @ M + sp.diags(alone.astype(np.float64)) @ M @ sp.diags(
-                    (~fixed).astype(np.float64))
+                Mc = M - sp.diags(alone.astype(np.float64)) @ M @ sp.diags(fixed.astype(np.float64))
                 parts.append((near, sp.csr_matrix(Mc @ self._mats(self._steps()[0])[0]) * Q, const))
             self._add_coupled(rows, A, g.s, _union(g.s.size, parts))
 

@@ -562,8 +562,8 @@ def solve_piece(
             if not floored and not stuck(prof):
                 return prof, joins
             if _floor_refines(opt) and not stuck(prof):
-                # (one of the refinements' candidates: bench seed 198 lp, 15.5 ms on these 64 intervals,
-                # 20.3 ms on the plan's 16 and 32, where the refinements stopped as 32 gained under 1 %)
+                # (a candidate besides the refinements': bench seed 198 lp, 13.3 ms on these 64 intervals,
+                # 20.3 ms on the plan's 16, 48.5 ms on 32, where the refinements stopped)
                 first = (PieceTiming.build(prof, inverse=False).duration, prof, joins)
         except (InfeasibleError, SolverFailure):
             pass
