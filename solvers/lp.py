@@ -126,7 +126,8 @@ PRESOLVE = "off"
 #: that pass on the default (session 25): seed 894 lp stalled (``ScheduleError``: q reaches 0 inside the path)
 #: and seed 664 lp took 129.8 s of CPU against 33.4 s (a ``CaseTimeout`` in ``bench.random_cases``), 2 of ~1,500
 #: seeds; seed 93 lp, the other way, kept its 128-interval profile (-38.8 % of motion).  Dantzig (0) was not
-#: faster (session 24).
+#: faster (session 24).  Both seeds pass with Devex since session 26's bounded break couplings (894: the LP
+#: held a break at its floor, see ``_step_jerk``; 664: 16.3 s of CPU); Devex has not been re-tried since.
 DUAL_EDGE_WEIGHT = -1
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.
