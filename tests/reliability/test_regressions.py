@@ -14,7 +14,7 @@ import pytest
 from geometry import primitives
 from geometry.nurbs import NurbsSegment
 from geometry.toolpath import Toolpath
-from solvers import pipeline
+from solvers import lp, pipeline
 from solvers.errors import ScheduleError
 from solvers.machine import Axis, AxisLimits, Machine, router
 from solvers.pipeline import Options, schedule
@@ -731,8 +731,6 @@ def test_curvature_jump_at_a_tight_turn_couples_only_the_points_it_can_reach(
     charged it as a constant: 6.71 s with either, and the samples pass the independent checker.  (Two
     dips at the floor remain, 0.24 and 0.62 s, where the cap at the apex holds the quadratic's
     control points on a 76 um knot spacing: see the README.)"""
-    from solvers import lp
-
     monkeypatch.setattr(lp, "DUAL_EDGE_WEIGHT", edge_weight)
     case = gen.case(894, "bench")
     sch = schedule(case.toolpath(), case.lp_machine, Options(method="lp", sample_period=TS))
