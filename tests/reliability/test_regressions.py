@@ -314,7 +314,6 @@ def test_stalled_highs_run_is_stopped_and_solved_cold(monkeypatch: pytest.Monkey
     corner; the case runs as found, without the cut.)"""
     import geometry.nurbs
     from bench import random_cases
-    from solvers import lp
 
     monkeypatch.setattr(geometry.nurbs, "SHARP_TURN_RADIUS_MM", 0.0)
     monkeypatch.setattr(lp, "HIGHS_TIME_LIMIT_S", 1.0)
