@@ -128,17 +128,55 @@ def rest_bump(
     to |q'| at rest (the acceleration step); e_k has slope 0 at rest too, so h shapes the acceleration
     after the step without moving it (the bump alone is spent on the step where the step is at its bound).
     g, h in mm^2/s^2; returns (K,) mm^2/s^2, mm/s^2, 1/s^2."""
-    m = REST_BUMP_POWER
     t = np.asarray(s, dtype=np.float64) / d - k
     r = t if head else 1.0 - t
-    u = 1.0 - r
     sign = 1.0 if head else -1.0
-    b = (g * (r * u**m), g * (u ** (m - 1) * (1.0 - (m + 1) * r)), g * (-m * u ** (m - 2) * (2.0 - (m + 1) * r)))
+    bb = _bump_shape(r)
+    b = (g * bb[0], g * bb[1], g * bb[2])
     for hk, j in zip(h, REST_RISE_POWERS, strict=True) if len(h) else ():
         if hk:
-            b = (b[0] + hk * (r * r * u**j), b[1] + hk * (r * u ** (j - 1) * (2.0 - (2.0 + j) * r)),
-                 b[2] + hk * (u ** (j - 2) * (2.0 * u * u - 4.0 * j * r * u + j * (j - 1) * r * r)))
+            e = _rise_shape(r, j)
+            b = (b[0] + hk * e[0], b[1] + hk * e[1], b[2] + hk * e[2])
     return b[0], sign * b[1] / d, b[2] / (d * d)
+
+
+def _bump_shape(r: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The bump b = r (1 - r)^m (m = REST_BUMP_POWER) and its first two r-derivatives (``rest_bump``)."""
+    m = REST_BUMP_POWER
+    u = 1.0 - r
+    return r * u**m, u ** (m - 1) * (1.0 - (m + 1) * r), -m * u ** (m - 2) * (2.0 - (m + 1) * r)
+
+
+def _rise_shape(r: FloatArray, j: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The rise e_j = r^2 (1 - r)^j and its first two r-derivatives (``rest_bump``)."""
+    u = 1.0 - r
+    return (r * r * u**j, r * u ** (j - 1) * (2.0 - (2.0 + j) * r),
+            u ** (j - 2) * (2.0 * u * u - 4.0 * j * r * u + j * (j - 1) * r * r))
+
+
+#: Amplitudes of a rest interval's shapes in ``rest_shapes``: the bump, then one rise per REST_RISE_POWERS.
+REST_SHAPES = 1 + len(REST_RISE_POWERS)
+
+
+def rest_shapes(s: FloatArray, d: float, k: int, head: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The rest interval's shapes one by one (``rest_bump`` with a unit amplitude each: the bump, then the rises of
+    REST_RISE_POWERS) and their s-derivatives at piece-local s on knot interval k (the piece's first, ``head``,
+    or last): three (K, REST_SHAPES) arrays, 1, 1/mm, 1/mm^2 per unit amplitude.  What the LP of method lp
+    adds to q in its rest intervals (``solvers.lp.WindowSpec.rest_shapes``)."""
+    t = np.asarray(s, dtype=np.float64) / d - k
+    r = t if head else 1.0 - t
+    sign = 1.0 if head else -1.0
+    cols = [_bump_shape(r)] + [_rise_shape(r, j) for j in REST_RISE_POWERS]
+    return (np.column_stack([c[0] for c in cols]), np.column_stack([sign * c[1] / d for c in cols]),
+            np.column_stack([c[2] / (d * d) for c in cols]))
+
+
+def rest_shape_integrals(d: float) -> FloatArray:
+    """Integral over the rest interval of each ``rest_shapes`` shape (REST_SHAPES,), mm per unit amplitude:
+    d B(2, m + 1) for the bump, d B(3, j + 1) for the rise of power j (B the beta function)."""
+    m = REST_BUMP_POWER
+    out = [1.0 / ((m + 1) * (m + 2))] + [2.0 / ((j + 1) * (j + 2) * (j + 3)) for j in REST_RISE_POWERS]
+    return np.asarray(out, dtype=np.float64) * d
 
 
 def rest_bump_quotient(r: Any, g: Any, h: Sequence[Any] = ()) -> Any:

@@ -72,12 +72,16 @@ from solvers.timing import (
     PieceProfile,
     PieceTiming,
     interval_times,
+    rest_dips,
     rest_interval_times,
     stalled_intervals,
     stuck,
 )
 
 FloatArray = NDArray[np.float64]
+#: LP window results kept across the knot plans and repair rounds of one piece (``_solve_windows``): (n_int, k0,
+#: k1, rest_floor, rest_shapes) -> (what the window inherits, its extra verification points, its result)
+WindowCache = dict[tuple[int, int, int, bool, bool], tuple[Any, FloatArray, WindowResult]]
 
 METHODS = ("lp+nlp", "lp")
 SOLVERS = ("highs", "clarabel")
@@ -155,6 +159,9 @@ BINDING_UTILISATION = 0.98
 #: Times a piece whose feed stalls is solved again with twice the knots (the last time with a floor on
 #: q' at its rest ends) ...
 KNOT_REFINEMENTS = 3
+#: Method lp's LP adds the rest shapes to q in each piece's first and last knot interval (``lp.WindowSpec.rest_shapes``,
+#: ``_solve_windows``).
+LP_REST_SHAPES = True
 #: ... and more times, with that floor, while it is still stuck and its knots stay at most this many: bench
 #: seed 828, a 34 mm closed loop whose curvature jumps by 1.7e4 /mm at a knot 0.82 mm from its start
 #: (q <= 0.019 there), still stalled at 128 intervals and moves at 512.
@@ -518,7 +525,7 @@ def _local(toolpath: Toolpath, piece: Piece) -> Any:
 def solve_piece(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any],
     on_window: Callable[[float], None] | None = None, verify: FloatArray | None = None,
-    cache: dict[tuple[int, int, int, bool], tuple[Any, FloatArray, WindowResult]] | None = None,
+    cache: WindowCache | None = None,
     on_lp: Callable[[FloatArray, list[int]], None] | None = None,
     first_n_int: int | None = None,
 ) -> tuple[PieceProfile, list[int]]:
@@ -581,7 +588,7 @@ def _floor_refines(opt: Options) -> bool:
 def _refined(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any],
     on_window: Callable[[float], None] | None, verify: FloatArray | None,
-    cache: dict[tuple[int, int, int, bool], tuple[Any, FloatArray, WindowResult]] | None,
+    cache: WindowCache | None,
     on_lp: Callable[[FloatArray, list[int]], None] | None,
     first: tuple[float, PieceProfile, list[int]] | None = None,
 ) -> tuple[PieceProfile, list[int]]:
@@ -654,10 +661,12 @@ class _WindowWalk:
     opt: Options
     lim: LimitSet
     verify: FloatArray | None
-    cache: dict[tuple[int, int, int, bool], tuple[Any, FloatArray, WindowResult]] | None
+    cache: WindowCache | None
     rest_floor: bool
     a_rest_start: FloatArray | None
     a_rest_end: FloatArray | None
+    #: ``WindowSpec.rest_shapes``
+    rest_shapes: bool = False
 
     def window(
         self, stats: dict[str, Any], k0: int, k1: int, start: tuple[float, float] | None,
@@ -669,7 +678,8 @@ class _WindowWalk:
         knot k0_next on) of the solution a seam window joins at k1."""
         plan, N = self.plan, self.opt.checkpoints_per_interval
         spec = WindowSpec(stats["windows"], k0, k1, plan.d, plan.n_int, start, k1 == plan.n_int, prev_qstar, prev_c,
-                          self.a_rest_start if k0 == 0 else None, self.a_rest_end, self.rest_floor)
+                          self.a_rest_start if k0 == 0 else None, self.a_rest_end, self.rest_floor,
+                          rest_shapes=self.rest_shapes)
         if end_fixed is not None:
             kn, cn, qn = end_fixed
             spec = replace(spec, end_fixed=(float(cn[k1 - kn]), float(cn[k1 - kn + 1])), next_c=(kn, cn),
@@ -685,7 +695,7 @@ class _WindowWalk:
         if end_fixed is not None:
             st += [end_fixed[1][k0 - end_fixed[0]: k1 + 2 - end_fixed[0]],
                    end_fixed[2][k0 - end_fixed[0]: k1 + 2 - end_fixed[0]]]
-        key = (plan.n_int, k0, k1, self.rest_floor)
+        key = (plan.n_int, k0, k1, self.rest_floor, self.rest_shapes)
         stv = np.concatenate(st)
         cache = self.cache
         hit = cache.get(key) if cache is not None else None
@@ -711,12 +721,14 @@ class _WindowWalk:
         prev_qstar: tuple[int, FloatArray] | None, prev_c: tuple[int, FloatArray] | None,
         on_window: Callable[[float], None] | None, floored: list[int] | None,
         on_lp: Callable[[FloatArray, list[int]], None] | None = None, stop: int | None = None,
-        solved: list[WindowResult] | None = None,
+        solved: list[WindowResult] | None = None, shapes: list[FloatArray | None] | None = None,
     ) -> tuple[list[int], _WalkState | None]:
         """Windows from knot k0 on, each starting where the previous one's overlap begins, into c (the piece's
         control points): to the piece end, or (``stop``) until they are final up to knot ``stop``.
         Returns the knots where consecutive windows meet and, with ``stop``, the state a window starting
-        there inherits (None if the piece end came first).  ``solved``, if given, gets each window's result."""
+        there inherits (None if the piece end came first).  ``solved``, if given, gets each window's result;
+        ``shapes``, if given, the rest shapes' amplitudes of the piece's start and end ([head, tail],
+        ``WindowResult.shapes``) where a window has them."""
         plan = self.plan
         joins: list[int] = []
         while True:
@@ -724,6 +736,10 @@ class _WindowWalk:
             spec, res = self.window(stats, k0, k1, start, prev_qstar, prev_c)
             if solved is not None:
                 solved.append(res)
+            if shapes is not None:
+                for i, amp in enumerate(res.shapes):
+                    if amp is not None:
+                        shapes[i] = amp
             if floored is not None and res.floored:
                 floored.append(spec.index)
             if spec.end_rest:
@@ -806,7 +822,7 @@ def _chain_split(plan: WindowPlan, opt: Options) -> tuple[int, int, int] | None:
 def _solve_windows(
     toolpath: Toolpath, piece: Piece, plan: WindowPlan, opt: Options, lim: LimitSet, stats: dict[str, Any],
     on_window: Callable[[float], None] | None, verify: FloatArray | None,
-    cache: dict[tuple[int, int, int, bool], tuple[Any, FloatArray, WindowResult]] | None = None,
+    cache: WindowCache | None = None,
     rest_floor: bool = False, floored: list[int] | None = None,
     on_lp: Callable[[FloatArray, list[int]], None] | None = None,
 ) -> tuple[PieceProfile, list[int]]:
@@ -822,23 +838,56 @@ def _solve_windows(
     A long piece of method lp is walked as two chains (``_chain_split``), the second one in a forked
     process with ``Options.nlp_workers`` > 1 (the same feed as in this process).  If the second chain or
     the seam window fails, the first chain walks on over the second one's knots instead (counted in
-    ``stats["lp_seam_fallbacks"]``)."""
+    ``stats["lp_seam_fallbacks"]``).
+
+    Method lp with jerk adds the rest shapes to q in the piece's first and last knot intervals
+    (``WindowSpec.rest_shapes``; not with ``rest_floor``, whose floor is on the control point next to rest, nor
+    without jerk, where a quadratic leaves rest at amax already).  Should q dip to 0 inside such an interval
+    between the points the LP holds it at (``timing.rest_dips``), the piece is walked again without them
+    (counted in ``stats["rest_shape_fallbacks"]``)."""
+    shaped = LP_REST_SHAPES and opt.method == "lp" and opt.jerk and not rest_floor
+    prof, joins = _walk_plan(toolpath, piece, plan, opt, lim, stats, on_window, verify, cache, rest_floor, floored,
+                             on_lp, shaped)
+    if shaped and rest_dips(prof):
+        stats["rest_shape_fallbacks"] = stats.get("rest_shape_fallbacks", 0) + 1
+        if floored is not None:
+            floored.clear()
+        prof, joins = _walk_plan(toolpath, piece, plan, opt, lim, stats, None, verify, cache, rest_floor, floored,
+                                 on_lp, False)
+    return prof, joins
+
+
+def _walk_plan(
+    toolpath: Toolpath, piece: Piece, plan: WindowPlan, opt: Options, lim: LimitSet, stats: dict[str, Any],
+    on_window: Callable[[float], None] | None, verify: FloatArray | None, cache: WindowCache | None,
+    rest_floor: bool, floored: list[int] | None, on_lp: Callable[[FloatArray, list[int]], None] | None,
+    rest_shapes: bool,
+) -> tuple[PieceProfile, list[int]]:
+    """``_solve_windows``'s walk over the windows of one knot plan, with or without the rest shapes."""
     # the step at a corner is shared by the pieces on both sides, under either method (until session 6
     # only under lp+nlp: bench seed 1723, lp, a 5.8 degree corner with x moving on through it, stepped by
     # 2 a_rest = jmax Ts and the third difference across it read 1.018 x jmax; sharing costs test-profile
     # lp cases with corners 1.4 % of motion time, geometric mean over 47)
     ww = _WindowWalk(_local(toolpath, piece), _breaks(toolpath, piece), plan, opt, lim, verify, cache, rest_floor,
-                     _corner_rest(toolpath, piece, lim, at_end=False), _corner_rest(toolpath, piece, lim, at_end=True))
+                     _corner_rest(toolpath, piece, lim, at_end=False), _corner_rest(toolpath, piece, lim, at_end=True),
+                     rest_shapes)
     c = np.zeros(plan.n_int + 2)
+    shapes: list[FloatArray | None] = [None, None]
     split = _chain_split(plan, opt) if on_lp is None else None
     if split is None:
-        joins = ww.walk(c, stats, 0, None, None, None, on_window, floored, on_lp)[0]
+        joins = ww.walk(c, stats, 0, None, None, None, on_window, floored, on_lp, shapes=shapes)[0]
     else:
-        joins = _walk_chains(ww, c, split, stats, on_window, floored)
+        joins = _walk_chains(ww, c, split, stats, on_window, floored, shapes)
     # rest at both piece ends holds exactly (the LP meets it to solver tolerance)
     c[0] = -c[1]
     c[-1] = -c[-2]
-    return PieceProfile(s_start=piece.s_start, length=piece.length, d=plan.d, c=c), joins
+    head, tail = shapes
+    return PieceProfile(
+        s_start=piece.s_start, length=piece.length, d=plan.d, c=c,
+        rest_g=(0.0 if head is None else float(head[0]), 0.0 if tail is None else float(tail[0])),
+        rest_h=(() if head is None else tuple(float(x) for x in head[1:]),
+                () if tail is None else tuple(float(x) for x in tail[1:])),
+    ), joins
 
 
 def _second_chain(ww: _WindowWalk, k_b: int, stats: dict[str, Any], floored: bool) -> dict[str, Any]:
@@ -850,20 +899,23 @@ def _second_chain(ww: _WindowWalk, k_b: int, stats: dict[str, Any], floored: boo
     st = {k: (list(v) if isinstance(v, list) else v) for k, v in stats.items()}
     fl: list[int] = []
     solved: list[WindowResult] = []
-    joins = ww.walk(c, st, k_b, None, None, None, None, fl if floored else None, solved=solved)[0]
+    shapes: list[FloatArray | None] = [None, None]
+    joins = ww.walk(c, st, k_b, None, None, None, None, fl if floored else None, solved=solved, shapes=shapes)[0]
     new = {k: v for k, v in (ww.cache or {}).items() if cache0 is None or cache0.get(k) is not v}
     return {"c": c[k_b:], "c_star": solved[0].c_star, "joins": joins, "floored": fl, "cache": new,
+            "tail": shapes[1],
             "stats": {k: (v[len(stats.get(k, [])):] if isinstance(v, list) else v - stats.get(k, 0))
                       for k, v in st.items() if isinstance(v, (int, float, list))}}
 
 
 def _walk_chains(
     ww: _WindowWalk, c: FloatArray, split: tuple[int, int, int], stats: dict[str, Any],
-    on_window: Callable[[float], None] | None, floored: list[int] | None,
+    on_window: Callable[[float], None] | None, floored: list[int] | None, shapes: list[FloatArray | None],
 ) -> list[int]:
     """``_solve_windows`` on two chains (``_chain_split``): the first from the piece start to k_split, the
     second from rest at k_b to the end (forked with ``Options.nlp_workers`` > 1), then the seam window
-    [k_split, k_seam] from the first chain's state to the second chain's control points."""
+    [k_split, k_seam] from the first chain's state to the second chain's control points.  ``shapes`` gets the
+    rest shapes' amplitudes as in ``_WindowWalk.walk``."""
     k_split, k_b, k_seam = split
     stats["lp_chains"] = stats.get("lp_chains", 0) + 1
     pipe = proc = None
@@ -884,7 +936,7 @@ def _walk_chains(
         child_end.close()
     second: dict[str, Any] | None = None
     try:
-        joins, state = ww.walk(c, stats, 0, None, None, None, on_window, floored, stop=k_split)
+        joins, state = ww.walk(c, stats, 0, None, None, None, on_window, floored, stop=k_split, shapes=shapes)
         if pipe is not None:
             try:
                 tag, payload = pipe.recv()
@@ -916,8 +968,10 @@ def _walk_chains(
             second = None
     if second is None:  # the first chain walks on
         stats["lp_seam_fallbacks"] = stats.get("lp_seam_fallbacks", 0) + 1
-        more, _ = ww.walk(c, stats, state.k0, state.start, state.prev_qstar, state.prev_c, on_window, floored)
+        more, _ = ww.walk(c, stats, state.k0, state.start, state.prev_qstar, state.prev_c, on_window, floored,
+                          shapes=shapes)
         return joins + more
+    shapes[1] = second["tail"]
     if floored is not None:
         floored += second["floored"] + ([spec.index] if res.floored else [])
     c[k_split:k_seam] = res.c[: k_seam - k_split]
@@ -1460,6 +1514,7 @@ def schedule_stream(
     stats: dict[str, Any] = {
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
         "unverified": 0, "window_times": [], "sample_repairs": 0, "lp_chains": 0, "lp_seam_fallbacks": 0,
+        "rest_shape_fallbacks": 0,
     }
     if opt.method == "lp+nlp" and not machine.has_drives:
         raise InvalidMachineError(
@@ -1503,7 +1558,7 @@ def schedule_stream(
         i = piece.index
         last = i == n_pieces - 1
         emit("piece_start", i)
-        cache: dict[tuple[int, int, int, bool], tuple[Any, FloatArray, WindowResult]] = {}
+        cache: WindowCache = {}
 
         def on_window(s_done: float, s0: float = piece.s_start) -> None:
             report((s0 + lp_share * s_done) / total)
@@ -1645,6 +1700,9 @@ def schedule_stream(
         # those of them whose second chain or seam failed (the first chain then walked on alone)
         "lp_chains": stats["lp_chains"],
         "lp_seam_fallbacks": stats["lp_seam_fallbacks"],
+        # knot plans of method lp walked again without the rest shapes, whose q dipped to 0 next to rest
+        # (``_solve_windows``)
+        "rest_shape_fallbacks": stats["rest_shape_fallbacks"],
         # most rounds of re-solving a piece whose samples were over a limit (solvers.verify)
         "sample_repairs": stats["sample_repairs"],
         "control_points": int(sum(p.c.size for p in profiles)),

@@ -397,6 +397,31 @@ def rest_interval_times(profile: PieceProfile) -> tuple[float, float]:
     return out[0], out[1]
 
 
+def rest_dips(profile: PieceProfile) -> bool:
+    """Whether q dips to (nearly) 0 inside, or at the rest end of, one of the two rest intervals that have a bump
+    or rises.  There q = r (A + B r + ``bspline.rest_bump_quotient``(r)) at the unit distance r from rest (A, B as
+    in ``rest_interval_times``), and the factor after r is checked at REST_DIP_POINTS points of r in [0, 1]:
+    a dip is a value at most REST_DIP_SHARE of its largest.  At r = 0 the factor is d q'(rest): an LP whose
+    row q' >= 0 at rest binds leaves it at a rounding residue (bench seed 894, 1.7e-15 against 31 at r = 1),
+    which passes ``stuck`` but leaves the time table bisecting towards the near-singularity for minutes."""
+    c = profile.c
+    r = np.linspace(0.0, 1.0, REST_DIP_POINTS)
+    for c1, c2, g, h in ((c[1], c[2], profile.rest_g[0], profile.rest_h[0]),
+                         (c[-2], c[-3], profile.rest_g[1], profile.rest_h[1])):
+        if not (g or any(h)):
+            continue
+        A, B = 2.0 * float(c1), 0.5 * (float(c2) - 3.0 * float(c1))
+        f = A + B * r + bspline.rest_bump_quotient(r, g, h)
+        if not float(np.min(f)) > REST_DIP_SHARE * float(np.max(f)):
+            return True
+    return False
+
+
+#: Points of ``rest_dips``, and the share of its largest value at which the factor counts as a dip.
+REST_DIP_POINTS = 4097
+REST_DIP_SHARE = 1e-6
+
+
 #: Gauss-Legendre nodes for a rest interval's time with a bump (``rest_interval_times``).
 REST_TIME_NODES = 48
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(REST_TIME_NODES)

@@ -112,7 +112,8 @@ def test_json_lines_arcs_polylines_blended_through_corners(client: TestClient) -
     assert blend.status_code == 200, blend.text
     b = blend.json()
     assert b["diagnostics"]["corners"] == [] and b["diagnostics"]["unblended_corners"] == []
-    assert b["summary"]["motion_time"] < 0.85 * s["summary"]["motion_time"]  # 1.311 s vs 1.758 s
+    # 1.349 s vs 1.424 s (before the LP's rest shapes, which make a stop cheaper, 1.431 s vs 1.835 s)
+    assert b["summary"]["motion_time"] < 0.97 * s["summary"]["motion_time"]
     # every sample within 0.05 mm of the programmed lines and the R6 arc (centre (16.683, 5))
     x, y = np.array(b["samples"]["x"]), np.array(b["samples"]["y"])
     cx, cy = 20 - (36 - 25) ** 0.5, 5.0

@@ -19,9 +19,10 @@ from tests.solvers.test_nlp import _check_drive
 #: 8 legs of 11.2 mm turning 53 degrees alternately (a pocketing-style zig-zag).
 ZIGZAG = np.array([[10.0 * i, 5.0 * (i % 2), 0.0] for i in range(9)])
 #: Blend tolerance (mm) and the speed-up it must give over stopping at each corner
-#: (measured 3.634 s / 2.252 s = 1.61 on the router preset at commit time).
+#: (measured 3.634 s / 2.252 s = 1.61 on the router preset at commit time; 3.129 s / 2.159 s = 1.45 before the
+#: LP's rest shapes, which make a stop cheaper: 2.526 s / 1.998 s = 1.26, session 27).
 BLEND_TOL_MM = 0.1
-MIN_SPEEDUP = 1.4
+MIN_SPEEDUP = 1.2
 
 
 def test_blended_zigzag_is_faster_and_within_limits() -> None:
