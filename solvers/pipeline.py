@@ -159,9 +159,6 @@ BINDING_UTILISATION = 0.98
 #: Times a piece whose feed stalls is solved again with twice the knots (the last time with a floor on
 #: q' at its rest ends) ...
 KNOT_REFINEMENTS = 3
-#: Method lp's LP adds the rest shapes to q in each piece's first and last knot interval (``lp.WindowSpec.rest_shapes``,
-#: ``_solve_windows``).
-LP_REST_SHAPES = True
 #: ... and more times, with that floor, while it is still stuck and its knots stay at most this many: bench
 #: seed 828, a 34 mm closed loop whose curvature jumps by 1.7e4 /mm at a knot 0.82 mm from its start
 #: (q <= 0.019 there), still stalled at 128 intervals and moves at 512.
@@ -173,6 +170,9 @@ FLOOR_REFINE_GAIN = 0.99
 #: ``Options.knot_spacing`` is kept: the 45-loop flower at 4.63 mm went from 22 to 67 LP windows,
 #: 4 % less motion for ~3 x the compute)
 FLOOR_REFINE_MAX_INTERVALS = 1024
+#: Method lp with jerk adds the rest shapes to q in each piece's first and last knot interval
+#: (``lp.WindowSpec.rest_shapes``, ``_solve_windows``).
+LP_REST_SHAPES = True
 #: A refined span (``_slower_spans``) whose time exceeds the LP feed's over it by more than this share keeps
 #: the LP's feed.  The NLP starts from the LP's feed (admissible for its limits) and minimises time, so a
 #: slower span is a feed collapsing between its checkpoints, where its objective does not look (the

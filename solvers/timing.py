@@ -372,11 +372,9 @@ def rest_interval_times(profile: PieceProfile) -> tuple[float, float]:
     ``rest_h``: g b + sum_k h_k e_k added to q) the root is of A + B w^2 + g (1 - w^2)^2
     + sum_k h_k w^2 (1 - w^2)^k, smooth in w: REST_TIME_NODES-point Gauss-Legendre.
     inf if the feed does not leave (reach) rest."""
-    c, d = profile.c, profile.d
+    d = profile.d
     out = []
-    for c1, c2, g, h in ((c[1], c[2], profile.rest_g[0], profile.rest_h[0]),
-                         (c[-2], c[-3], profile.rest_g[1], profile.rest_h[1])):
-        A, B = 2.0 * float(c1), 0.5 * (float(c2) - 3.0 * float(c1))
+    for A, B, g, h in _rest_ends(profile):
         if g or any(h):
             w, x = _REST_TIME_GL
             r = A + B * x * x + bspline.rest_bump_quotient(x * x, g, h)
@@ -397,6 +395,16 @@ def rest_interval_times(profile: PieceProfile) -> tuple[float, float]:
     return out[0], out[1]
 
 
+def _rest_ends(profile: PieceProfile) -> list[tuple[float, float, float, tuple[float, ...]]]:
+    """(A, B, g, h) of the first and the last knot interval: q = r (A + B r + ``bspline.rest_bump_quotient``(r, g, h))
+    at the unit distance r from rest, A = 2 c_1 and B = (c_2 - 3 c_1) / 2 (c_1 next to rest; the last interval
+    mirrored), g and h its bump's and rises' amplitudes (``rest_interval_times``, ``rest_dips``)."""
+    c = profile.c
+    return [(2.0 * float(c1), 0.5 * (float(c2) - 3.0 * float(c1)), g, h)
+            for c1, c2, g, h in ((c[1], c[2], profile.rest_g[0], profile.rest_h[0]),
+                                 (c[-2], c[-3], profile.rest_g[1], profile.rest_h[1]))]
+
+
 def rest_dips(profile: PieceProfile) -> bool:
     """Whether q dips to (nearly) 0 inside, or at the rest end of, one of the two rest intervals that have a bump
     or rises.  There q = r (A + B r + ``bspline.rest_bump_quotient``(r)) at the unit distance r from rest (A, B as
@@ -404,13 +412,10 @@ def rest_dips(profile: PieceProfile) -> bool:
     a dip is a value at most REST_DIP_SHARE of its largest.  At r = 0 the factor is d q'(rest): an LP whose
     row q' >= 0 at rest binds leaves it at a rounding residue (bench seed 894, 1.7e-15 against 31 at r = 1),
     which passes ``stuck`` but leaves the time table bisecting towards the near-singularity for minutes."""
-    c = profile.c
     r = np.linspace(0.0, 1.0, REST_DIP_POINTS)
-    for c1, c2, g, h in ((c[1], c[2], profile.rest_g[0], profile.rest_h[0]),
-                         (c[-2], c[-3], profile.rest_g[1], profile.rest_h[1])):
+    for A, B, g, h in _rest_ends(profile):
         if not (g or any(h)):
             continue
-        A, B = 2.0 * float(c1), 0.5 * (float(c2) - 3.0 * float(c1))
         f = A + B * r + bspline.rest_bump_quotient(r, g, h)
         if not float(np.min(f)) > REST_DIP_SHARE * float(np.max(f)):
             return True
