@@ -140,6 +140,21 @@ def rest_bump(
     return b[0], sign * b[1] / d, b[2] / (d * d)
 
 
+def add_rest_bump(
+    q3: tuple[FloatArray, FloatArray, FloatArray], s: FloatArray, d: float, k: int, head: bool, g: float,
+    h: Sequence[float] = (),
+) -> None:
+    """Add ``rest_bump`` in place to q, q', q'' (``q3``, each (K,)) at those of the piece-local points s that lie on
+    the rest interval k (the piece's first, ``head``: s < (k + 1) d; or last: s > k d); nothing where g and h are
+    all 0 (``timing.PieceProfile.feed``, ``solvers.lp.WindowLP._eval``)."""
+    if not (g or any(h)):
+        return
+    at = s < (k + 1) * d if head else s > k * d
+    if at.any():
+        for x, bx in zip(q3, rest_bump(s[at], d, k, head, g, h), strict=True):
+            x[at] += bx
+
+
 def _bump_shape(r: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The bump b = r (1 - r)^m (m = REST_BUMP_POWER) and its first two r-derivatives (``rest_bump``)."""
     m = REST_BUMP_POWER

@@ -735,12 +735,8 @@ class WindowLP:
         spec = self.spec
         q3 = bspline.evaluate(c[: spec.ncols], s, spec.d, k_lo=spec.k0, k_hi=spec.k1 - 1, col0=spec.k0)
         for head, kr, col in self.shape_ends:
-            at = s < spec.d if head else s > kr * spec.d
-            if at.any():
-                amp = c[col : col + bspline.REST_SHAPES]
-                b = bspline.rest_bump(s[at], spec.d, kr, head, float(amp[0]), tuple(float(x) for x in amp[1:]))
-                for x, bx in zip(q3, b, strict=True):
-                    x[at] += bx
+            amp = c[col : col + bspline.REST_SHAPES]
+            bspline.add_rest_bump(q3, s, spec.d, kr, head, float(amp[0]), tuple(float(x) for x in amp[1:]))
         return q3
 
     def _shapes(self, c: FloatArray) -> tuple[FloatArray | None, FloatArray | None]:

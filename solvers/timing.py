@@ -107,17 +107,10 @@ class PieceProfile:
         self, s: FloatArray, q3: tuple[FloatArray, FloatArray, FloatArray]
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """q, q', q'' with the rest intervals' bumps and rises (``rest_g``, ``rest_h``) added (copies)."""
-        q, q1, q2 = (x.copy() for x in q3)
-        n, d = self.n_int, self.d
-        for g, h, k, head in ((self.rest_g[0], self.rest_h[0], 0, True),
-                              (self.rest_g[1], self.rest_h[1], n - 1, False)):
-            sel = s < d if head else s > (n - 1) * d
-            if (g or any(h)) and sel.any():
-                b, b1, b2 = bspline.rest_bump(s[sel], d, k, head, g, h)
-                q[sel] += b
-                q1[sel] += b1
-                q2[sel] += b2
-        return q, q1, q2
+        out = (q3[0].copy(), q3[1].copy(), q3[2].copy())
+        bspline.add_rest_bump(out, s, self.d, 0, True, self.rest_g[0], self.rest_h[0])
+        bspline.add_rest_bump(out, s, self.d, self.n_int - 1, False, self.rest_g[1], self.rest_h[1])
+        return out
 
     def s_of_x(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Piece-local s(x) and ds/dx."""
