@@ -149,10 +149,17 @@ def add_rest_bump(
     all 0 (``timing.PieceProfile.feed``, ``solvers.lp.WindowLP._eval``)."""
     if not (g or any(h)):
         return
-    at = s < (k + 1) * d if head else s > k * d
+    at = on_rest_interval(s, d, k, head)
     if at.any():
         for x, bx in zip(q3, rest_bump(s[at], d, k, head, g, h), strict=True):
             x[at] += bx
+
+
+def on_rest_interval(s: FloatArray, d: float, k: int, head: bool) -> NDArray[np.bool_]:
+    """Which of the piece-local points s (K,) lie on the rest interval k, the piece's first (``head``:
+    s < (k + 1) d) or last (s > k d): where the rest shapes are added (``add_rest_bump``) and where the LP
+    has their columns (``solvers.lp.WindowLP._basis``)."""
+    return np.asarray(s < (k + 1) * d if head else s > k * d)
 
 
 def _bump_shape(r: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:

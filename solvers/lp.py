@@ -505,15 +505,15 @@ class WindowLP:
     # ----- row blocks ---------------------------------------------------------
     def _basis(self, s: FloatArray) -> Basis:
         """``bspline.basis`` at s in this window, k (K,), W0, W1, W2 (K, 3), and the rest shapes at those of
-        the points in a rest interval with shapes (``shape_ends``; the same intervals as
-        ``timing.PieceProfile._bumped``: s < d at the head, s > (n - 1) d at the tail)."""
+        the points in a rest interval with shapes (``shape_ends``; ``bspline.on_rest_interval``, as where
+        ``timing.PieceProfile._bumped`` adds them)."""
         sp_ = self.spec
         k, W0, W1, W2 = bspline.basis(s, sp_.d, sp_.n_int, sp_.k0, sp_.k1 - 1)
         if not self.shape_ends:
             return k, W0, W1, W2, None
         rows, cols, S = [], [], []
         for head, kr, col in self.shape_ends:
-            at = np.flatnonzero(s < sp_.d if head else s > kr * sp_.d)
+            at = np.flatnonzero(bspline.on_rest_interval(s, sp_.d, kr, head))
             rows.append(at)
             cols.append(np.full(at.size, col, dtype=np.int64))
             S.append(bspline.rest_shapes(s[at], sp_.d, kr, head))
@@ -1219,7 +1219,7 @@ class WindowLP:
         if self._fine_ub is None or self._fine_ub[0] is not g:
             self._fine_ub = (g, velocity_bound(g, self.lim))
         bad = f * f > self._fine_ub[1] * tol**2
-        if self.shape_ends:  # q >= 0 (the rest shapes' amplitudes are free: ``_shape_rows``)
+        if self.shape_ends:  # q >= 0 (the rest shapes' amplitudes are free columns: ``solve``)
             bad |= q3[0] < -REST_SHAPE_Q_TOL * self.Q
         lim = self.lim
         rest = self._rest_mask(g.s)
