@@ -2,6 +2,7 @@
 
     python -m bench.lp_switch --switch rest_shapes   # pipeline.LP_REST_SHAPES (the LP's rest shapes, session 27)
     python -m bench.lp_switch --switch devex         # lp.DUAL_EDGE_WEIGHT 1 (Devex) against -1 (HiGHS's default)
+    python -m bench.lp_switch --switch no_scale      # lp.SIMPLEX_SCALE 0 (HiGHS's scaling off) against 2 (its default)
 
 Cases: one flower loop (v + a, and with jerk) and rest-to-rest router lines of 1, 20, 100 and 500 mm (with jerk).
 Each case is scheduled REPEATS times per setting, the settings alternated so both see the same machine; CPU is
@@ -35,7 +36,12 @@ def _set_devex(on: bool) -> None:
     lp.DUAL_EDGE_WEIGHT = 1 if on else -1
 
 
-SWITCHES: dict[str, Callable[[bool], None]] = {"rest_shapes": _set_rest_shapes, "devex": _set_devex}
+def _set_no_scale(on: bool) -> None:
+    lp.SIMPLEX_SCALE = 0 if on else 2
+
+
+SWITCHES: dict[str, Callable[[bool], None]] = {"rest_shapes": _set_rest_shapes, "devex": _set_devex,
+                                                "no_scale": _set_no_scale}
 
 
 def cases() -> dict[str, tuple[Toolpath, Options]]:

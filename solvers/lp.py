@@ -136,6 +136,8 @@ PRESOLVE = "off"
 #: 0.9985 x against the default (seeds 550 and 566 0.45 x and 0.54 x, 663 +2.9 %, the rest within 2.4 %), lp+nlp
 #: within 0.5 % in all 200 compared.  Dantzig (0) was not faster (session 24).
 DUAL_EDGE_WEIGHT = 1
+#: HiGHS's simplex scaling (``simplex_scale_strategy``; 2, equilibration, is HiGHS's default).
+SIMPLEX_SCALE = 2
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.
 COL_SCALE_MIN_BASIS = 0.1
@@ -452,6 +454,8 @@ class _ShapeRows:
     S: tuple[FloatArray, FloatArray, FloatArray]  # (Kr, REST_SHAPES) each: q, q', q'' per unit amplitude
 
 
+#: The breaks whose velocity steps count (``WindowLP._vstep_live``): s (nl,), w_b (nl,), reach (nl,), q0 (nl,).
+_LiveSteps = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 #: ``bspline.basis`` at points (k, W0, W1, W2) and the rest shapes there (None: the window has none).
 Basis = tuple[IntArray, FloatArray, FloatArray, FloatArray, _ShapeRows | None]
 
@@ -489,6 +493,11 @@ class WindowLP:
         self._fine_g: tuple[FloatArray, PathSamples] | None = None
         self._step_cache: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._vstep_cache: FloatArray | None = None
+        #: ``_break_qmax`` for the Q it was computed at, and ``_vstep_live`` per (axis, limit, kernel, power, Q):
+        #: both read only the window's breaks, not the points asked about (a flower loop with jerk asked for
+        #: them ~60 and ~40 times a schedule)
+        self._qmax_cache: tuple[float, FloatArray] | None = None
+        self._vstep_live_cache: dict[tuple[int, float, float, int, float], _LiveSteps | None] = {}
         #: velocity_bound of the verification grid's geometry (``_fine_geometry``), as (geometry, bound)
         self._fine_ub: tuple[PathSamples, FloatArray] | None = None
         #: knot intervals after k0 on which the previous window's solution and q* are inherited
@@ -536,15 +545,20 @@ class WindowLP:
         A = bspline.combination(k, list(zip(coef, (W0, W1, W2), strict=False)), spec.k0, spec.ncols)
         if self.nvar == spec.ncols:
             return A
-        n_ext = self.nvar - spec.ncols
+        K = k.size
         if shapes is None or shapes.rows.size == 0:
-            return sp.csr_matrix(sp.hstack([A, sp.csr_matrix((k.size, n_ext))], format="csr"))
+            return sp.csr_matrix((A.data, A.indices, A.indptr), shape=(K, self.nvar))
         data = sum(a[shapes.rows, None] * S for a, S in zip(coef, shapes.S, strict=False))
         nr = bspline.REST_SHAPES
-        E = sp.csr_matrix((np.asarray(data).ravel(), (np.repeat(shapes.rows, nr),
-                           (shapes.cols[:, None] - spec.ncols + np.arange(nr)[None, :]).ravel())),
-                          shape=(k.size, n_ext))
-        return sp.csr_matrix(sp.hstack([A, E], format="csr"))
+        # One CSR from A's three entries a row and the shapes' amplitudes (columns after every control point),
+        # each row's columns ascending: what hstack([A, E]) gave, without scipy's per-matrix overhead (three
+        # matrices built and checked a call; _combo was ~20 % of a flower loop's LP with jerk)
+        r = np.concatenate([np.repeat(np.arange(K), 3), np.repeat(shapes.rows, nr)])
+        c = np.concatenate([A.indices.astype(np.int64), (shapes.cols[:, None] + np.arange(nr)[None, :]).ravel()])
+        order = np.lexsort((c, r))
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(r, minlength=K))])
+        v = np.concatenate([A.data, np.asarray(data, dtype=np.float64).ravel()])
+        return sp.csr_matrix((v[order], c[order], indptr), shape=(K, self.nvar))
 
     def _add(self, rows: _Rows, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, s: FloatArray) -> None:
         """Add rows at points s; on inherited intervals widen them to admit the previous solution (and on
@@ -949,7 +963,9 @@ class WindowLP:
     def _break_qmax(self) -> FloatArray:
         """The largest q each break may have (nb,): its velocity step's cap, its acceleration step's (both
         rows of every model, ``_step_rows``) and Q."""
-        return np.minimum(np.minimum(self._vstep_caps(), self._step_caps()), self.Q)
+        if self._qmax_cache is None or self._qmax_cache[0] != self.Q:
+            self._qmax_cache = (self.Q, np.minimum(np.minimum(self._vstep_caps(), self._step_caps()), self.Q))
+        return self._qmax_cache[1]
 
     def _step_caps(self) -> FloatArray:
         """Cap on q at each break from the acceleration step, min_x a_step_x / |jump of x_ss|, (nb,)."""
@@ -980,24 +996,10 @@ class WindowLP:
         largest q the break's cap allows, min(cap, Q), divided by the square of the number of live
         breaks within twice the reach (so the constant shares of breaks close to one point add up to
         at most half the limit)), or None where no break's impulse reaches V_STEP_MIN of the limit."""
-        Ts = self.lim.v_step_period
-        if Ts is None or self.lim.v_step is None or self.breaks.size == 0:
+        live = self._vstep_live(ax, limit, kernel, power)
+        if live is None:
             return None
-        br, _, jump1 = self._steps()
-        q0 = np.minimum(self._vstep_caps(), self.Q)
-        # the break's largest feed (its acceleration step's cap too: ``_break_qmax``) decides whether its
-        # impulse counts and how far it reaches; the tangent stays at q0 (a point nearer the break's feed
-        # steepens the coupling, and the LP held such breaks at their floor: bench seed 894)
-        qmax = self._break_qmax()
-        w = kernel * jump1[:, ax] / (Ts**power * limit)
-        live = w * np.sqrt(qmax) > V_STEP_MIN
-        if not live.any():
-            return None
-        br, q0, qmax, w = br[live], q0[live], qmax[live], w[live]
-        reach = 3.0 * Ts * (np.sqrt(qmax) + 3.0 * Ts * float(np.linalg.norm(self.lim.amax))) + BREAK_EPS_MM
-        # breaks within twice the reach of each (counted against the largest reach: at most more)
-        crowd = (np.searchsorted(br, br + reach + reach.max(), side="right")
-                 - np.searchsorted(br, br - reach - reach.max(), side="left"))
+        br, w, reach, q0 = live
         # points within each break's reach, by bisection on the sorted points (a dense polyline has
         # ~1,000 breaks and ~10,000 verification points per window)
         order = np.argsort(s, kind="stable")
@@ -1013,7 +1015,38 @@ class WindowLP:
         near[pt] = True
         row = (np.cumsum(near) - 1)[pt]
         W = sp.csr_matrix((w[col], (row, col)), shape=(int(near.sum()), br.size))
-        return near, W, br, np.asarray(q0 / crowd.astype(np.float64) ** 2, dtype=np.float64)
+        return near, W, br, q0
+
+    def _vstep_live(self, ax: int, limit: float, kernel: float, power: int) -> _LiveSteps | None:
+        """The breaks whose velocity step's impulse counts for axis ``ax`` (``_vstep_terms``): their s, weight
+        w_b, reach and linearisation point q0 (crowding applied), or None; computed once per window and Q."""
+        key = (ax, limit, kernel, power, self.Q)
+        if key in self._vstep_live_cache:
+            return self._vstep_live_cache[key]
+        Ts = self.lim.v_step_period
+        if Ts is None or self.lim.v_step is None or self.breaks.size == 0:
+            return self._store_live(key, None)
+        br, _, jump1 = self._steps()
+        q0 = np.minimum(self._vstep_caps(), self.Q)
+        # the break's largest feed (its acceleration step's cap too: ``_break_qmax``) decides whether its
+        # impulse counts and how far it reaches; the tangent stays at q0 (a point nearer the break's feed
+        # steepens the coupling, and the LP held such breaks at their floor: bench seed 894)
+        qmax = self._break_qmax()
+        w = kernel * jump1[:, ax] / (Ts**power * limit)
+        live = w * np.sqrt(qmax) > V_STEP_MIN
+        if not live.any():
+            return self._store_live(key, None)
+        br, q0, qmax, w = br[live], q0[live], qmax[live], w[live]
+        reach = 3.0 * Ts * (np.sqrt(qmax) + 3.0 * Ts * float(np.linalg.norm(self.lim.amax))) + BREAK_EPS_MM
+        # breaks within twice the reach of each (counted against the largest reach: at most more)
+        crowd = (np.searchsorted(br, br + reach + reach.max(), side="right")
+                 - np.searchsorted(br, br - reach - reach.max(), side="left"))
+        return self._store_live(key, (br, w, reach, np.asarray(q0 / crowd.astype(np.float64) ** 2,
+                                                           dtype=np.float64)))
+
+    def _store_live(self, key: tuple[int, float, float, int, float], live: _LiveSteps | None) -> _LiveSteps | None:
+        self._vstep_live_cache[key] = live
+        return live
 
     def _vstep_coupling(
         self, s: FloatArray, ax: int, limit: float, kernel: float, power: int
@@ -1287,20 +1320,18 @@ class WindowLP:
         h.setOptionValue("output_flag", False)
         h.setOptionValue("presolve", PRESOLVE)
         h.setOptionValue("simplex_dual_edge_weight_strategy", DUAL_EDGE_WEIGHT)
-        lp = highspy.HighsLp()
-        lp.num_col_ = A.shape[1]
-        lp.num_row_ = A.shape[0]
-        lp.col_cost_ = -w
-        lp.col_lower_ = np.where(np.isfinite(col_lo), col_lo, -highspy.kHighsInf)
-        lp.col_upper_ = np.where(np.isfinite(col_hi), col_hi, highspy.kHighsInf)
-        lp.row_lower_ = np.where(np.isfinite(lo), lo, -highspy.kHighsInf)
-        lp.row_upper_ = np.where(np.isfinite(hi), hi, highspy.kHighsInf)
-        Acsc = A.tocsc()
-        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-        lp.a_matrix_.start_ = Acsc.indptr.astype(np.int32)
-        lp.a_matrix_.index_ = Acsc.indices.astype(np.int32)
-        lp.a_matrix_.value_ = Acsc.data
-        h.passModel(lp)
+        h.setOptionValue("simplex_scale_strategy", SIMPLEX_SCALE)
+        # columns, then the rows as they are (CSR), each passed as one numpy buffer: filling a ``HighsLp``'s
+        # fields copied every array element by element (~1.5 ms a model of ~2,700 rows)
+        n = A.shape[1]
+        passed = (
+            h.addVars(n, np.where(np.isfinite(col_lo), col_lo, -inf), np.where(np.isfinite(col_hi), col_hi, inf)),
+            h.changeColsCost(n, np.arange(n, dtype=np.int32), np.ascontiguousarray(-w, dtype=np.float64)),
+            h.addRows(A.shape[0], np.where(np.isfinite(lo), lo, -inf), np.where(np.isfinite(hi), hi, inf), A.nnz,
+                      A.indptr[:-1].astype(np.int32), A.indices.astype(np.int32), A.data),
+        )
+        if highspy.HighsStatus.kError in passed:
+            raise SolverFailure("HiGHS did not take the LP", window=self.spec.index, status=str(passed))
         return self._highs_run(h)
 
     def _highs_run(self, h: highspy.Highs) -> FloatArray:

@@ -85,6 +85,10 @@ def test_lp_rows_and_evaluation_match_the_time_tables_profile() -> None:
     s = np.concatenate([np.linspace(0.0, tp.length, 301), d * rng.uniform(0, 1, 20),
                         tp.length - d * rng.uniform(0, 1, 20)])
     B = w._mats(s)
+    # each row's columns ascending, none twice (the solver gets the rows as given)
+    assert all(Bi.has_canonical_format and Bi.shape == (s.size, w.nvar) for Bi in B)
+    inner = w._mats(np.linspace(2.0 * d, tp.length - 2.0 * d, 50))  # no point in a rest interval
+    assert all(Bi.shape == (50, w.nvar) and Bi.nnz == 150 for Bi in inner)
     ev = w._eval(x, s)
     head, tail = w._shapes(x)
     assert head is not None and tail is not None
