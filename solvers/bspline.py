@@ -56,12 +56,17 @@ def combination(k: IntArray, terms: list[tuple[FloatArray, FloatArray]], col0: i
     the designs' common sparsity (3 non-zeros a row, explicit zeros kept): the same values, summed in the
     same order, as the sparse products and sums, at a fraction of their cost (the LP's rows)."""
     K = k.size
+    cols = (k[:, None] - col0 + np.arange(3)[None, :]).ravel()
+    return sp.csr_matrix((combination_data(terms).ravel(), cols, np.arange(0, 3 * K + 1, 3)), shape=(K, ncols))
+
+
+def combination_data(terms: list[tuple[FloatArray, FloatArray]]) -> FloatArray:
+    """The (K, 3) entries of ``combination``: sum_i a_i[:, None] W_i, summed in the terms' order."""
     a0, W0 = terms[0]
     data = a0[:, None] * W0
     for a, W in terms[1:]:
         data = data + a[:, None] * W
-    cols = (k[:, None] - col0 + np.arange(3)[None, :]).ravel()
-    return sp.csr_matrix((data.ravel(), cols, np.arange(0, 3 * K + 1, 3)), shape=(K, ncols))
+    return np.asarray(data, dtype=np.float64)
 
 
 def evaluate(
@@ -131,11 +136,12 @@ def rest_bump(
     t = np.asarray(s, dtype=np.float64) / d - k
     r = t if head else 1.0 - t
     sign = 1.0 if head else -1.0
-    bb = _bump_shape(r)
+    up = _powers(1.0 - r)
+    bb = _bump_shape(r, up)
     b = (g * bb[0], g * bb[1], g * bb[2])
     for hk, j in zip(h, REST_RISE_POWERS, strict=True) if len(h) else ():
         if hk:
-            e = _rise_shape(r, j)
+            e = _rise_shape(r, j, up)
             b = (b[0] + hk * e[0], b[1] + hk * e[1], b[2] + hk * e[2])
     return b[0], sign * b[1] / d, b[2] / (d * d)
 
@@ -162,18 +168,32 @@ def on_rest_interval(s: FloatArray, d: float, k: int, head: bool) -> NDArray[np.
     return np.asarray(s < (k + 1) * d if head else s > k * d)
 
 
-def _bump_shape(r: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """The bump b = r (1 - r)^m (m = REST_BUMP_POWER) and its first two r-derivatives (``rest_bump``)."""
+#: The highest power of u = 1 - r that the shapes read.
+_TOP_POWER = max(REST_BUMP_POWER, *REST_RISE_POWERS)
+
+
+def _powers(u: Any) -> list[Any]:
+    """[1, u, u^2, ..., u^_TOP_POWER] by products (floats, arrays or CasADi expressions): numpy's float
+    ``u ** j`` calls ``pow`` per element for j > 2 (the shapes' powers were ~5 % of a flower loop with jerk)."""
+    out: list[Any] = [1.0, u]
+    for _ in range(2, _TOP_POWER + 1):
+        out.append(out[-1] * u)
+    return out
+
+
+def _bump_shape(r: FloatArray, up: list[Any]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The bump b = r (1 - r)^m (m = REST_BUMP_POWER) and its first two r-derivatives (``rest_bump``); ``up`` the
+    powers of 1 - r (``_powers``)."""
     m = REST_BUMP_POWER
-    u = 1.0 - r
-    return r * u**m, u ** (m - 1) * (1.0 - (m + 1) * r), -m * u ** (m - 2) * (2.0 - (m + 1) * r)
+    return r * up[m], up[m - 1] * (1.0 - (m + 1) * r), -m * up[m - 2] * (2.0 - (m + 1) * r)
 
 
-def _rise_shape(r: FloatArray, j: int) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """The rise e_j = r^2 (1 - r)^j and its first two r-derivatives (``rest_bump``)."""
-    u = 1.0 - r
-    return (r * r * u**j, r * u ** (j - 1) * (2.0 - (2.0 + j) * r),
-            u ** (j - 2) * (2.0 * u * u - 4.0 * j * r * u + j * (j - 1) * r * r))
+def _rise_shape(r: FloatArray, j: int, up: list[Any]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The rise e_j = r^2 (1 - r)^j and its first two r-derivatives (``rest_bump``); ``up`` the powers of 1 - r
+    (``_powers``)."""
+    u = up[1]
+    return (r * r * up[j], r * up[j - 1] * (2.0 - (2.0 + j) * r),
+            up[j - 2] * (2.0 * u * u - 4.0 * j * r * u + j * (j - 1) * r * r))
 
 
 #: Amplitudes of a rest interval's shapes in ``rest_shapes``: the bump, then one rise per REST_RISE_POWERS.
@@ -188,7 +208,8 @@ def rest_shapes(s: FloatArray, d: float, k: int, head: bool) -> tuple[FloatArray
     t = np.asarray(s, dtype=np.float64) / d - k
     r = t if head else 1.0 - t
     sign = 1.0 if head else -1.0
-    cols = [_bump_shape(r)] + [_rise_shape(r, j) for j in REST_RISE_POWERS]
+    up = _powers(1.0 - r)
+    cols = [_bump_shape(r, up)] + [_rise_shape(r, j, up) for j in REST_RISE_POWERS]
     return (np.column_stack([c[0] for c in cols]), np.column_stack([sign * c[1] / d for c in cols]),
             np.column_stack([c[2] / (d * d) for c in cols]))
 
@@ -206,8 +227,8 @@ def rest_bump_quotient(r: Any, g: Any, h: Sequence[Any] = ()) -> Any:
     from rest (floats, arrays or CasADi expressions): what the shapes add under the root of a rest interval's
     time integrand, where q / r is taken with r = w^2 (``timing.PieceProfile.h_local``,
     ``timing.rest_interval_times``, ``solvers.nlp._Shape._rest_rows``)."""
-    u = 1.0 - r
-    out = g * u**REST_BUMP_POWER
+    up = _powers(1.0 - r)
+    out = g * up[REST_BUMP_POWER]
     for hk, j in zip(h, REST_RISE_POWERS, strict=True) if len(h) else ():
-        out = out + hk * (r * u**j)
+        out = out + hk * (r * up[j])
     return out

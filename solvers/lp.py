@@ -339,7 +339,8 @@ class _Rows:
 
     def add(self, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray) -> None:
         if A.shape[0]:
-            self.blocks.append(sp.csr_matrix(A))
+            # (a CSR matrix as it is: wrapping it again shares its arrays all the same, at scipy's checking cost)
+            self.blocks.append(A if type(A) is sp.csr_matrix else sp.csr_matrix(A))
             self.lo.append(np.asarray(lo, dtype=np.float64))
             self.hi.append(np.asarray(hi, dtype=np.float64))
 
@@ -542,22 +543,25 @@ class WindowLP:
         (nvar columns: the rest shapes' amplitudes after the control points)."""
         k, W0, W1, W2, shapes = basis
         spec = self.spec
-        A = bspline.combination(k, list(zip(coef, (W0, W1, W2), strict=False)), spec.k0, spec.ncols)
+        terms = list(zip(coef, (W0, W1, W2), strict=False))
         if self.nvar == spec.ncols:
-            return A
+            return bspline.combination(k, terms, spec.k0, spec.ncols)
         K = k.size
+        data3 = bspline.combination_data(terms).ravel()
+        cols3 = (k[:, None] - spec.k0 + np.arange(3)[None, :]).ravel()
         if shapes is None or shapes.rows.size == 0:
-            return sp.csr_matrix((A.data, A.indices, A.indptr), shape=(K, self.nvar))
+            return sp.csr_matrix((data3, cols3, np.arange(0, 3 * K + 1, 3)), shape=(K, self.nvar))
         data = sum(a[shapes.rows, None] * S for a, S in zip(coef, shapes.S, strict=False))
         nr = bspline.REST_SHAPES
-        # One CSR from A's three entries a row and the shapes' amplitudes (columns after every control point),
-        # each row's columns ascending: what hstack([A, E]) gave, without scipy's per-matrix overhead (three
-        # matrices built and checked a call; _combo was ~20 % of a flower loop's LP with jerk)
+        # One CSR from the B-spline's three entries a row and the shapes' amplitudes (columns after every
+        # control point), each row's columns ascending: what hstack([combination, E]) gave, without scipy's
+        # per-matrix overhead (three matrices built and checked a call; _combo was ~20 % of a flower loop's LP
+        # with jerk)
         r = np.concatenate([np.repeat(np.arange(K), 3), np.repeat(shapes.rows, nr)])
-        c = np.concatenate([A.indices.astype(np.int64), (shapes.cols[:, None] + np.arange(nr)[None, :]).ravel()])
+        c = np.concatenate([cols3, (shapes.cols[:, None] + np.arange(nr)[None, :]).ravel()])
         order = np.lexsort((c, r))
         indptr = np.concatenate([[0], np.cumsum(np.bincount(r, minlength=K))])
-        v = np.concatenate([A.data, np.asarray(data, dtype=np.float64).ravel()])
+        v = np.concatenate([data3, np.asarray(data, dtype=np.float64).ravel()])
         return sp.csr_matrix((v[order], c[order], indptr), shape=(K, self.nvar))
 
     def _add(self, rows: _Rows, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, s: FloatArray) -> None:
