@@ -499,8 +499,12 @@ class WindowLP:
         #: them ~60 and ~40 times a schedule)
         self._qmax_cache: tuple[float, FloatArray] | None = None
         self._vstep_live_cache: dict[tuple[int, float, float, int, float], _LiveSteps | None] = {}
-        #: velocity_bound of the verification grid's geometry (``_fine_geometry``), as (geometry, bound)
-        self._fine_ub: tuple[PathSamples, FloatArray] | None = None
+        #: ``_cap`` of the last geometry asked about, as (geometry, cap): the floor and the column scales both
+        #: read the verification grid's
+        self._cap_cache: tuple[PathSamples, FloatArray] | None = None
+        #: ``velocity_bound`` of the last two geometries asked about (the checkpoints' and the verification
+        #: grid's, asked for in turn), as (geometry, bound)
+        self._ub_cache: list[tuple[PathSamples, FloatArray]] = []
         #: knot intervals after k0 on which the previous window's solution and q* are inherited
         self.inherited = INHERITED_INTERVALS
         #: the rest intervals with shapes: (head, knot interval, column of the first amplitude)
@@ -587,7 +591,7 @@ class WindowLP:
         rows.add(A, lo, hi)
 
     def _stage1_rows(self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray | None) -> None:
-        ub = velocity_bound(g, self.lim)
+        ub = self._velocity_bound(g)
         if qstar is not None:
             ub = np.minimum(ub, np.maximum(qstar, 0.0))
         rest = self._rest_mask(g.s)
@@ -808,7 +812,7 @@ class WindowLP:
         if self.lim.jerk:  # from rest under jerk j: s = j t^3 / 6, v = j t^2 / 2
             j = float(np.linalg.norm(self.lim.jmax))
             Q_reach = min(Q_reach, 4.0 * (0.5 * j) ** (2.0 / 3.0) * (6.0 * L) ** (4.0 / 3.0))
-        Q = float(min(np.max(np.minimum(velocity_bound(g, self.lim), 1e300)), Q_reach))
+        Q = float(min(np.max(np.minimum(self._velocity_bound(g), 1e300)), Q_reach))
         self.Q = Q
         if not np.isfinite(Q) or Q <= 0:
             raise InfeasibleError("window has no positive velocity bound", window=spec.index)
@@ -1175,8 +1179,11 @@ class WindowLP:
 
     def _cap(self, g: PathSamples) -> FloatArray:
         """The largest constant q that meets every limit at each point of g (K,), inf where none binds:
-        q <= ub (velocity, feed), |x_ss| q <= amax, |x_sss| q sqrt(ub) <= jmax (pseudo-jerk, q* <= ub)."""
-        ub = velocity_bound(g, self.lim)
+        q <= ub (velocity, feed), |x_ss| q <= amax, |x_sss| q sqrt(ub) <= jmax (pseudo-jerk, q* <= ub).
+        (Shared with later calls on the same g: not to be changed in place.)"""
+        if self._cap_cache is not None and self._cap_cache[0] is g:
+            return self._cap_cache[1]
+        ub = self._velocity_bound(g)
         lim = self.lim
         with np.errstate(divide="ignore", invalid="ignore"):
             qa = np.min(np.where(np.abs(g.d2) > AXIS_EPS, lim.amax[None, :] / np.abs(g.d2), np.inf), axis=1)
@@ -1186,7 +1193,18 @@ class WindowLP:
                     np.where(np.abs(g.d3) > AXIS_EPS, lim.jmax[None, :] / np.abs(g.d3), np.inf), axis=1
                 ) / np.sqrt(ub)
                 cap = np.minimum(cap, qj)
-        return np.asarray(cap, dtype=np.float64)
+        out = np.asarray(cap, dtype=np.float64)
+        self._cap_cache = (g, out)
+        return out
+
+    def _velocity_bound(self, g: PathSamples) -> FloatArray:
+        """``velocity_bound`` of g, kept for the next calls on the same g (not to be changed in place)."""
+        for seen, ub in self._ub_cache:
+            if seen is g:
+                return ub
+        ub = velocity_bound(g, self.lim)
+        self._ub_cache = [self._ub_cache[-1], (g, ub)] if self._ub_cache else [(g, ub)]
+        return ub
 
     def _floor(self, g: PathSamples) -> float:
         """FLOOR_SHARE x the largest constant q that meets every limit at the points g (verification grid)."""
@@ -1253,9 +1271,7 @@ class WindowLP:
         q3 = self._eval(c, g.s)
         f, v, a, j = axis_kinematics(g, *q3)
         tol = 1.0 + VERIFY_TOL
-        if self._fine_ub is None or self._fine_ub[0] is not g:
-            self._fine_ub = (g, velocity_bound(g, self.lim))
-        bad = f * f > self._fine_ub[1] * tol**2
+        bad = f * f > self._velocity_bound(g) * tol**2
         if self.shape_ends:  # q >= 0 (the rest shapes' amplitudes are free columns: ``solve``)
             bad |= q3[0] < -REST_SHAPE_Q_TOL * self.Q
         lim = self.lim
