@@ -136,7 +136,11 @@ PRESOLVE = "off"
 #: 0.9985 x against the default (seeds 550 and 566 0.45 x and 0.54 x, 663 +2.9 %, the rest within 2.4 %), lp+nlp
 #: within 0.5 % in all 200 compared.  Dantzig (0) was not faster (session 24).
 DUAL_EDGE_WEIGHT = 1
-#: HiGHS's simplex scaling (``simplex_scale_strategy``; 2, equilibration, is HiGHS's default).
+#: HiGHS's simplex scaling (``simplex_scale_strategy``; 2, equilibration, is HiGHS's default).  Off (0) was
+#: tried in session 29 and not kept: HiGHS time -10 to -30 % on a flower loop and -29 / -44 % on the 18.35 m
+#: path (with jerk / v+a), and random bench seeds 0-399 (bench profile, both methods) all passed, but method lp's
+#: motion time over seeds 0-80 was never shorter and up to 2.7 % longer (seeds 46, 25, 54: +2.7, +2.3, +1.6 %;
+#: geometric mean +0.08 %) for 0.93x the CPU.  ``python -m bench.lp_switch --switch no_scale`` compares them.
 SIMPLEX_SCALE = 2
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.
