@@ -17,6 +17,12 @@ tolerance pass ``newton=False`` to ``inverse`` and skip the 6-point partial
 integral and the extra f evaluation (the solvers' own geometry does: about
 60 % of evaluating the geometry).
 
+f may jump at given breakpoints (``jumps``): there the table keeps both one-sided values of f, each a
+hair's breadth (``jump_eps``) inside its interval, and the Hermite guesses take the slope from the interval's
+own side (a time table's x map changes its scale at the rest intervals' inner knots, where dt/dx halves:
+the guess took the other side's slope there, and the intervals next to the knot were bisected 11 rounds
+deep, to 1/8192 of a knot interval, before it met the tolerance).
+
 Given f' (``df``), the table also holds a quintic Hermite guess of x(F) (slopes
 1/f, curvatures -f'/f^3): checked at the same midpoints, in the round where an
 interval is final, and flagged per interval where it is within ``QUINTIC_TOL``
@@ -83,7 +89,8 @@ def _at(f: Integrand, x: FloatArray) -> FloatArray:
 @dataclass(frozen=True, eq=False)
 class MonotoneTable:
     """Breakpoints x_b (M+1,), cumulative integral F_b (M+1,) and f(x_b); with f' given, f'(x_b) (M+1,)
-    and the intervals (M,) where the quintic guess stands for the Newton step."""
+    and the intervals (M,) where the quintic guess stands for the Newton step; with jumps of f, its limits
+    from the left and from the right at each breakpoint (M+1,) (None: f_b on both sides)."""
 
     f: Integrand
     x_b: FloatArray
@@ -92,6 +99,8 @@ class MonotoneTable:
     df: Integrand | None = None
     fp_b: FloatArray | None = None
     quintic: NDArray[np.bool_] | None = None
+    f_left: FloatArray | None = None
+    f_right: FloatArray | None = None
 
     @property
     def total(self) -> float:
@@ -106,10 +115,14 @@ class MonotoneTable:
         abs_tol: float = 1e-15,
         guess_tol: float = 1e-7,
         df: Integrand | None = None,
+        jumps: FloatArray | None = None,
+        jump_eps: float = 0.0,
     ) -> MonotoneTable:
         """The table of f over ``edges`` (each split in ``min_intervals``), bisected until GL_ORDER agrees
         with its halves to REL_TOL (or ``abs_tol``), then until the cubic guess of the inverse is within
-        ``guess_tol`` (np.inf: no inverse); with ``df`` = f', the quintic guess's flags too."""
+        ``guess_tol`` (np.inf: no inverse); with ``df`` = f', the quintic guess's flags too.  ``jumps``: edges
+        where f may jump (without ``df``); f is taken ``jump_eps`` to either side of them for the guesses
+        (an eps that x +- eps tells apart from x in f's own arithmetic)."""
         frac = np.linspace(0.0, 1.0, min_intervals + 1)[:-1]
         a = (edges[:-1, None] + np.diff(edges)[:, None] * frac[None, :]).ravel()
         b = np.concatenate([a[1:], edges[-1:]])
@@ -145,12 +158,26 @@ class MonotoneTable:
             return table
         if df is not None:
             table = cls(f, x_b, F_b, table.f_b, df, _at(df, x_b), np.zeros(x_b.size - 1, dtype=bool))
+        elif jumps is not None and jumps.size:
+            table = table._one_sided(jumps, jump_eps)
         todo = np.ones(x_b.size - 1, dtype=bool)
         for _ in range(MAX_BISECTIONS):
             table, todo = table._refine_for_inverse(guess_tol, todo)
             if not todo.any():
                 break
         return table
+
+    def _one_sided(self, jumps: FloatArray, eps: float) -> MonotoneTable:
+        """This table with f's limits from either side at those breakpoints that are in ``jumps``."""
+        at = np.searchsorted(self.x_b, jumps)
+        inside = at < self.x_b.size
+        at = at[inside][self.x_b[at[inside]] == jumps[inside]]
+        if not at.size:
+            return self
+        f_left, f_right = self.f_b.copy(), self.f_b.copy()
+        f_left[at] = self.f(self.x_b[at] - eps)
+        f_right[at] = self.f(self.x_b[at] + eps)
+        return replace(self, f_left=f_left, f_right=f_right)
 
     def _refine_for_inverse(
         self, guess_tol: float, todo: NDArray[np.bool_]
@@ -182,18 +209,24 @@ class MonotoneTable:
         # interval i of the old table becomes one interval, or two if split: both halves are checked next
         nxt = np.repeat(split, np.where(split, 2, 1))
         f_b = np.insert(self.f_b, at, fm[bad])
+        # (a midpoint is never a jump: both one-sided values are f there)
+        f_left = None if self.f_left is None else np.insert(self.f_left, at, fm[bad])
+        f_right = None if self.f_right is None else np.insert(self.f_right, at, fm[bad])
         if quintic is None or self.df is None or self.fp_b is None:
-            return MonotoneTable(self.f, x_b, F_b, f_b), nxt
+            return MonotoneTable(self.f, x_b, F_b, f_b, f_left=f_left, f_right=f_right), nxt
         fp_b = np.insert(self.fp_b, at, _at(self.df, xm[bad]))
-        return MonotoneTable(self.f, x_b, F_b, f_b, self.df, fp_b, np.repeat(quintic, np.where(split, 2, 1))), nxt
+        return MonotoneTable(self.f, x_b, F_b, f_b, self.df, fp_b, np.repeat(quintic, np.where(split, 2, 1)),
+                             f_left, f_right), nxt
 
     def _hermite(self, y: FloatArray, j: NDArray[np.intp]) -> FloatArray:
         """Cubic Hermite guess of x(F = y) inside interval j (slopes dx/dF = 1/f)."""
         x0, x1 = self.x_b[j], self.x_b[j + 1]
         h = self.F_b[j + 1] - self.F_b[j]
         t = np.where(h > 0.0, (y - self.F_b[j]) / np.where(h > 0.0, h, 1.0), 0.0)
-        m0 = np.minimum(h / np.maximum(self.f_b[j], 1e-300), 3.0 * (x1 - x0))
-        m1 = np.minimum(h / np.maximum(self.f_b[j + 1], 1e-300), 3.0 * (x1 - x0))
+        fa = self.f_b if self.f_right is None else self.f_right  # (f at the interval's ends, from inside it)
+        fz = self.f_b if self.f_left is None else self.f_left
+        m0 = np.minimum(h / np.maximum(fa[j], 1e-300), 3.0 * (x1 - x0))
+        m1 = np.minimum(h / np.maximum(fz[j + 1], 1e-300), 3.0 * (x1 - x0))
         t2, t3 = t * t, t * t * t
         x = (2 * t3 - 3 * t2 + 1) * x0 + (t3 - 2 * t2 + t) * m0 + (-2 * t3 + 3 * t2) * x1 + (t3 - t2) * m1
         return np.asarray(np.clip(x, x0, x1), dtype=np.float64)

@@ -11,8 +11,8 @@ x in [0, n_int] that removes the singularity:
 and h(x) = s'(x) / sqrt(q(s(x))) is smooth and finite on every interval
 (h(0) = 2 sqrt(d / q'(0))).  t(x) = integral h dx is tabulated to 1e-13 by
 adaptive Gauss-Legendre (``geometry.quadrature``) and inverted at the sample
-times by a Hermite guess plus a Newton step, so s(t_k) is accurate to ~1e-12
-relative and the sampled feed does not fluctuate.
+times by a Hermite guess (within TIME_GUESS_TOL_S) plus a Newton step, so s(t_k) is
+accurate to ~1e-12 relative and the sampled feed does not fluctuate.
 """
 
 from __future__ import annotations
@@ -38,9 +38,12 @@ STALL_Q_SHARE = 1e-12
 #: no near-singularity for the quadrature) and over this share of the peak (bench seed 2966: 330 m/s
 #: down to 0.15 mm/s at a 0.1 mm radius curvature jump, q 2e-13 of its peak, 1024 intervals).
 STALL_Q_SHARE_CONDITIONED = 1e-18
-#: Hermite guess tolerance for the time table, seconds (one Newton step then
-#: leaves an error of order this squared times |h'/h^2|: far below 1e-12 s).
-TIME_GUESS_TOL_S = 1e-6
+#: Hermite guess tolerance for the time table, seconds.  One Newton step then leaves an error of order this
+#: squared times |h'/h^2|, which is not small where h is small and steep: in the rest intervals 1e-6 s left
+#: s(t) 1.2e-11 mm (flower v+a) and 8.8e-11 mm (with jerk) from quadrature, and the 18.35 m path's samples
+#: moved by 7.7e-10 mm from 1e-6 to 1e-8; at 1e-8 they are within ~1e-15 mm there (``tests/solvers/test_timing``),
+#: for ~15 % more time-table work than 1e-6 (a second Newton step cost ~45 % on the 18.35 m path).
+TIME_GUESS_TOL_S = 1e-8
 
 
 @dataclass(frozen=True, eq=False)
@@ -172,6 +175,12 @@ class PieceProfile:
         return np.asarray(out, dtype=np.float64)
 
 
+#: Where h jumps (``_segment_table``), h is read this share of the piece's knot intervals (at least 1) inside each
+#: side: 2^-40 n stays ~2^12 units in the last place of x clear of the jump, and moves the guess's slope there
+#: by ~1e-12 relative.
+JUMP_EPS_SHARE = 2.0**-40
+
+
 #: Knot intervals per time-table segment.  A piece with more intervals has its table built segment by
 #: segment: the build keeps each segment's duration only, and ``s_at`` builds the table of a segment when its
 #: times are asked for, holding one segment's table at a time.  So a corner-free piece of any length holds
@@ -279,8 +288,13 @@ def _segment_table(profile: PieceProfile, x0: float, x1: float, inverse: bool) -
     the segment-local x - x0 (``PieceProfile.h_local``)."""
     k0 = int(x0)
     edges = np.arange(0.0, x1 - x0 + 0.5, dtype=np.float64)
+    # h jumps where the x map changes scale, at the rest intervals' inner knots (ds/dx = 2 d on the rest side,
+    # d on the other): the table's guesses take h from each interval's own side there (``MonotoneTable``)
+    n = profile.n_int
+    jumps = np.array([1.0, n - 1.0]) - k0
     return MonotoneTable.build(partial(profile.h_local, k0), edges, min_intervals=2, abs_tol=1e-16,
-                               guess_tol=TIME_GUESS_TOL_S if inverse else np.inf)
+                               guess_tol=TIME_GUESS_TOL_S if inverse else np.inf, jumps=jumps,
+                               jump_eps=JUMP_EPS_SHARE * max(1.0, float(n)))
 
 
 def stuck(profile: PieceProfile) -> bool:

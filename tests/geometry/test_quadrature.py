@@ -151,3 +151,38 @@ def test_a_wrong_derivative_fails_the_midpoint_check_and_the_newton_step_takes_o
     j = np.clip(np.searchsorted(table.F_b, y, side="right") - 1, 0, table.F_b.size - 2)
     q = table.quintic[j]
     np.testing.assert_array_equal(got[~q], _newton_only(table, y)[~q])
+
+
+def _f_jump(x: np.ndarray) -> np.ndarray:
+    """1 + 0.3 sin(x), halved from x = 1 on: a jump of f at an edge (a time table's x map at a rest interval's
+    inner knot)."""
+    return np.asarray(np.where(x < 1.0, 1.0, 0.5) + 0.3 * np.sin(x))
+
+
+def _F_jump(x: np.ndarray) -> np.ndarray:
+    left = x + 0.3 * (1.0 - np.cos(x))
+    at1 = 1.0 + 0.3 * (1.0 - np.cos(1.0))
+    return np.asarray(np.where(x < 1.0, left, at1 + 0.5 * (x - 1.0) + 0.3 * (np.cos(1.0) - np.cos(x))))
+
+
+def test_a_jump_at_an_edge_keeps_both_sides_and_needs_no_bisection_towards_it() -> None:
+    """f jumps at the edge x = 1.  Given as a jump, the guesses read f from each interval's own side and the
+    table is as coarse as a smooth f's; not given, the guesses on the left of x = 1 take the right side's slope
+    and the intervals next to it are bisected round after round.  Integral and inverse against the closed form
+    either way."""
+    edges = np.linspace(0.0, 3.0, 4)
+    plain = MonotoneTable.build(_f_jump, edges, min_intervals=2, guess_tol=1e-8)
+    sided = MonotoneTable.build(_f_jump, edges, min_intervals=2, guess_tol=1e-8, jumps=np.array([1.0]),
+                                jump_eps=2.0**-40)
+    assert sided.f_left is not None and sided.f_right is not None
+    i = int(np.flatnonzero(sided.x_b == 1.0)[0])
+    assert sided.f_left[i] == pytest.approx(1.0 + 0.3 * np.sin(1.0), rel=1e-11)
+    assert sided.f_right[i] == pytest.approx(0.5 + 0.3 * np.sin(1.0), rel=1e-11)
+    # without the jump: nodes crowd towards x = 1 from the left (each round halves the interval next to it)
+    assert np.count_nonzero((plain.x_b > 0.99) & (plain.x_b < 1.0)) >= 5
+    assert np.count_nonzero((sided.x_b > 0.99) & (sided.x_b < 1.0)) == 0
+    assert sided.x_b.size < plain.x_b.size
+    x = np.linspace(0.0, 3.0, 3001)
+    for table in (plain, sided):
+        np.testing.assert_allclose(table.value(x), _F_jump(x), rtol=INTEGRAL_REL_TOL, atol=0.0)
+        np.testing.assert_allclose(table.inverse(_F_jump(x)), x, rtol=0.0, atol=INVERSE_ABS_TOL)

@@ -97,8 +97,9 @@ def test_streamed_long_piece_with_segmented_tables(method: str, monkeypatch: pyt
 
 
 #: Table nodes per knot interval of a smooth, steep interval (the quadrature splits each in two, then bisects
-#: where 16-point rules disagree: a clean integrand needs no bisection there).
-CLEAN_NODES_PER_INTERVAL = 8
+#: where 16-point rules disagree, and where the inverse's guess misses ``TIME_GUESS_TOL_S``: 27 nodes at 1e-8 s,
+#: the same interval near the piece start too; 8 at 1e-6 s; the noisy integrand took 2,081).
+CLEAN_NODES_PER_INTERVAL = 32
 
 
 def test_far_along_a_long_piece_the_time_integrand_is_not_noisy() -> None:
@@ -126,6 +127,7 @@ def test_far_along_a_long_piece_the_time_integrand_is_not_noisy() -> None:
     j = np.searchsorted(table.x_b, [k - x0, k - x0 + 1])
     i = np.searchsorted(near.x_b, [10.0, 11.0])
     assert table.F_b[j[1]] - table.F_b[j[0]] == pytest.approx(near.F_b[i[1]] - near.F_b[i[0]], rel=DURATION_REL_TOL)
+    assert in_k <= np.count_nonzero(np.floor(near.x_b[:-1]) == 10) + 2
 
 
 def _dipping_profile(rng: np.random.Generator, n: int = 60) -> PieceProfile:
@@ -188,3 +190,46 @@ def test_interval_times_are_the_time_integrals() -> None:
     c = prof.c.copy()
     c[21] = -c[20]
     assert np.all(T.interval_times(replace(prof, c=c, p=None, f_mask=None), np.array([19, 20])) == np.inf)
+
+
+#: s(t) in the rest intervals against adaptive quadrature and root finding, mm (measured ~1e-15 mm with
+#: TIME_GUESS_TOL_S = 1e-8; with 1e-6 the one Newton step left 1.2e-11 (v+a) and 8.8e-11 mm (with jerk) there)
+REST_S_ABS_TOL = 1e-12
+
+
+@pytest.mark.filterwarnings("ignore::scipy.integrate.IntegrationWarning")
+@pytest.mark.parametrize("jerk", [False, True])
+def test_time_samples_in_the_rest_intervals_match_quadrature(jerk: bool) -> None:
+    """The flower's LP profile (with jerk: the rest shapes too): s at the sample times in the first and the last
+    knot interval against t(x) = integral_0^x h by scipy's adaptive quad, inverted by brentq to 1e-16 in x.
+    h jumps at the rest intervals' inner knots (``MonotoneTable``'s one-sided values there)."""
+    from scipy.integrate import quad
+    from scipy.optimize import brentq
+
+    sch = P.schedule(ex.flower(), router(), P.Options(method="lp", jerk=jerk))
+    prof = sch.profiles[0]
+    assert len(sch.profiles) == 1
+    n = prof.n_int
+    t = sch.samples.t
+    tm = PieceTiming.build(prof)
+    s = tm.s_at(t)
+    np.testing.assert_array_equal(s, sch.samples.s)  # (the schedule's own samples)
+
+    def h(x: float) -> float:
+        return float(prof.h(np.array([x]))[0])
+
+    t_end = tm.duration
+    for head in (True, False):
+        lo, hi = (0.0, 1.0) if head else (n - 1.0, float(n))
+        k = np.flatnonzero((s > lo * prof.d) & (s < prof.s_of_x(np.array([hi]))[0][0]) if head
+                           else (s > prof.s_of_x(np.array([lo]))[0][0]) & (s < prof.length))
+        assert k.size >= 10
+        for i in k[:: max(1, k.size // 12)]:
+            if head:
+                def resid(x: float, i: int = i) -> float:
+                    return quad(h, 0.0, x, epsabs=1e-17, epsrel=1e-15, limit=200)[0] - t[i]
+            else:  # from the end: t_end - t(x) = integral_x^n h
+                def resid(x: float, i: int = i) -> float:
+                    return (t_end - t[i]) - quad(h, x, float(n), epsabs=1e-17, epsrel=1e-15, limit=200)[0]
+            x = brentq(resid, lo, hi, xtol=1e-16, rtol=1e-15)
+            assert abs(s[i] - prof.s_of_x(np.array([x]))[0][0]) <= REST_S_ABS_TOL, (head, i, s[i])
