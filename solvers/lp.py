@@ -87,6 +87,8 @@ REST_SHARE = 0.9
 FLOOR_SHARE = 1e-2
 #: Each control point's own floor, as a share of its reach (``WindowLP._col_scale``).
 LOCAL_FLOOR_SHARE = 1e-2
+#: Floors next to a rest end at most this share of what the ramp from rest reaches there (``WindowLP._ramp_reach``).
+RAMP_FLOOR_SHARE = 0.5
 #: A control point within this share above its floor counts as held there (``WindowResult.floored``).
 FLOORED_TOL = 1e-3
 #: At a curvature jump the axis acceleration steps by x_ss jump x q; seen in a sampled third
@@ -888,6 +890,13 @@ class WindowLP:
         local_lo[floor_cols] = np.maximum(floor_lo[floor_cols], LOCAL_FLOOR_SHARE * base.col_scale[floor_cols])
         for j, c_max in rest_c:
             local_lo[j] = max(floor_lo[j], LOCAL_FLOOR_SHARE * min(base.col_scale[j], c_max / Q))
+        # Neither floor above RAMP_FLOOR_SHARE of what a feed from a rest end can reach at the column: on a short
+        # piece the ramp from rest spans many knot intervals, and the floors there made both floored models
+        # infeasible (a 2.8 mm line: two infeasible solves before the one without a floor)
+        ramp = self._ramp_reach(g, n) / Q
+        for lo_k in (local_lo, floor_lo):
+            cap = floor_cols[:n] & (lo_k[:n] > RAMP_FLOOR_SHARE * ramp)
+            lo_k[:n][cap] = np.maximum(col_lo[:n][cap], RAMP_FLOOR_SHARE * ramp[cap])
         floors = [local_lo, floor_lo, col_lo]
         for i, lo_i in enumerate(floors):
             self.fallback_left = i < len(floors) - 1
@@ -1203,6 +1212,25 @@ class WindowLP:
                 cap = np.minimum(cap, qj)
         out = np.asarray(cap, dtype=np.float64)
         self._cap_cache = (g, out)
+        return out
+
+    def _ramp_reach(self, g: PathSamples, n: int) -> FloatArray:
+        """q a feed leaving (or reaching) this window's rest ends can have at each control point's peak (n,):
+        2 a_t times its distance from the nearer rest end, a_t = the smallest tangential acceleration the axes allow
+        at the points g, min over points and axes of amax / |x_s| (curvature and the drive's rows ignored: an
+        estimate, not a bound); inf without a rest end in the window."""
+        spec = self.spec
+        out = np.full(n, np.inf)
+        if spec.start_fixed is not None and not spec.end_rest:
+            return out
+        xs = np.abs(g.d1)
+        with np.errstate(divide="ignore"):
+            a_t = float(np.min(np.where(xs > AXIS_EPS, self.lim.amax[None, :] / xs, np.inf)))
+        peak = (np.arange(n) - 0.5) * spec.d  # column j's basis function peaks half an interval before k0 + j
+        if spec.start_fixed is None:
+            out = np.minimum(out, 2.0 * a_t * np.maximum(peak, 0.0))
+        if spec.end_rest:
+            out = np.minimum(out, 2.0 * a_t * np.maximum((spec.k1 - spec.k0) * spec.d - peak, 0.0))
         return out
 
     def _velocity_bound(self, g: PathSamples) -> FloatArray:

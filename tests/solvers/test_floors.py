@@ -1,0 +1,95 @@
+"""The LP's floors next to rest ends (``solvers.lp.WindowLP.solve``, ``_ramp_reach``, ``RAMP_FLOOR_SHARE``).
+
+Away from rest ends q is kept above a small floor (no stall at a knot).  On a short piece the ramp from rest
+spans many knot intervals, and a floor there cannot be reached: both floored models were infeasible, each proved
+twice by HiGHS, before the model without a floor (a 2.8 mm leg: 5 solves instead of 1).  The floors are now capped
+at RAMP_FLOOR_SHARE of what the ramp from rest reaches.
+
+Independent truth: the same schedule with every floor off (the floors do not bind on a straight leg, so the
+motion is the same) and the finite differences of the sampled positions (``tests.fdcheck``).
+"""
+
+from __future__ import annotations
+
+import collections
+from typing import Any
+
+import highspy
+import numpy as np
+import pytest
+
+from geometry import Toolpath, primitives
+from solvers import lp
+from solvers.machine import router
+from solvers.pipeline import Options, schedule
+from tests.fdcheck import utilisation
+
+TS = 1e-3
+#: Allowed overshoot of any limit in the sampled output (issue: 1.01 x).
+LIMIT_FACTOR = 1.01
+#: Motion time with the floors against without them, relative (measured ~1e-13 on these legs).
+MOTION_REL_TOL = 1e-9
+LEGS = 6
+LEG_XY = 2.0  # mm: legs of 2.83 mm turning by 90 degrees, each a rest-to-rest piece
+
+
+def _zigzag() -> Toolpath:
+    pts = np.array([[LEG_XY * i, LEG_XY * (i % 2), 0.0] for i in range(LEGS + 1)])
+    return Toolpath([primitives.polyline(pts)])
+
+
+def _statuses(monkeypatch: pytest.MonkeyPatch) -> collections.Counter[str]:
+    seen: collections.Counter[str] = collections.Counter()
+    run = lp.WindowLP._timed_run
+
+    def counted(h: Any) -> None:
+        run(h)
+        seen[str(h.getModelStatus())] += 1
+
+    monkeypatch.setattr(lp.WindowLP, "_timed_run", staticmethod(counted))
+    return seen
+
+
+@pytest.mark.parametrize("jerk", [False, True])
+def test_short_pieces_are_solved_with_their_floors_at_the_first_try(monkeypatch: pytest.MonkeyPatch,
+                                                                   jerk: bool) -> None:
+    tp = _zigzag()
+    assert len(tp.pieces) == LEGS
+    seen = _statuses(monkeypatch)
+    sch = schedule(tp, router(), Options(method="lp", jerk=jerk))
+    assert seen[str(highspy.HighsModelStatus.kInfeasible)] == 0, seen
+    assert seen[str(highspy.HighsModelStatus.kOptimal)] == sum(seen.values())
+    # the floors bind nowhere on a straight leg: the same motion as without any floor
+    monkeypatch.setattr(lp, "FLOOR_SHARE", 0.0)
+    monkeypatch.setattr(lp, "LOCAL_FLOOR_SHARE", 0.0)
+    free = schedule(tp, router(), Options(method="lp", jerk=jerk))
+    t, t_free = float(sch.summary["motion_time"]), float(free.summary["motion_time"])
+    assert t == pytest.approx(t_free, rel=MOTION_REL_TOL)
+    vmax, amax, jmax = router().limit_arrays()
+    u = utilisation(sch.samples.position, TS, vmax, amax, jmax)
+    assert max(v for k, v in u.items() if jerk or k[0] in "va") <= LIMIT_FACTOR, u
+
+
+def test_ramp_reach_is_twice_the_tangential_acceleration_times_the_distance_from_rest() -> None:
+    """``_ramp_reach`` on a straight x move: 2 amax_x (j - 1/2) d from the start, the same from the end."""
+    m = router()
+    tp = Toolpath([primitives.polyline(np.array([[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]]))])
+    piece = tp.pieces[0]
+    n_int, d = 64, tp.length / 64
+    lim = lp.LimitSet.from_machine(m, TS, False)
+
+    def geometry(s: np.ndarray) -> Any:
+        return tp.evaluate(np.asarray(s, dtype=np.float64) + piece.s_start, piece)
+
+    spec = lp.WindowSpec(0, 0, n_int, d, n_int, None, True)
+    w = lp.WindowLP(spec, lim, geometry, "highs")
+    n = n_int + 2
+    g = geometry(np.linspace(0.0, tp.length, 50))
+    reach = w._ramp_reach(g, n)
+    peak = (np.arange(n) - 0.5) * d
+    ax = float(lim.amax[0])
+    expect = np.minimum(2.0 * ax * np.maximum(peak, 0.0), 2.0 * ax * np.maximum(tp.length - peak, 0.0))
+    np.testing.assert_allclose(reach, expect, rtol=1e-12, atol=0.0)
+    # a window between two others (no rest end) reaches anywhere
+    mid = lp.WindowLP(lp.WindowSpec(1, 8, 40, d, n_int, (1.0, 1.0), False), lim, geometry, "highs")
+    assert np.all(np.isinf(mid._ramp_reach(g, 34)))
