@@ -47,8 +47,12 @@ def design(k: IntArray, W: FloatArray, col0: int, ncols: int) -> sp.csr_matrix:
     """Sparse (K, ncols) matrix with W's rows at columns k - col0 .. k - col0 + 2."""
     K = k.size
     rows = np.repeat(np.arange(K), 3)
-    cols = (k[:, None] - col0 + np.arange(3)[None, :]).ravel()
-    return sp.csr_matrix((W.ravel(), (rows, cols)), shape=(K, ncols))
+    return sp.csr_matrix((W.ravel(), (rows, design_columns(k, col0))), shape=(K, ncols))
+
+
+def design_columns(k: IntArray, col0: int) -> IntArray:
+    """The columns k - col0 .. k - col0 + 2 of each point's three basis functions, row by row (3 K,)."""
+    return np.asarray((k[:, None] - col0 + np.arange(3)[None, :]).ravel(), dtype=np.int64)
 
 
 def combination(k: IntArray, terms: list[tuple[FloatArray, FloatArray]], col0: int, ncols: int) -> sp.csr_matrix:
@@ -56,8 +60,8 @@ def combination(k: IntArray, terms: list[tuple[FloatArray, FloatArray]], col0: i
     the designs' common sparsity (3 non-zeros a row, explicit zeros kept): the same values, summed in the
     same order, as the sparse products and sums, at a fraction of their cost (the LP's rows)."""
     K = k.size
-    cols = (k[:, None] - col0 + np.arange(3)[None, :]).ravel()
-    return sp.csr_matrix((combination_data(terms).ravel(), cols, np.arange(0, 3 * K + 1, 3)), shape=(K, ncols))
+    return sp.csr_matrix((combination_data(terms).ravel(), design_columns(k, col0), np.arange(0, 3 * K + 1, 3)),
+                         shape=(K, ncols))
 
 
 def combination_data(terms: list[tuple[FloatArray, FloatArray]]) -> FloatArray:

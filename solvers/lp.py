@@ -556,13 +556,11 @@ class WindowLP:
         k, W0, W1, W2, shapes = basis
         spec = self.spec
         terms = list(zip(coef, (W0, W1, W2), strict=False))
-        if self.nvar == spec.ncols:
-            return bspline.combination(k, terms, spec.k0, spec.ncols)
+        if shapes is None or shapes.rows.size == 0:  # (the amplitudes' columns, if any, empty)
+            return bspline.combination(k, terms, spec.k0, self.nvar)
         K = k.size
         data3 = bspline.combination_data(terms).ravel()
-        cols3 = (k[:, None] - spec.k0 + np.arange(3)[None, :]).ravel()
-        if shapes is None or shapes.rows.size == 0:
-            return sp.csr_matrix((data3, cols3, np.arange(0, 3 * K + 1, 3)), shape=(K, self.nvar))
+        cols3 = bspline.design_columns(k, spec.k0)
         data = sum(a[shapes.rows, None] * S for a, S in zip(coef, shapes.S, strict=False))
         nr = bspline.REST_SHAPES
         # One CSR from the B-spline's three entries a row and the shapes' amplitudes (columns after every
@@ -1046,11 +1044,15 @@ class WindowLP:
         """The breaks whose velocity step's impulse counts for axis ``ax`` (``_vstep_terms``): their s, weight
         w_b, reach and linearisation point q0 (crowding applied), or None; computed once per window and Q."""
         key = (ax, limit, kernel, power, self.Q)
-        if key in self._vstep_live_cache:
-            return self._vstep_live_cache[key]
+        if key not in self._vstep_live_cache:
+            self._vstep_live_cache[key] = self._live_steps(ax, limit, kernel, power)
+        return self._vstep_live_cache[key]
+
+    def _live_steps(self, ax: int, limit: float, kernel: float, power: int) -> _LiveSteps | None:
+        """``_vstep_live`` computed."""
         Ts = self.lim.v_step_period
         if Ts is None or self.lim.v_step is None or self.breaks.size == 0:
-            return self._store_live(key, None)
+            return None
         br, _, jump1 = self._steps()
         q0 = np.minimum(self._vstep_caps(), self.Q)
         # the break's largest feed (its acceleration step's cap too: ``_break_qmax``) decides whether its
@@ -1060,18 +1062,13 @@ class WindowLP:
         w = kernel * jump1[:, ax] / (Ts**power * limit)
         live = w * np.sqrt(qmax) > V_STEP_MIN
         if not live.any():
-            return self._store_live(key, None)
+            return None
         br, q0, qmax, w = br[live], q0[live], qmax[live], w[live]
         reach = 3.0 * Ts * (np.sqrt(qmax) + 3.0 * Ts * float(np.linalg.norm(self.lim.amax))) + BREAK_EPS_MM
         # breaks within twice the reach of each (counted against the largest reach: at most more)
         crowd = (np.searchsorted(br, br + reach + reach.max(), side="right")
                  - np.searchsorted(br, br - reach - reach.max(), side="left"))
-        return self._store_live(key, (br, w, reach, np.asarray(q0 / crowd.astype(np.float64) ** 2,
-                                                           dtype=np.float64)))
-
-    def _store_live(self, key: tuple[int, float, float, int, float], live: _LiveSteps | None) -> _LiveSteps | None:
-        self._vstep_live_cache[key] = live
-        return live
+        return br, w, reach, np.asarray(q0 / crowd.astype(np.float64) ** 2, dtype=np.float64)
 
     def _vstep_coupling(
         self, s: FloatArray, ax: int, limit: float, kernel: float, power: int
