@@ -1212,23 +1212,31 @@ class WindowLP:
         return out
 
     def _ramp_reach(self, g: PathSamples, n: int) -> FloatArray:
-        """q a feed leaving (or reaching) this window's rest ends can have at each control point's peak (n,):
-        2 a_t times its distance from the nearer rest end, a_t = the smallest tangential acceleration the axes allow
-        at the points g, min over points and axes of amax / |x_s| (curvature and the drive's rows ignored: an
-        estimate, not a bound); inf without a rest end in the window."""
+        """q a feed leaving (or reaching) this window's rest ends can have at each control point's peak (n,), from
+        its distance r to the nearer rest end: 2 a_t r, and with jerk rows 0.25 j_t^(2/3) (6 r)^(4/3) if less
+        (v = j t^2 / 2 at s = j t^3 / 6), a_t and j_t the smallest tangential acceleration and jerk the axes allow at
+        the points g (min over points and axes of amax / |x_s|, jmax / |x_s|; curvature and the drive's rows
+        ignored: an estimate, not a bound); inf without a rest end in the window."""
         spec = self.spec
         out = np.full(n, np.inf)
         if spec.start_fixed is not None and not spec.end_rest:
             return out
         xs = np.abs(g.d1)
-        with np.errstate(divide="ignore"):
-            a_t = float(np.min(np.where(xs > AXIS_EPS, self.lim.amax[None, :] / xs, np.inf)))
+
+        def tangential(lim: FloatArray) -> float:
+            with np.errstate(divide="ignore"):
+                return float(np.min(np.where(xs > AXIS_EPS, lim[None, :] / xs, np.inf)))
+
         peak = (np.arange(n) - 0.5) * spec.d  # column j's basis function peaks half an interval before k0 + j
+        r = np.full(n, np.inf)
         if spec.start_fixed is None:
-            out = np.minimum(out, 2.0 * a_t * np.maximum(peak, 0.0))
+            r = np.maximum(peak, 0.0)
         if spec.end_rest:
-            out = np.minimum(out, 2.0 * a_t * np.maximum((spec.k1 - spec.k0) * spec.d - peak, 0.0))
-        return out
+            r = np.minimum(r, np.maximum((spec.k1 - spec.k0) * spec.d - peak, 0.0))
+        out = 2.0 * tangential(self.lim.amax) * r
+        if self.lim.jerk:
+            out = np.minimum(out, 0.25 * tangential(self.lim.jmax) ** (2.0 / 3.0) * (6.0 * r) ** (4.0 / 3.0))
+        return np.asarray(out, dtype=np.float64)
 
     def _velocity_bound(self, g: PathSamples) -> FloatArray:
         """``velocity_bound`` of g, kept for the next calls on the same g (not to be changed in place)."""
