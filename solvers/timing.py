@@ -9,11 +9,12 @@ x in [0, n_int] that removes the singularity:
     x in [n_int - 1, n_int]: s = L - d (n_int - x)^2  (rest at s = L)
 
 and h(x) = s'(x) / sqrt(q(s(x))) is smooth and finite on every interval
-(h(0) = 2 sqrt(d / q'(0))); it jumps at x = 1 and n_int - 1, where s'(x) does (2 d
-on the rest side, d on the other), and the table takes each side's value there.  t(x) = integral h dx is tabulated to 1e-13 by
-adaptive Gauss-Legendre (``geometry.quadrature``) and inverted at the sample
-times by a Hermite guess (within TIME_GUESS_TOL_S) plus a Newton step, so s(t_k) is
-accurate to ~1e-12 relative and the sampled feed does not fluctuate.
+(h(0) = 2 sqrt(d / q'(0))); it jumps at x = 1 and n_int - 1, where s'(x) does
+(2 d on the rest side, d on the other), and the table takes each side's value
+there.  t(x) = integral h dx is tabulated to 1e-13 by adaptive Gauss-Legendre
+(``geometry.quadrature``) and inverted at the sample times by a Hermite guess
+(within TIME_GUESS_TOL_S) plus a Newton step, so s(t_k) is accurate to ~1e-12
+relative and the sampled feed does not fluctuate.
 """
 
 from __future__ import annotations
