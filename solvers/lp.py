@@ -1218,9 +1218,8 @@ class WindowLP:
         the points g (min over points and axes of amax / |x_s|, jmax / |x_s|; curvature and the drive's rows
         ignored: an estimate, not a bound); inf without a rest end in the window."""
         spec = self.spec
-        out = np.full(n, np.inf)
         if spec.start_fixed is not None and not spec.end_rest:
-            return out
+            return np.full(n, np.inf)
         xs = np.abs(g.d1)
 
         def tangential(lim: FloatArray) -> float:
