@@ -302,8 +302,8 @@ class PathSamples:
     d3: FloatArray
     feed_limit: FloatArray | None = None
 
-    def subset(self, mask: NDArray[np.bool_]) -> PathSamples:
-        """The points selected by ``mask``."""
+    def subset(self, mask: NDArray[np.bool_] | NDArray[np.intp]) -> PathSamples:
+        """The points selected by ``mask`` (a boolean mask or indices)."""
         fl = None if self.feed_limit is None else self.feed_limit[mask]
         return PathSamples(self.s[mask], self.position[mask], self.d1[mask], self.d2[mask], self.d3[mask], fl)
 

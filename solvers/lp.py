@@ -733,7 +733,7 @@ class WindowLP:
     def _rest_rows(self, rows: _Rows, s_rest: float, sign: float, Q: float, a_rest: FloatArray | None) -> float:
         """q(s_rest) = 0 and sign * q'(s_rest) * max_x(|x_s|/(2 a_rest_x)) <= 1 (a_rest: default lim.a_rest).
         Returns the largest control point next to the rest end these allow (q' = 2 c / d there), mm^2/s^2."""
-        g = self.geometry(np.array([s_rest]))
+        g = self._known_geometry(np.array([s_rest]))
         B0, B1, _ = self._mats(g.s)
         rows.add(B0, np.zeros(1), np.zeros(1))
         r = float(np.max(np.abs(g.d1[0]) / (2.0 * (self.lim.a_rest if a_rest is None else a_rest))))
@@ -808,7 +808,8 @@ class WindowLP:
     # ----- solve -------------------------------------------------------------
     def solve(self, s_check: FloatArray) -> WindowResult:
         spec = self.spec
-        g = self.geometry(self._row_points(s_check))
+        self._fine_geometry(s_check)  # first: the rows' points, the breaks and the window's ends are on its grid
+        g = self._known_geometry(self._row_points(s_check))
         # scale of q: the largest velocity bound, but no more than the q reachable from rest over
         # the whole piece (q' = 2 sddot <= 2 |amax|, and the jerk's bound): with limits far above what a short piece can
         # use (v^2 / a >> L) the velocity bound alone left acceleration rows with coefficients
@@ -1117,7 +1118,7 @@ class WindowLP:
             lo, hi = spec.k0 * spec.d, spec.k1 * spec.d
             br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
             if br.size:
-                right, left = self.geometry(br + BREAK_EPS_MM), self.geometry(br - BREAK_EPS_MM)
+                right, left = self._known_geometry(br + BREAK_EPS_MM), self._known_geometry(br - BREAK_EPS_MM)
                 jump, jump1 = np.abs(right.d2 - left.d2), tangent_jump(right, left, BREAK_EPS_MM)
             else:
                 jump = jump1 = np.zeros((0, 3))
@@ -1190,6 +1191,32 @@ class WindowLP:
         if self._fine_g is None or self._fine_g[0] is not s_check:
             self._fine_g = (s_check, self.geometry(self._fine(s_check)))
         return self._fine_g[1]
+
+    def _known_geometry(self, s: FloatArray) -> PathSamples:
+        """Geometry at s (K,), the points on the verification grid taken from its geometry (``_fine_geometry``;
+        the same numbers: each point is evaluated on its own), the others evaluated.  The grid holds the
+        checkpoints, both sides of every break and the window's ends: a flower loop's rows, breaks and rest ends
+        evaluated them again (~5 ms of a ~50 ms v + a schedule)."""
+        if self._fine_g is None or s.size == 0:
+            return self.geometry(s)
+        grid = self._fine_g[1]
+        i = np.minimum(np.searchsorted(grid.s, s), grid.s.size - 1)
+        on = grid.s[i] == s
+        if on.all():
+            return grid.subset(i)
+        if not on.any():
+            return self.geometry(s)
+        new = self.geometry(s[~on])
+
+        def merged(known: FloatArray, fresh: FloatArray) -> FloatArray:
+            out = np.empty((s.size, *known.shape[1:]))
+            out[on] = known[i[on]]
+            out[~on] = fresh
+            return out
+
+        fl = None if grid.feed_limit is None or new.feed_limit is None else merged(grid.feed_limit, new.feed_limit)
+        return PathSamples(s, merged(grid.position, new.position), merged(grid.d1, new.d1), merged(grid.d2, new.d2),
+                           merged(grid.d3, new.d3), fl)
 
     def _cap(self, g: PathSamples) -> FloatArray:
         """The largest constant q that meets every limit at each point of g (K,), inf where none binds:
