@@ -150,6 +150,10 @@ COL_SCALE_MIN_BASIS = 0.1
 COL_SCALE_FLOOR = 1e-12
 #: An axis whose path-derivative coefficients are all below this is not moving.
 AXIS_EPS = 1e-12
+#: Two axes' rows at a point are parallel where |v_x x v_y| <= this x |v_x| |v_y| (``implied_rows``): the smaller is
+#: implied by the larger and left out.  A row left out for a near-parallel pair can be exceeded by at most this
+#: share of its coefficients' size; the verification grid checks every axis anyway.
+PARALLEL_ROW_TOL = 1e-12
 #: Knot intervals next to a rest end whose acceleration and jerk rows are the drive's control signal and
 #: servo error (lp+nlp, ``LimitSet.rest_drive``): the rest interval.  Since session 14 the NLP solves it
 #: too (``solvers.nlp.REST_ENDS``): this LP feed is where its rest windows start from, and what a failed
@@ -435,6 +439,38 @@ def _union(K: int, parts: list[Coupling | None]) -> Coupling | None:
     return near, sp.csr_matrix(C), const
 
 
+def implied_rows(vecs: dict[int, FloatArray]) -> dict[int, NDArray[np.bool_]]:
+    r"""Per axis, the points where its row is implied by another axis's row at the same point.
+
+    Each axis x has at each point one two-sided row |v_x . z| <= 1 in the point's terms z (q, q' and q'', as
+    B-spline rows), v_x (K, m) its coefficients over the axis's limit.  Where v_x = lambda v_y with |lambda| <= 1,
+    |v_x . z| = |lambda| |v_y . z| <= 1 holds whenever y's row does, and it still does on rows widened to admit a
+    point (``_admit``: lambda times y's widened bounds lies within x's).  Parallel: |v_x x v_y| <= PARALLEL_ROW_TOL
+    |v_x| |v_y|; of equal norms the first axis keeps its row.  On a straight line x_ss = x_sss = 0 and every
+    axis's acceleration (jerk) row is a multiple of one: a 0.5 mm line in the plane had 1,339 and 2,213 rows in
+    its two stages for 76 columns, of which the second axis's ~440 and ~880 decided nothing.
+
+    Args:
+        vecs: axis -> (K, m) coefficients, m = 2 or 3; only the moving axes.
+    Returns:
+        axis -> (K,) bool, True where that axis's row is implied.
+    """
+    axes = list(vecs)
+    norm = {ax: np.sqrt(np.einsum("ij,ij->i", v, v)) for ax, v in vecs.items()}
+    out = {ax: np.zeros(v.shape[0], dtype=bool) for ax, v in vecs.items()}
+    for i, a in enumerate(axes):
+        for b in axes[i + 1 :]:
+            u, v = vecs[a], vecs[b]
+            if u.shape[1] == 2:
+                cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+            else:
+                cross = np.linalg.norm(np.cross(u, v), axis=1)
+            parallel = cross <= PARALLEL_ROW_TOL * norm[a] * norm[b]
+            out[b] |= parallel & (norm[b] <= norm[a])
+            out[a] |= parallel & (norm[a] < norm[b])
+    return out
+
+
 def axis_moves(g: PathSamples, ax: int) -> bool:
     """Whether axis ``ax`` moves along these points (else its rows are all zero)."""
     return bool(np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS)
@@ -574,6 +610,14 @@ class WindowLP:
         v = np.concatenate([data3, np.asarray(data, dtype=np.float64).ravel()])
         return sp.csr_matrix((v[order], c[order], indptr), shape=(K, self.nvar))
 
+    def _add_needed(self, rows: _Rows, A: sp.csr_matrix, s: FloatArray, need: NDArray[np.bool_]) -> None:
+        """Rows -1 <= A chat <= 1 at the points s where ``need`` (the others are implied, ``implied_rows``)."""
+        if need.all():
+            self._add(rows, A, -np.ones(s.size), np.ones(s.size), s)
+        elif need.any():
+            k = int(need.sum())
+            self._add(rows, A[need], -np.ones(k), np.ones(k), s[need])
+
     def _add(self, rows: _Rows, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, s: FloatArray) -> None:
         """Add rows at points s; on inherited intervals widen them to admit the previous solution (and on
         the last ones before a seam window's fixed end, the next one)."""
@@ -611,12 +655,13 @@ class WindowLP:
                 return
         basis = self._basis(g.s)
         self._add(rows, self._combo(basis, np.ones(ub.size)), np.zeros(ub.size), ub / Q, g.s)
-        for ax in range(3):
-            if not axis_moves(g, ax):
-                continue
+        moving = [ax for ax in range(3) if axis_moves(g, ax)]
+        # a = x_ss q + x_s q' / 2 per axis: the row of (x_ss, x_s / 2) / amax
+        implied = implied_rows({ax: np.column_stack([g.d2[:, ax], 0.5 * g.d1[:, ax]]) / self.lim.amax[ax]
+                                for ax in moving})
+        for ax in moving:
             A = self._combo(basis, g.d2[:, ax], 0.5 * g.d1[:, ax]) * (Q / self.lim.amax[ax])
-            one = np.ones(g.s.size)
-            self._add(rows, A, -one, one, g.s)
+            self._add_needed(rows, A, g.s, ~implied[ax])
             self._add_coupled(rows, A, g.s, self._vstep_coupling(g.s, ax, self.lim.amax[ax], V_KERNEL_A, 1))
 
     def _rest_mask(self, s: FloatArray) -> NDArray[np.bool_]:
@@ -702,14 +747,15 @@ class WindowLP:
         g = g.subset(keep)
         rq = np.sqrt(qstar[keep])
         basis = self._basis(g.s)
-        for ax in range(3):
-            if not axis_moves(g, ax):
-                continue
+        moving = [ax for ax in range(3) if axis_moves(g, ax)]
+        # pseudo-jerk sqrt(q*) (x_sss q + 1.5 x_ss q' + 0.5 x_s q''): the row of (x_sss, 1.5 x_ss, 0.5 x_s) / jmax
+        implied = implied_rows({ax: np.column_stack([g.d3[:, ax], 1.5 * g.d2[:, ax], 0.5 * g.d1[:, ax]])
+                                / self.lim.jmax[ax] for ax in moving})
+        for ax in moving:
             J = self._combo(basis, g.d3[:, ax], 1.5 * g.d2[:, ax], 0.5 * g.d1[:, ax])
             A = sp.csr_matrix((J.data * np.repeat(rq * Q / self.lim.jmax[ax], np.diff(J.indptr)), J.indices, J.indptr),
                               shape=J.shape)
-            one = np.ones(g.s.size)
-            self._add(rows, A, -one, one, g.s)
+            self._add_needed(rows, A, g.s, ~implied[ax])
             # next to a curvature jump, |j| + the step's share <= jmax (``_step_jerk``); next to a
             # tangent break, + the velocity step's impulse (``_vstep_coupling``): one row holds both
             parts = [self._vstep_coupling(g.s, ax, self.lim.jmax[ax], V_KERNEL_J, 2)]
