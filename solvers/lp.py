@@ -154,6 +154,10 @@ AXIS_EPS = 1e-12
 #: implied by the larger and left out.  A row left out for a near-parallel pair can be exceeded by at most this
 #: share of its coefficients' size; the verification grid checks every axis anyway.
 PARALLEL_ROW_TOL = 1e-12
+#: Stage-1 rows that the other rows at their point hold are left out (``held_rows``); off: every row.
+POINT_HELD_ROWS = True
+#: ... where they hold with this relative margin.
+HELD_ROW_MARGIN = 1e-9
 #: Knot intervals next to a rest end whose acceleration and jerk rows are the drive's control signal and
 #: servo error (lp+nlp, ``LimitSet.rest_drive``): the rest interval.  Since session 14 the NLP solves it
 #: too (``solvers.nlp.REST_ENDS``): this LP feed is where its rest windows start from, and what a failed
@@ -471,6 +475,64 @@ def implied_rows(vecs: dict[int, FloatArray]) -> dict[int, NDArray[np.bool_]]:
     return out
 
 
+def held_rows(
+    alpha: dict[int, FloatArray], beta: dict[int, FloatArray], ub: FloatArray, plain: NDArray[np.bool_],
+    implied: dict[int, NDArray[np.bool_]],
+) -> tuple[NDArray[np.bool_], dict[int, NDArray[np.bool_]]]:
+    r"""Stage-1 rows that the other rows at the same point hold, in the point's (q, p = q').
+
+    At a point the rows are the velocity row 0 <= q <= U (U = ub) and per moving axis x the slab
+    |alpha_x q + beta_x p| <= 1 (the acceleration x_ss q + x_s q' / 2 over amax).  Only at ``plain`` points, where
+    q >= 0 also follows from the column bounds and no row is widened (``WindowLP._plain_points``), and where U is
+    finite; axes whose row is ``implied`` (a parallel one, ``implied_rows``) are not counted on.
+
+    - The velocity row is held where two slabs bound q below U: their parallelogram's largest q is
+      (|beta_x| + |beta_y|) / |alpha_x beta_y - alpha_y beta_x| (a determinant of 0: no parallelogram); a slab with
+      beta_x = 0 alone bounds q by 1 / |alpha_x|.
+    - Where it stays, slab y is held by slab x if x's interval of p lies inside y's for every q in [0, U]: centres
+      -alpha q / beta, half-widths 1 / |beta|; the gap of the centres grows linearly from 0 at q = 0, so at q = U,
+      |alpha_x / beta_x - alpha_y / beta_y| U + 1 / |beta_x| <= 1 / |beta_y| (which includes q = 0's
+      |beta_y| <= |beta_x|).
+      A slab with beta_y = 0 (|alpha_y| q <= 1) is held by the velocity row where |alpha_y| U <= 1.
+
+    At a point either the velocity row or slabs are left out, never both (each case leans on the other's rows);
+    every test has the relative margin HELD_ROW_MARGIN.  Flower loop, v + a: ~25 % of the rows.
+
+    Returns:
+        (velocity row held (K,), axis -> its slab held (K,)).
+    """
+    K = ub.size
+    axes = list(alpha)
+    m = HELD_ROW_MARGIN
+    v_held = np.zeros(K, dtype=bool)
+    a_held = {ax: np.zeros(K, dtype=bool) for ax in axes}
+    ok = plain & np.isfinite(ub)
+    if not ok.any():
+        return v_held, a_held
+    U = np.where(ok, ub, 0.0)
+    on = {ax: ~implied[ax] for ax in axes}
+    aa = {ax: np.abs(alpha[ax]) for ax in axes}
+    bb = {ax: np.abs(beta[ax]) for ax in axes}
+    for i, x in enumerate(axes):
+        v_held |= on[x] & (bb[x] == 0.0) & (aa[x] * U * (1.0 - m) >= 1.0)
+        for y in axes[i + 1 :]:
+            det = np.abs(alpha[x] * beta[y] - alpha[y] * beta[x])
+            v_held |= on[x] & on[y] & (det > 0.0) & (bb[x] + bb[y] <= U * (1.0 - m) * det)
+    v_held &= ok
+    free = ok & ~v_held
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for y in axes:
+            held = (bb[y] == 0.0) & (aa[y] * U <= 1.0 - m)
+            for x in axes:
+                if x == y:
+                    continue
+                live = on[x] & ~a_held[x] & (bb[x] > 0.0) & (bb[y] > 0.0)
+                gap = np.abs(alpha[x] / beta[x] - alpha[y] / beta[y])
+                held |= live & (gap * U + 1.0 / bb[x] <= (1.0 - m) / bb[y])
+            a_held[y] = free & on[y] & held
+    return v_held, a_held
+
+
 def axis_moves(g: PathSamples, ax: int) -> bool:
     """Whether axis ``ax`` moves along these points (else its rows are all zero)."""
     return bool(np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS)
@@ -654,15 +716,39 @@ class WindowLP:
             if g.s.size == 0:
                 return
         basis = self._basis(g.s)
-        self._add(rows, self._combo(basis, np.ones(ub.size)), np.zeros(ub.size), ub / Q, g.s)
         moving = [ax for ax in range(3) if axis_moves(g, ax)]
-        # a = x_ss q + x_s q' / 2 per axis: the row of (x_ss, x_s / 2) / amax
-        implied = implied_rows({ax: np.column_stack([g.d2[:, ax], 0.5 * g.d1[:, ax]]) / self.lim.amax[ax]
-                                for ax in moving})
+        # a = x_ss q + x_s q' / 2 per axis: |alpha q + beta q'| <= 1, alpha = x_ss / amax, beta = x_s / (2 amax)
+        alpha = {ax: g.d2[:, ax] / self.lim.amax[ax] for ax in moving}
+        beta = {ax: 0.5 * g.d1[:, ax] / self.lim.amax[ax] for ax in moving}
+        implied = implied_rows({ax: np.column_stack([alpha[ax], beta[ax]]) for ax in moving})
+        v_held, a_held = held_rows(alpha, beta, ub, self._plain_points(g.s), implied) if POINT_HELD_ROWS else (
+            np.zeros(ub.size, dtype=bool), {ax: np.zeros(ub.size, dtype=bool) for ax in moving})
+        V = self._combo(basis, np.ones(ub.size))
+        if v_held.any():
+            V, ub_v, s_v = V[~v_held], ub[~v_held], g.s[~v_held]
+        else:
+            ub_v, s_v = ub, g.s
+        self._add(rows, V, np.zeros(ub_v.size), ub_v / Q, s_v)
         for ax in moving:
             A = self._combo(basis, g.d2[:, ax], 0.5 * g.d1[:, ax]) * (Q / self.lim.amax[ax])
-            self._add_needed(rows, A, g.s, ~implied[ax])
+            self._add_needed(rows, A, g.s, ~(implied[ax] | a_held[ax]))
             self._add_coupled(rows, A, g.s, self._vstep_coupling(g.s, ax, self.lim.amax[ax], V_KERNEL_A, 1))
+
+    def _plain_points(self, s: FloatArray) -> NDArray[np.bool_]:
+        """Points s (K,) where q >= 0 follows from the column bounds (outside a rest end's knot interval, whose
+        outer control point and rest shapes are free) and whose rows ``_add`` keeps as they are (outside the
+        intervals where they are widened to admit an inherited solution): where ``held_rows`` may leave rows out."""
+        spec = self.spec
+        out = np.ones(s.size, dtype=bool)
+        if spec.start_fixed is None:
+            out &= s >= (spec.k0 + 1) * spec.d
+        if spec.end_rest:
+            out &= s <= (spec.k1 - 1) * spec.d
+        if spec.prev_c is not None:
+            out &= s >= self._inherited_end(spec.prev_c) * spec.d
+        if spec.next_c is not None:
+            out &= s <= self._next_start(spec.next_c) * spec.d
+        return out
 
     def _rest_mask(self, s: FloatArray) -> NDArray[np.bool_]:
         """Points s (K,) in the REST_DRIVE_INTERVALS knot intervals next to a rest end of the piece, where the
