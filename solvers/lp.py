@@ -533,6 +533,59 @@ def held_rows(
     return v_held, a_held
 
 
+def held_jerk_rows(
+    acc: dict[int, tuple[FloatArray, FloatArray]], jerk: dict[int, tuple[FloatArray, FloatArray, FloatArray]],
+    ub: FloatArray, plain: NDArray[np.bool_], implied: dict[int, NDArray[np.bool_]],
+) -> dict[int, NDArray[np.bool_]]:
+    r"""Stage-2 jerk rows that another axis's jerk row holds at their point, in the point's (q, p = q', r = q'').
+
+    Axis x's pseudo-jerk row is |gamma_x q + delta_x p + eps_x r| <= 1 (``jerk[x]`` = (gamma, delta, eps): x_sss,
+    1.5 x_ss and 0.5 x_s times sqrt(q*) / jmax).  The stage-1 rows at the same point (``held_rows``: those left
+    out are held by the others) keep (q, p) in the box [0, U] x [p_lo, p_hi], U = ``ub`` (min of the velocity bound
+    and q*), p_lo and p_hi from the acceleration slabs |alpha q + beta p| <= 1 (``acc[x]`` = (alpha, beta)): each
+    slab's p-interval is linear in q, so over 0 <= q <= U it lies between its values at q = 0 and q = U; the box
+    intersects them over the axes.  Row y is held by row x where x's interval of r lies inside y's for every
+    (q, p) of the box: centres -(gamma q + delta p) / eps, half-widths 1 / |eps|, and the gap of the centres is
+    |linear| (convex), so at the box's four corners, max |c_x - c_y| + 1 / |eps_x| <= 1 / |eps_y|.  A row with
+    eps_y = 0 is held where max over the corners of |gamma_y q + delta_y p| <= 1.  Only at ``plain`` points
+    (``WindowLP._plain_points``) with U finite; rows ``implied`` (``implied_rows``) neither count nor are counted
+    on; margin HELD_ROW_MARGIN.  Flower loop with jerk: ~1/3 of the jerk rows.
+
+    Returns:
+        axis -> (K,) True where its jerk row is held.
+    """
+    K = ub.size
+    axes = list(jerk)
+    m = HELD_ROW_MARGIN
+    held = {ax: np.zeros(K, dtype=bool) for ax in axes}
+    ok = plain & np.isfinite(ub)
+    if not ok.any():
+        return held
+    U = np.where(ok, ub, 0.0)
+    p_lo, p_hi = np.full(K, -np.inf), np.full(K, np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for a, b in acc.values():
+            ends = [(sgn - a * q) / b for sgn in (-1.0, 1.0) for q in (0.0, U)]
+            on = b != 0.0
+            p_lo = np.where(on, np.maximum(p_lo, np.minimum.reduce(ends)), p_lo)
+            p_hi = np.where(on, np.minimum(p_hi, np.maximum.reduce(ends)), p_hi)
+        ok &= np.isfinite(p_lo) & np.isfinite(p_hi)
+        p_lo, p_hi = np.where(ok, p_lo, 0.0), np.where(ok, p_hi, 0.0)
+        corners = [(q, p) for q in (0.0, U) for p in (p_lo, p_hi)]
+        for y in axes:
+            gy, dy, ey = jerk[y]
+            h = (ey == 0.0) & (np.maximum.reduce([np.abs(gy * q + dy * p) for q, p in corners]) <= 1.0 - m)
+            for x in axes:
+                if x == y:
+                    continue
+                gx, dx, ex = jerk[x]
+                live = ~implied[x] & ~held[x] & (ex != 0.0) & (ey != 0.0)
+                gap = np.maximum.reduce([np.abs((gy * q + dy * p) / ey - (gx * q + dx * p) / ex) for q, p in corners])
+                h |= live & (gap + 1.0 / np.abs(ex) <= (1.0 - m) / np.abs(ey))
+            held[y] = ok & ~implied[y] & h
+    return held
+
+
 def axis_moves(g: PathSamples, ax: int) -> bool:
     """Whether axis ``ax`` moves along these points (else its rows are all zero)."""
     return bool(np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS)
@@ -837,6 +890,14 @@ class WindowLP:
         # pseudo-jerk sqrt(q*) (x_sss q + 1.5 x_ss q' + 0.5 x_s q''): the row of (x_sss, 1.5 x_ss, 0.5 x_s) / jmax
         implied = implied_rows({ax: np.column_stack([g.d3[:, ax], 1.5 * g.d2[:, ax], 0.5 * g.d1[:, ax]])
                                 / self.lim.jmax[ax] for ax in moving})
+        if POINT_HELD_ROWS:
+            jmax = self.lim.jmax
+            held = held_jerk_rows(
+                {ax: (g.d2[:, ax] / self.lim.amax[ax], 0.5 * g.d1[:, ax] / self.lim.amax[ax]) for ax in moving},
+                {ax: (g.d3[:, ax] * rq / jmax[ax], 1.5 * g.d2[:, ax] * rq / jmax[ax], 0.5 * g.d1[:, ax] * rq / jmax[ax])
+                 for ax in moving},
+                np.minimum(self._velocity_bound(g), qstar[keep]), self._plain_points(g.s), implied)
+            implied = {ax: implied[ax] | held[ax] for ax in moving}
         for ax in moving:
             J = self._combo(basis, g.d3[:, ax], 1.5 * g.d2[:, ax], 0.5 * g.d1[:, ax])
             A = sp.csr_matrix((J.data * np.repeat(rq * Q / self.lim.jmax[ax], np.diff(J.indptr)), J.indices, J.indptr),
