@@ -757,7 +757,12 @@ class WindowLP:
                 lo, hi = _admit(A, lo, hi, near, x)
         rows.add(A, lo, hi)
 
-    def _stage1_rows(self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray | None) -> None:
+    def _stage1_rows(
+        self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray | None, velocity_only: bool = False
+    ) -> None:
+        """Velocity (q <= ub: the velocity bound, and q* with ``qstar``) and acceleration rows at points g; with
+        ``velocity_only`` the acceleration rows are left out (stage 2 going on in stage 1's model, which has them:
+        they do not depend on q*)."""
         ub = self._velocity_bound(g)
         if qstar is not None:
             ub = np.minimum(ub, np.maximum(qstar, 0.0))
@@ -784,7 +789,7 @@ class WindowLP:
         else:
             ub_v, s_v = ub, g.s
         self._add(rows, V, np.zeros(ub_v.size), ub_v / Q, s_v)
-        for ax in moving:
+        for ax in [] if velocity_only else moving:
             A = self._combo(basis, g.d2[:, ax], 0.5 * g.d1[:, ax]) * (Q / self.lim.amax[ax])
             self._add_needed(rows, A, g.s, ~(implied[ax] | a_held[ax]))
             self._add_coupled(rows, A, g.s, self._vstep_coupling(g.s, ax, self.lim.amax[ax], V_KERNEL_A, 1))
@@ -1122,16 +1127,16 @@ class WindowLP:
             # a fresh model each time (the solver keeps its column bounds), or stage 1's own (``warm``, on its
             # floor: the rows added to it, the dual simplex going on from its optimal basis)
             r2 = base.copy() if warm is None else warm
-            self._stage1_rows(r2, g, Q, qstar)
+            self._stage1_rows(r2, g, Q, qstar, velocity_only=warm is not None)
             self._jerk_rows(r2, g, Q, qstar)
             return self._cuts(self._run(r2, w, lo, col_hi), r2, w, lo, col_hi, Q, s_check, c_star)
 
         # Stage 2 first goes on in stage 1's model (STAGE2_WARM, HiGHS): stage 1's optimum meets every row but
         # the jerk rows (q = q* where q <= q* is added), so its basis is dual feasible and only the jerk rows'
-        # violations are left to the dual simplex.  Its rows stay: stage 1's velocity rows (held by q <= q*) and
-        # cut rows (limits at verification points, which stage 2's own rounds would add where they bind).
-        # Flower with jerk: stage 2's 290 iterations from scratch -> 44.  If it fails, stage 2 runs from
-        # scratch as below.
+        # violations are left to the dual simplex.  Only q <= q* and the jerk rows are added: stage 1's
+        # acceleration rows are there already; its velocity rows (held by q <= q*) and cut rows (limits at
+        # verification points, which stage 2's own rounds would add where they bind) stay.  Flower with jerk:
+        # stage 2's 290 iterations from scratch -> 44.  If it fails, stage 2 runs from scratch as below.
         warm = r1 if STAGE2_WARM and self.solver == "highs" and r1.highs is not None else None
 
         # A floor (or a cut round under it) infeasible: the next one.  All infeasible with an inherited
