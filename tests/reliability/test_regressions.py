@@ -304,6 +304,39 @@ def test_stuck_small_piece_keeps_refining_its_knots(monkeypatch: pytest.MonkeyPa
     assert out.ok, out.describe()
 
 
+@pytest.mark.parametrize("warm", [True, False])
+def test_refinements_coarser_than_the_rest_plan_do_not_end_the_search(monkeypatch: pytest.MonkeyPatch,
+                                                                      warm: bool) -> None:
+    """Bench seed 97 (lp): piece 2 (110.6 mm) is first solved on 64 intervals (2.02 s, a control point at its
+    floor), then refined from its plan's 16: 3.85 s there, 4.00 s on 32.  The refinements stopped ("finer knots no
+    longer pay") although 64 and 128 intervals (with the rest floor) give 2.02 and 1.16 s: 5.47 s of motion in all
+    instead of 4.61 s.  Which way it went hung on which of two equally good LP vertices stage 2 met (the
+    16-interval profile stuck or not; ``lp.STAGE2_WARM``).  Now only plans at least as fine as the first one judge
+    whether finer knots pay.  Truth: each plan's own duration (``PieceTiming``), recorded as it is solved."""
+    monkeypatch.setattr(lp, "STAGE2_WARM", warm)
+    tried: list[tuple[int, int, float]] = []
+    solve = pipeline._solve_windows
+
+    def recorded(toolpath: Any, piece: Any, plan: Any, *args: Any, **kwargs: Any) -> Any:
+        prof, joins = solve(toolpath, piece, plan, *args, **kwargs)
+        try:
+            tried.append((piece.index, plan.n_int, PieceTiming.build(prof, inverse=False).duration))
+        except ScheduleError:
+            tried.append((piece.index, plan.n_int, np.inf))
+        return prof, joins
+
+    monkeypatch.setattr(pipeline, "_solve_windows", recorded)
+    case = gen.case(97, "bench")
+    out = harness.run(case, "lp")
+    assert out.ok, out.describe()
+    piece2 = [(n, d) for i, n, d in tried if i == 2]
+    assert 128 in [n for n, _ in piece2], piece2
+    sch = schedule(case.toolpath(), case.lp_machine, Options(method="lp"))
+    # the schedule keeps each piece's fastest plan: its motion is the sum of the pieces' best durations
+    best = sum(min(d for i, _, d in tried if i == k) for k in range(3))
+    assert float(sch.summary["motion_time"]) == pytest.approx(best, rel=1e-9)
+
+
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_stalled_highs_run_is_stopped_and_solved_cold(monkeypatch: pytest.MonkeyPatch) -> None:
     """Bench seed 949 (lp): on its fourth knot refinement (128 intervals) a cut round's hot-started dual
