@@ -352,6 +352,16 @@ class _Rows:
         self.passed = 0
         #: column scale sigma (ncols,): the solver's variables are y = chat / sigma (``WindowLP._col_scale``)
         self.col_scale = np.ones(ncols)
+        #: each model row's scale (``build``: the rows passed to the solver are divided by it), in model order
+        self.row_scale = np.zeros(0)
+        #: (model rows, lo, hi) changed since the last solve, for the solver's model (``change_bounds``)
+        self.bound_changes: list[tuple[NDArray[np.intp], FloatArray, FloatArray]] = []
+        #: stage 1's velocity rows at its row points: their block, and which of the points (not in a rest interval
+        #: with the drive's rows) have one (``WindowLP._stage1_rows``; stage 2 going on in the same model changes
+        #: their bounds to q*)
+        self.velocity_rows: tuple[int, NDArray[np.bool_]] | None = None
+        #: the row scales of the last ``build``
+        self.built_scale = np.zeros(0)
 
     def add(self, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray) -> None:
         if A.shape[0]:
@@ -359,6 +369,14 @@ class _Rows:
             self.blocks.append(A if type(A) is sp.csr_matrix else sp.csr_matrix(A))
             self.lo.append(np.asarray(lo, dtype=np.float64))
             self.hi.append(np.asarray(hi, dtype=np.float64))
+
+    def change_bounds(self, block: int, lo: FloatArray, hi: FloatArray) -> None:
+        """New bounds of a block's rows (in place; for the solver's model too if the block was passed to it)."""
+        self.lo[block], self.hi[block] = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+        if block < self.passed:
+            start = sum(b.shape[0] for b in self.blocks[:block])
+            self.bound_changes.append((np.arange(start, start + self.blocks[block].shape[0]), self.lo[block],
+                                       self.hi[block]))
 
     def copy(self) -> _Rows:
         """A new row set starting with these rows (no solver state)."""
@@ -376,6 +394,7 @@ class _Rows:
         axis barely moving: normalising it by its coefficients gave bounds of ~5e13 and Clarabel
         stopped with InsufficientProgress)."""
         if len(self.blocks) <= first:
+            self.built_scale = np.zeros(0)
             return sp.csr_matrix((0, self.ncols)), np.zeros(0), np.zeros(0)
         A = sp.vstack(self.blocks[first:], format="csr")
         if any(np.may_share_memory(A.data, b.data) for b in self.blocks[first:]):  # (scaled in place below)
@@ -394,6 +413,7 @@ class _Rows:
         big = np.maximum(big, np.where(np.isfinite(hi), np.abs(hi), 0.0))
         r = 1.0 / np.where(big > 0.0, big, 1.0)
         A.data *= np.repeat(r, np.diff(A.indptr))
+        self.built_scale = r
         return A, lo * r, hi * r
 
 
@@ -738,6 +758,12 @@ class WindowLP:
     def _add(self, rows: _Rows, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, s: FloatArray) -> None:
         """Add rows at points s; on inherited intervals widen them to admit the previous solution (and on
         the last ones before a seam window's fixed end, the next one)."""
+        rows.add(A, *self._widened(A, lo, hi, s))
+
+    def _widened(
+        self, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, s: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """``_add``'s bounds of rows A at points s."""
         spec = self.spec
         if spec.prev_c is not None:
             near = s < self._inherited_end(spec.prev_c) * spec.d
@@ -755,14 +781,18 @@ class WindowLP:
                 a = max(0, k_next - spec.k0)  # (the next solution's columns from the window's, or later)
                 x[a : spec.ncols] = c_next[spec.k0 + a - k_next : spec.k0 + spec.ncols - k_next] / self.Q
                 lo, hi = _admit(A, lo, hi, near, x)
-        rows.add(A, lo, hi)
+        return lo, hi
 
     def _stage1_rows(
-        self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray | None, velocity_only: bool = False
+        self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray | None, velocity_only: bool = False,
+        record: bool = False,
     ) -> None:
-        """Velocity (q <= ub: the velocity bound, and q* with ``qstar``) and acceleration rows at points g; with
-        ``velocity_only`` the acceleration rows are left out (stage 2 going on in stage 1's model, which has them:
-        they do not depend on q*)."""
+        """Velocity (q <= ub: the velocity bound, and q* with ``qstar``) and acceleration rows at points g.
+
+        ``record``: the velocity rows' block is kept in ``rows.velocity_rows`` (stage 1 at its row points).  With
+        ``velocity_only`` (stage 2 going on in stage 1's model at the same points) the acceleration rows, there
+        already and not depending on q*, are not added again, and the recorded velocity rows get the bound
+        q <= min(ub, q*) in place; only points without one (held in stage 1, not under q*) get new rows."""
         ub = self._velocity_bound(g)
         if qstar is not None:
             ub = np.minimum(ub, np.maximum(qstar, 0.0))
@@ -784,11 +814,20 @@ class WindowLP:
         v_held, a_held = held_rows(alpha, beta, ub, self._plain_points(g.s), implied) if POINT_HELD_ROWS else (
             np.zeros(ub.size, dtype=bool), {ax: np.zeros(ub.size, dtype=bool) for ax in moving})
         V = self._combo(basis, np.ones(ub.size))
+        rec = rows.velocity_rows if velocity_only else None
+        if rec is not None and rec[1].size == ub.size:
+            block, had = rec
+            lo_h, hi_h = self._widened(V[had], np.zeros(int(had.sum())), ub[had] / Q, g.s[had])
+            rows.change_bounds(block, lo_h, hi_h)
+            v_held = v_held | had  # (those points have their row)
         if v_held.any():
             V, ub_v, s_v = V[~v_held], ub[~v_held], g.s[~v_held]
         else:
             ub_v, s_v = ub, g.s
+        n_blocks = len(rows.blocks)
         self._add(rows, V, np.zeros(ub_v.size), ub_v / Q, s_v)
+        if record:
+            rows.velocity_rows = (n_blocks, ~v_held) if len(rows.blocks) > n_blocks else None
         for ax in [] if velocity_only else moving:
             A = self._combo(basis, g.d2[:, ax], 0.5 * g.d1[:, ax]) * (Q / self.lim.amax[ax])
             self._add_needed(rows, A, g.s, ~(implied[ax] | a_held[ax]))
@@ -1133,10 +1172,11 @@ class WindowLP:
 
         # Stage 2 first goes on in stage 1's model (STAGE2_WARM, HiGHS): stage 1's optimum meets every row but
         # the jerk rows (q = q* where q <= q* is added), so its basis is dual feasible and only the jerk rows'
-        # violations are left to the dual simplex.  Only q <= q* and the jerk rows are added: stage 1's
-        # acceleration rows are there already; its velocity rows (held by q <= q*) and cut rows (limits at
-        # verification points, which stage 2's own rounds would add where they bind) stay.  Flower with jerk:
-        # stage 2's 290 iterations from scratch -> 44.  If it fails, stage 2 runs from scratch as below.
+        # violations are left to the dual simplex.  Stage 1's velocity rows at its row points get q <= q* in
+        # place (``_Rows.change_bounds``), points without one new rows, and the jerk rows are added: its
+        # acceleration rows are there already, and its cut rows (limits at verification points, which stage 2's
+        # own rounds would add where they bind) stay.  Flower with jerk: stage 2's 290 iterations from scratch
+        # -> 44.  If it fails, stage 2 runs from scratch as below.
         warm = r1 if STAGE2_WARM and self.solver == "highs" and r1.highs is not None else None
 
         # A floor (or a cut round under it) infeasible: the next one.  All infeasible with an inherited
@@ -1179,7 +1219,7 @@ class WindowLP:
         """Stage 1 (velocity + acceleration) with cutting planes: (chat, c*, (rounds, added, unverified), its rows
         and model)."""
         r1 = base.copy()
-        self._stage1_rows(r1, g, Q, None)
+        self._stage1_rows(r1, g, Q, None, record=True)
         chat1 = self._run(r1, w, col_lo, col_hi)
         chat1, pts1 = self._cuts(chat1, r1, w, col_lo, col_hi, Q, s_check, None)
         return chat1, chat1 * Q, pts1, r1
@@ -1605,8 +1645,15 @@ class WindowLP:
         inf = highspy.kHighsInf
         if rows.highs is not None:
             h = rows.highs
+            for idx, lo_c, hi_c in rows.bound_changes:  # (in the rows' scales as passed)
+                r = rows.row_scale[idx]
+                h.changeRowsBounds(  # type: ignore[attr-defined]  # (in highspy, not in its stubs)
+                    idx.size, idx.astype(np.int32), np.where(np.isfinite(lo_c), lo_c * r, -inf),
+                    np.where(np.isfinite(hi_c), hi_c * r, inf))
+            rows.bound_changes.clear()
             A, lo, hi = rows.build(rows.passed)
             rows.passed = len(rows.blocks)
+            rows.row_scale = np.concatenate([rows.row_scale, rows.built_scale])
             if A.shape[0]:
                 h.addRows(
                     A.shape[0],
@@ -1620,6 +1667,8 @@ class WindowLP:
             return self._highs_run(h)
         A, lo, hi = rows.build()
         rows.passed = len(rows.blocks)
+        rows.row_scale = rows.built_scale
+        rows.bound_changes.clear()
         h = highspy.Highs()  # type: ignore[no-untyped-call]
         rows.highs = h
         h.setOptionValue("output_flag", False)
