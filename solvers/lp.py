@@ -1171,12 +1171,12 @@ class WindowLP:
             return self._cuts(self._run(r2, w, lo, col_hi), r2, w, lo, col_hi, Q, s_check, c_star)
 
         # Stage 2 first goes on in stage 1's model (STAGE2_WARM, HiGHS): stage 1's optimum meets every row but
-        # the jerk rows (q = q* where q <= q* is added), so its basis is dual feasible and only the jerk rows'
+        # the jerk rows (q = q* where q <= q* is imposed), so its basis is dual feasible and only the jerk rows'
         # violations are left to the dual simplex.  Stage 1's velocity rows at its row points get q <= q* in
         # place (``_Rows.change_bounds``), points without one new rows, and the jerk rows are added: its
         # acceleration rows are there already, and its cut rows (limits at verification points, which stage 2's
         # own rounds would add where they bind) stay.  Flower with jerk: stage 2's 290 iterations from scratch
-        # -> 44.  If it fails, stage 2 runs from scratch as below.
+        # -> 56.  If it fails, stage 2 runs from scratch as below.
         warm = r1 if STAGE2_WARM and self.solver == "highs" and r1.highs is not None else None
 
         # A floor (or a cut round under it) infeasible: the next one.  All infeasible with an inherited
