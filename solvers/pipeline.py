@@ -617,18 +617,22 @@ def _refined(
             break
         is_stuck = stuck(prof)
         if not is_stuck:
-            if not floored and best is None:
+            if not floored and best is None and first is None:
                 break
             duration = PieceTiming.build(prof, inverse=False).duration
-            # finer knots no longer pay: judged from ``first``'s knot count on (a plan coarser than the one ``first``
-            # was solved on says nothing about finer ones: bench seed 97 lp, a 110.6 mm piece, 16 / 32 intervals
-            # 3.85 / 4.00 s stopped the refinements that on 64 / 128 reach 2.02 / 1.16 s)
-            judged = first is None or plan.n_int >= first[1].n_int
-            if judged and best is not None and duration > FLOOR_REFINE_GAIN * best[0]:
+            # A plan coarser than ``first``'s and no faster than it ends nothing (neither as clean nor as "finer
+            # knots no longer pay"): it says nothing about knots finer than first's.  Bench seed 97 lp, a 110.6 mm
+            # piece first solved on 64 intervals (2.02 s, a control point at its floor): 16 / 32 intervals, 3.85 /
+            # 4.00 s, stopped refinements that on 128 (with the rest floor) reach 1.16 s; so did a clean 16-interval
+            # profile of 2.51 s (which of two equally good stage-2 vertices HiGHS met decided between them).
+            behind = first is not None and plan.n_int < first[1].n_int and duration >= first[0]
+            if not floored and best is None and not behind:
                 break
+            if not behind and best is not None and duration > FLOOR_REFINE_GAIN * best[0]:
+                break  # finer knots no longer pay
             if best is None or duration < best[0]:
                 best = (duration, prof, joins)
-            if not floored:
+            if not floored and not behind:
                 break
         # after KNOT_REFINEMENTS doublings (the last with the rest floor) only a piece still stuck goes on,
         # with the rest floor, while its knots stay at most STUCK_REFINE_MAX_INTERVALS
