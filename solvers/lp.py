@@ -148,6 +148,13 @@ SIMPLEX_SCALE = 2
 #: and no column is scaled below this share of the window's Q.
 COL_SCALE_MIN_BASIS = 0.1
 COL_SCALE_FLOOR = 1e-12
+#: Each free control point's upper bound is COL_HI_FACTOR x the one its velocity rows imply, from the points where its
+#: basis function is at least COL_HI_MIN_BASIS (``WindowLP._implied_col_hi``).
+COL_HI_FACTOR = 2.0
+COL_HI_MIN_BASIS = 0.25
+#: ... but none that is over this in the solver's scaled variables (``_col_scale``): a column next to a cusp's rest
+#: end, its scale ~1e-12 of Q, got a bound of 6e12 there, and HiGHS stopped with kSolveError.
+COL_HI_MAX_SCALED = 1e6
 #: An axis whose path-derivative coefficients are all below this is not moving.
 AXIS_EPS = 1e-12
 #: Two axes' rows at a point are parallel where |v_x x v_y| <= this x |v_x| |v_y| (``implied_rows``): the smaller is
@@ -1116,6 +1123,7 @@ class WindowLP:
         # the turn's cap (q = c_2 tau^2 / 2), and a feed leaving rest with q' = 0 never leaves
         # (bench seed 14; only with ``spec.rest_floor``).  If the floor makes the window
         # infeasible (an inherited start below it), it is dropped.
+        col_hi = self._implied_col_hi(g, Q, col_lo, col_hi, base.col_scale)
         floor = min(self._floor(g_fine), FLOOR_SHARE * step_cap)
         floor_lo = col_lo.copy()
         floor_lo[floor_cols] = floor / Q
@@ -1564,6 +1572,37 @@ class WindowLP:
         # what q is made of there besides it)
         ext = [np.full(bspline.REST_SHAPES, sig[2 if head else spec.ncols - 3]) for head, _, _ in self.shape_ends]
         return np.asarray(np.concatenate([sig, *ext]), dtype=np.float64)
+
+    def _implied_col_hi(
+        self, g: PathSamples, Q: float, col_lo: FloatArray, col_hi: FloatArray, sig: FloatArray
+    ) -> FloatArray:
+        """col_hi (nvar,) with each free control point's upper bound that the velocity rows at the row points g
+        imply, times COL_HI_FACTOR (in units of Q, as col_lo and col_hi).
+
+        At a point s where q >= 0 follows from the column bounds (``_plain_points``; c_i >= 0 for the three
+        control points i whose basis functions b_i are nonzero there) and q(s) <= ub(s) (the point's velocity row,
+        or its other rows, ``held_rows``): c_j b_j(s) <= q(s) <= ub(s), so c_j <= ub(s) / b_j(s).  The bound is
+        the smallest over the points where b_j >= COL_HI_MIN_BASIS (inf where there is none).
+
+        The rows imply the bound, so it leaves the LP's optimum where it is; it keeps the dual simplex off
+        unbounded directions.  Bench seed 664 (lp), piece 1 on 128 knot intervals with its floors: a model
+        that the floors make infeasible (5,791 rows, 130 columns) ran 0.3-4.6 s of dual simplex to status
+        unknown (10 ms an iteration, the objective at 1e13), and 2 s more with presolve to prove it infeasible;
+        with the bounds, 0.03 s to infeasible."""
+        spec = self.spec
+        n = spec.ncols
+        k, W0, _, _ = bspline.basis(g.s, spec.d, spec.n_int, spec.k0, spec.k1 - 1)
+        cols = k[:, None] - spec.k0 + np.arange(3)[None, :]  # (K, 3): the control points nonzero at each point
+        ok = self._plain_points(g.s) & np.all(col_lo[cols] >= 0.0, axis=1)
+        ub = self._velocity_bound(g) / Q
+        bound = np.full(n, np.inf)
+        for i in range(3):
+            sel = ok & (W0[:, i] >= COL_HI_MIN_BASIS)
+            np.minimum.at(bound, cols[sel, i], ub[sel] / W0[sel, i])
+        out = col_hi.copy()
+        free = (col_lo[:n] < col_hi[:n]) & (COL_HI_FACTOR * bound <= COL_HI_MAX_SCALED * sig[:n])
+        out[:n][free] = np.minimum(col_hi[:n][free], COL_HI_FACTOR * bound[free])
+        return out
 
     def _cuts(
         self,

@@ -940,9 +940,10 @@ class NlpStats:
     #: hand-overs still over a limit after HANDOVER_MAX_STEPS scale-downs (started from unscaled)
     handover_unscaled: int = 0
     softer_retries: int = 0
-    #: re-solves (tightening rounds) warm-started from the previous round's primal-dual point, and their iterations
+    #: re-solves (tightening rounds) warm-started from the previous round's primal-dual point
     warm_resolves: int = 0
-    warm_iterations: int = 0
+    #: iterations of the re-solves (tightening rounds, softer retries), warm-started or not
+    resolve_iterations: int = 0
     #: first solves of a window started from the previous window's dual point
     warm_first: int = 0
     #: failed solves retried with Ipopt's cold start and IPOPT_SAFE_OPTIONS
@@ -1560,12 +1561,13 @@ class NlpRefiner:
                 res = solver(**args)
                 st = solver.stats()
             self.stats.iterations += int(st.get("iter_count", 0))
+            if rnd > 0 or retries > 0:
+                self.stats.resolve_iterations += int(st.get("iter_count", 0))
             if warm:
                 if rnd == 0 and retries == 0:
                     self.stats.warm_first += 1
                 else:
                     self.stats.warm_resolves += 1
-                    self.stats.warm_iterations += int(st.get("iter_count", 0))
             status = str(st.get("return_status", "unknown"))
             if not st.get("success", False) and status != "Solved_To_Acceptable_Level":
                 # once per solve: Ipopt's own cold start with the safe settings
@@ -2804,7 +2806,7 @@ def _merge_stats(into: NlpStats, st: NlpStats) -> None:
     into.cut_rounds += st.cut_rounds
     into.softer_retries += st.softer_retries
     into.warm_resolves += st.warm_resolves
-    into.warm_iterations += st.warm_iterations
+    into.resolve_iterations += st.resolve_iterations
     into.warm_first += st.warm_first
     into.safe_retries += st.safe_retries
     into.handover_scaled += st.handover_scaled

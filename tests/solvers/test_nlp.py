@@ -348,11 +348,20 @@ def _capture_stats(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
     return made
 
 
+#: How far apart the warm- and cold-started NLP's motion times may be: the NLP is not convex, and from another
+#: start Ipopt ends at another local optimum.  At 4.63 mm knots on the flower 1.6e-4 since session 31 (3e-6 before;
+#: 4.5 / 4.8 / 5.0 mm: 7e-6 / 3e-5 / 3e-5).
+WARM_COLD_MOTION_REL = 5e-4
+
+
 def test_tightening_rounds_are_warm_started(monkeypatch: pytest.MonkeyPatch) -> None:
     """A window's re-solves (tightening rounds, cut slots) start Ipopt from the previous round's primal and
     dual point, and a window inheriting from the previous one from that window's (``WARM_START``).
-    At 4.63 mm knots on the flower most windows need a round: the warm re-solves take far fewer
-    iterations than cold ones and reach the same schedule (within Ipopt's tolerance), limits holding.
+    At 4.63 mm knots on the flower most windows need a round: the warm re-solves take fewer iterations
+    than cold ones (30 against 36 since session 31's column bounds in the LP, whose vertex is the NLP's start;
+    at 4.5 / 4.8 / 5.0 mm 21 / 23 / 44 against 27 / 31 / 51) and reach the same schedule (within Ipopt's
+    tolerance: ``WARM_COLD_MOTION_REL``), limits holding.  (The first solves gain nothing from the previous
+    window's duals here: ~52 iterations either way.)
     (Ipopt alone: the dense interior point, ``DENSE_IPM``, gains nothing from the duals: 59 replayed
     warm-startable flower solves took 862 iterations seeded, 840 from unit multipliers.)"""
     from solvers import nlp
@@ -371,8 +380,8 @@ def test_tightening_rounds_are_warm_started(monkeypatch: pytest.MonkeyPatch) -> 
     assert st_warm.warm_resolves == st_warm.cut_rounds and st_cold.warm_resolves == 0
     # windows inheriting from the previous one start from its dual point, shifted
     assert st_warm.warm_first >= 1 and st_cold.warm_first == 0
-    assert st_warm.iterations < 0.9 * st_cold.iterations, (st_warm.iterations, st_cold.iterations)
-    assert warm.summary["motion_time"] == pytest.approx(cold.summary["motion_time"], rel=1e-4)
+    assert st_warm.resolve_iterations < 0.9 * st_cold.resolve_iterations, (st_warm, st_cold)
+    assert warm.summary["motion_time"] == pytest.approx(cold.summary["motion_time"], rel=WARM_COLD_MOTION_REL)
     assert warm.diagnostics["nlp_fallbacks"] == []
     _check_drive(m, warm)
 
