@@ -370,8 +370,6 @@ class _Rows:
         #: with the drive's rows) have one (``WindowLP._stage1_rows``; stage 2 going on in the same model changes
         #: their bounds to q*)
         self.velocity_rows: tuple[int, NDArray[np.bool_]] | None = None
-        #: the row scales of the last ``build``
-        self.built_scale = np.zeros(0)
 
     def add(self, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray) -> None:
         if A.shape[0]:
@@ -395,17 +393,17 @@ class _Rows:
         out.col_scale = self.col_scale
         return out
 
-    def build(self, first: int = 0) -> tuple[sp.csr_matrix, FloatArray, FloatArray]:
+    def build(self, first: int = 0) -> tuple[sp.csr_matrix, FloatArray, FloatArray, FloatArray]:
         """Rows of blocks[first:] in the solver's variables y (columns times ``col_scale``) as one
-        cleaned CSR matrix with bounds.  Coefficients below TINY_COEF (in units of Q) are dropped
-        first; then each row is divided by the larger of its largest coefficient and its largest
+        cleaned CSR matrix with bounds, and the scale each row was multiplied by (r: the rows passed
+        are diag(r) A).  Coefficients below TINY_COEF (in units of Q) are dropped first; then each
+        row is divided by the larger of its largest coefficient and its largest
         finite bound, so a row whose columns and bound are all ~1e-8 (q capped near a tight turn)
         is O(1), and a row whose coefficients are all tiny against its bound stays as it was (an
         axis barely moving: normalising it by its coefficients gave bounds of ~5e13 and Clarabel
         stopped with InsufficientProgress)."""
         if len(self.blocks) <= first:
-            self.built_scale = np.zeros(0)
-            return sp.csr_matrix((0, self.ncols)), np.zeros(0), np.zeros(0)
+            return sp.csr_matrix((0, self.ncols)), np.zeros(0), np.zeros(0), np.zeros(0)
         A = sp.vstack(self.blocks[first:], format="csr")
         if any(np.may_share_memory(A.data, b.data) for b in self.blocks[first:]):  # (scaled in place below)
             A = A.copy()
@@ -423,8 +421,7 @@ class _Rows:
         big = np.maximum(big, np.where(np.isfinite(hi), np.abs(hi), 0.0))
         r = 1.0 / np.where(big > 0.0, big, 1.0)
         A.data *= np.repeat(r, np.diff(A.indptr))
-        self.built_scale = r
-        return A, lo * r, hi * r
+        return A, lo * r, hi * r, r
 
 
 def axis_kinematics(
@@ -1678,7 +1675,7 @@ class WindowLP:
         lo_y, hi_y = col_lo / sig, col_hi / sig
         if self.solver == "highs":
             return self._highs(rows, wy, lo_y, hi_y) * sig
-        A, lo, hi = rows.build()
+        A, lo, hi, _ = rows.build()
         return self._clarabel(A, lo, hi, wy, lo_y, hi_y) * sig
 
     def _highs(self, rows: _Rows, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray) -> FloatArray:
@@ -1693,9 +1690,9 @@ class WindowLP:
                     idx.size, idx.astype(np.int32), np.where(np.isfinite(lo_c), lo_c * r, -inf),
                     np.where(np.isfinite(hi_c), hi_c * r, inf))
             rows.bound_changes.clear()
-            A, lo, hi = rows.build(rows.passed)
+            A, lo, hi, r_new = rows.build(rows.passed)
             rows.passed = len(rows.blocks)
-            rows.row_scale = np.concatenate([rows.row_scale, rows.built_scale])
+            rows.row_scale = np.concatenate([rows.row_scale, r_new])
             if A.shape[0]:
                 h.addRows(
                     A.shape[0],
@@ -1707,9 +1704,8 @@ class WindowLP:
                     A.data,
                 )
             return self._highs_run(h)
-        A, lo, hi = rows.build()
+        A, lo, hi, rows.row_scale = rows.build()
         rows.passed = len(rows.blocks)
-        rows.row_scale = rows.built_scale
         rows.bound_changes.clear()
         h = highspy.Highs()  # type: ignore[no-untyped-call]
         rows.highs = h
