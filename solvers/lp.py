@@ -164,10 +164,13 @@ PARALLEL_ROW_TOL = 1e-12
 #: Stage 2 (the jerk rows) first goes on in stage 1's HiGHS model from its optimal basis (``WindowLP.solve``).
 STAGE2_WARM = True
 #: Stage-1 rows that the other rows at their point hold are left out (``held_rows``, ``held_jerk_rows``); off: every
-#: row.  Off by default: with it, bench seed 664 lp (5 segments, a corner) took over 120 s of CPU where it takes
-#: 7.6 s without (another LP vertex, then a cascade of knot refinements: not yet understood; session 30).  On, the
-#: flower's v+a LP has 1,894 rows instead of 2,660 (HiGHS 17.8 -> 13.9 ms), the same motion.
-POINT_HELD_ROWS = False
+#: row.  The flower's v+a LP has 1,894 rows instead of 2,660 (HiGHS 17.8 -> 13.9 ms), the same motion.  Off from
+#: session 30's a42273f to session 31: bench seed 664 lp took over 120 s of CPU with it (7.6 s without).  Its piece
+#: 1, refined to 128, 256 and 512 knot intervals, had windows that their floors made infeasible, and HiGHS's dual
+#: simplex ran seconds on each to status unknown; the column bounds (``WindowLP._implied_col_hi``) end those runs in
+#: 0.03-1 s, and the case takes ~4 s either way.  Bench seeds 0-699 but 388 and 615, both methods, with the bounds
+#: and the held rows: 1,396 runs, 0 failures.
+POINT_HELD_ROWS = True
 #: ... where they hold with this relative margin.
 HELD_ROW_MARGIN = 1e-9
 #: Knot intervals next to a rest end whose acceleration and jerk rows are the drive's control signal and

@@ -171,7 +171,7 @@ def test_flower_solves_on_fewer_rows_to_the_same_motion(monkeypatch: pytest.Monk
     tp = ex.flower(1)
     opt = Options(method="lp", jerk=jerk)
     rows = _rows_passed(monkeypatch)
-    monkeypatch.setattr(lp, "POINT_HELD_ROWS", True)  # (off by default: bench seed 664, see lp.POINT_HELD_ROWS)
+    monkeypatch.setattr(lp, "POINT_HELD_ROWS", True)  # (the default: set here as this test is about it)
     sch = schedule(tp, router(), opt)
     fewer = list(rows)
     rows.clear()

@@ -350,7 +350,7 @@ def _capture_stats(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
 
 #: How far apart the warm- and cold-started NLP's motion times may be: the NLP is not convex, and from another
 #: start Ipopt ends at another local optimum.  At 4.63 mm knots on the flower 1.6e-4 since session 31 (3e-6 before;
-#: 4.5 / 4.8 / 5.0 mm: 7e-6 / 3e-5 / 3e-5).
+#: 4.5 / 4.8 / 5.0 mm: 3e-5 / 3e-5 / 3e-5).
 WARM_COLD_MOTION_REL = 5e-4
 
 
@@ -359,7 +359,7 @@ def test_tightening_rounds_are_warm_started(monkeypatch: pytest.MonkeyPatch) -> 
     dual point, and a window inheriting from the previous one from that window's (``WARM_START``).
     At 4.63 mm knots on the flower most windows need a round: the warm re-solves take fewer iterations
     than cold ones (30 against 36 since session 31's column bounds in the LP, whose vertex is the NLP's start;
-    at 4.5 / 4.8 / 5.0 mm 21 / 23 / 44 against 27 / 31 / 51) and reach the same schedule (within Ipopt's
+    at 4.5 / 4.8 / 5.0 mm 20 / 23 / 36 against 27 / 31 / 52) and reach the same schedule (within Ipopt's
     tolerance: ``WARM_COLD_MOTION_REL``), limits holding.  (The first solves gain nothing from the previous
     window's duals here: ~52 iterations either way.)
     (Ipopt alone: the dense interior point, ``DENSE_IPM``, gains nothing from the duals: 59 replayed
