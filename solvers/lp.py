@@ -352,6 +352,33 @@ def _admit(
     return lo, hi
 
 
+def column_reach(
+    k: IntArray, W0: FloatArray, cap: FloatArray, ncols: int, min_basis: float, ok: NDArray[np.bool_] | None = None
+) -> FloatArray:
+    """For each control point c_j (ncols,), the smallest cap(s) / b_j(s) over the points s where its basis function
+    b_j(s) >= min_basis (and ``ok``), inf where there is none: with every c >= 0, q(s) >= c_j b_j(s), so
+    q(s) <= cap(s) keeps c_j at most that.
+
+    k (K,): each point's first nonzero control point (``bspline.basis``, counted from the window's first); W0 (K, 3):
+    the basis weights b_k, b_k+1, b_k+2 there; cap (K,).  Points in order of s (each column's points together:
+    per-column minima by ``np.minimum.reduceat``; otherwise ``np.minimum.at``, the same minima, ~10x slower)."""
+    out = np.full(ncols, np.inf)
+    for i in range(3):
+        sel = W0[:, i] >= min_basis
+        if ok is not None:
+            sel &= ok
+        col = k[sel] + i
+        if col.size == 0:
+            continue
+        val = cap[sel] / W0[sel, i]
+        if np.all(col[1:] >= col[:-1]):
+            first = np.flatnonzero(np.concatenate([[True], col[1:] != col[:-1]]))
+            out[col[first]] = np.minimum(out[col[first]], np.minimum.reduceat(val, first))
+        else:
+            np.minimum.at(out, col, val)
+    return out
+
+
 class _Rows:
     """Accumulates sparse rows lo <= A chat <= hi."""
 
@@ -928,18 +955,19 @@ class WindowLP:
                           (E - er) / E, g.s)
 
     def _jerk_rows(self, rows: _Rows, g: PathSamples, Q: float, qstar: FloatArray) -> None:
+        ub = self._velocity_bound(g)  # (the stage-1 rows' at the same points: kept, not computed again)
         rest = self._rest_mask(g.s)
         if rest.any():
             gr = g.subset(rest)
             R = np.sqrt(np.minimum(np.maximum(qstar[rest], 0.0), self._rest_feed_cap(gr) ** 2))
             self._rest_drive_rows(rows, gr, Q, R, qstar[rest])
-            g, qstar = g.subset(~rest), qstar[~rest]
+            g, qstar, ub = g.subset(~rest), qstar[~rest], ub[~rest]
             if g.s.size == 0:
                 return
         keep = np.sqrt(np.maximum(qstar, 0.0)) > TINY_SQRT_QSTAR * np.sqrt(Q)
         if not keep.any():
             return
-        g = g.subset(keep)
+        g, ub = g.subset(keep), ub[keep]
         rq = np.sqrt(qstar[keep])
         basis = self._basis(g.s)
         moving = [ax for ax in range(3) if axis_moves(g, ax)]
@@ -952,7 +980,7 @@ class WindowLP:
                 {ax: (g.d2[:, ax] / self.lim.amax[ax], 0.5 * g.d1[:, ax] / self.lim.amax[ax]) for ax in moving},
                 {ax: (g.d3[:, ax] * rq / jmax[ax], 1.5 * g.d2[:, ax] * rq / jmax[ax], 0.5 * g.d1[:, ax] * rq / jmax[ax])
                  for ax in moving},
-                np.minimum(self._velocity_bound(g), qstar[keep]), self._plain_points(g.s), implied)
+                np.minimum(ub, qstar[keep]), self._plain_points(g.s), implied)
             implied = {ax: implied[ax] | held[ax] for ax in moving}
         for ax in moving:
             J = self._combo(basis, g.d3[:, ax], 1.5 * g.d2[:, ax], 0.5 * g.d1[:, ax])
@@ -1559,10 +1587,7 @@ class WindowLP:
         spec = self.spec
         k, W0, _, _ = bspline.basis(g.s, spec.d, spec.n_int, spec.k0, spec.k1 - 1)
         cap = np.minimum(self._cap(g), Q)
-        sig = np.full(spec.ncols, Q)
-        for i in range(3):
-            ok = W0[:, i] >= COL_SCALE_MIN_BASIS
-            np.minimum.at(sig, k[ok] - spec.k0 + i, cap[ok] / W0[ok, i])
+        sig = np.minimum(column_reach(k - spec.k0, W0, cap, spec.ncols, COL_SCALE_MIN_BASIS), Q)
         sig = np.clip(sig / Q, COL_SCALE_FLOOR, 1.0)
         if spec.start_fixed is None:  # c_k0 = -c_k0+1 at a rest start
             sig[0] = sig[1]
@@ -1594,11 +1619,7 @@ class WindowLP:
         k, W0, _, _ = bspline.basis(g.s, spec.d, spec.n_int, spec.k0, spec.k1 - 1)
         cols = k[:, None] - spec.k0 + np.arange(3)[None, :]  # (K, 3): the control points nonzero at each point
         ok = self._plain_points(g.s) & np.all(col_lo[cols] >= 0.0, axis=1)
-        ub = self._velocity_bound(g) / Q
-        bound = np.full(n, np.inf)
-        for i in range(3):
-            sel = ok & (W0[:, i] >= COL_HI_MIN_BASIS)
-            np.minimum.at(bound, cols[sel, i], ub[sel] / W0[sel, i])
+        bound = column_reach(k - spec.k0, W0, self._velocity_bound(g) / Q, n, COL_HI_MIN_BASIS, ok)
         out = col_hi.copy()
         free = (col_lo[:n] < col_hi[:n]) & (COL_HI_FACTOR * bound <= COL_HI_MAX_SCALED * sig[:n])
         out[:n][free] = np.minimum(col_hi[:n][free], COL_HI_FACTOR * bound[free])

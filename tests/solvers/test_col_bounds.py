@@ -15,7 +15,7 @@ import pytest
 
 from geometry import Toolpath, primitives
 from geometry import examples as ex
-from solvers import lp
+from solvers import bspline, lp
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
 
@@ -109,3 +109,25 @@ def test_infeasible_floors_are_found_quickly(monkeypatch: pytest.MonkeyPatch, he
     finally:
         w.close()
     assert row["ok"], row
+
+
+@pytest.mark.parametrize("shuffled", [False, True])
+def test_column_reach_is_the_smallest_cap_over_each_basis_function(shuffled: bool) -> None:
+    """``lp.column_reach`` against a loop over every (point, column) pair, with points in order of s (the
+    reduceat path) and shuffled (``np.minimum.at``)."""
+    rng = np.random.default_rng(7)
+    n_int, d = 12, 0.5
+    s = np.sort(rng.uniform(0.0, n_int * d, 400))
+    if shuffled:
+        s = rng.permutation(s)
+    k, W0, _, _ = bspline.basis(s, d, n_int)
+    cap = rng.uniform(0.1, 2.0, s.size)
+    ok = rng.uniform(size=s.size) > 0.2
+    got = lp.column_reach(k, W0, cap, n_int + 2, 0.25, ok)
+    want = np.full(n_int + 2, np.inf)
+    for p in range(s.size):
+        for i in range(3):
+            if ok[p] and W0[p, i] >= 0.25:
+                want[k[p] + i] = min(want[k[p] + i], cap[p] / W0[p, i])
+    assert np.isfinite(want).sum() >= n_int  # (most columns have points)
+    np.testing.assert_array_equal(got, want)
