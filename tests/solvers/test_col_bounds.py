@@ -1,8 +1,9 @@
 """Upper bounds on the LP's control points that its velocity rows imply (``solvers.lp.WindowLP._implied_col_hi``).
 
 Independent truth: each bound is checked against the largest value the column can take under the model's own
-rows with every upper bound removed (a fresh HiGHS model maximising that column), and bench seed 664 against
-the HiGHS statuses of its runs and ``tests.reliability``'s checker of the sampled output.
+rows with every upper bound removed (a fresh HiGHS model maximising that column), bench seed 664 in a worker
+limited in CPU as the random bench runs it, checked by ``tests.reliability``'s checker, and ``column_reach``
+against a loop.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ BOUND_TOL = 1e-6
 
 
 def _first_models(monkeypatch: pytest.MonkeyPatch) -> dict[int, Any]:
-    """The ``HighsLp`` of every HiGHS model's first run (copies, as built: rows, scaled columns, bounds)."""
+    """The ``HighsLp`` at the first run of each of the first MODELS_PER_CASE HiGHS models (copies, as built: rows,
+    scaled columns, bounds), by the model's id."""
     seen: dict[int, Any] = {}
     run = lp.WindowLP._timed_run
 
@@ -98,7 +100,8 @@ def test_infeasible_floors_are_found_quickly(monkeypatch: pytest.MonkeyPatch, he
     floor, whose floors make the window infeasible.  Without column upper bounds HiGHS's dual simplex ran 0.3-4.6 s
     (10 ms an iteration, the objective at 1e13) to status unknown, then 2 s more with presolve to prove it
     infeasible; with ``lp.POINT_HELD_ROWS`` the refinements to 256 and 512 intervals did the same, over 120 s of
-    CPU in all (a ``CaseTimeout``).  With the bounds those runs end infeasible in 0.03-1 s.  Run in a worker
+    CPU in all (a ``CaseTimeout``).  With the bounds those runs end in 0.03-1 s (infeasible; one at 256 intervals
+    with status unknown, in 0.12 s, and the next floor goes on).  Run in a worker
     limited to CASE_CPU_S, as the random bench runs it, and checked by its checker."""
     from bench import random_cases
 
