@@ -566,7 +566,7 @@ def held_rows(
     v_held = np.zeros(K, dtype=bool)
     a_held = {ax: np.zeros(K, dtype=bool) for ax in axes}
     ok = plain & np.isfinite(ub)
-    if not ok.any():
+    if not ok.any() or _one_row_each(implied, {ax: beta[ax] == 0.0 for ax in axes}, ok):
         return v_held, a_held
     U = np.where(ok, ub, 0.0)
     on = {ax: ~implied[ax] for ax in axes}
@@ -590,6 +590,22 @@ def held_rows(
                 held |= live & (gap * U + 1.0 / bb[x] <= (1.0 - m) / bb[y])
             a_held[y] = free & on[y] & held
     return v_held, a_held
+
+
+def _one_row_each(
+    implied: dict[int, NDArray[np.bool_]], flat: dict[int, NDArray[np.bool_]], ok: NDArray[np.bool_]
+) -> bool:
+    """Whether ``held_rows`` / ``held_jerk_rows`` can hold nothing: at every ``ok`` point at most one axis's row is
+    not ``implied`` (their other rules hold one axis's row by another's), and no such row is ``flat`` (no term in
+    the highest derivative, p or r: the rules of one row alone).  A straight line's points, where the parallel rows
+    leave one axis's: a 0.5 mm G01 move ran them ~6 times, ~1.3 ms of its ~55 ms, to find nothing."""
+    count = np.zeros(ok.size, dtype=np.int64)
+    for ax, imp in implied.items():
+        live = ok & ~imp
+        if np.any(live & flat[ax]):
+            return False
+        count += live
+    return bool(np.all(count <= 1))
 
 
 def held_jerk_rows(
@@ -618,7 +634,7 @@ def held_jerk_rows(
     m = HELD_ROW_MARGIN
     held = {ax: np.zeros(K, dtype=bool) for ax in axes}
     ok = plain & np.isfinite(ub)
-    if not ok.any():
+    if not ok.any() or _one_row_each(implied, {ax: jerk[ax][2] == 0.0 for ax in axes}, ok):
         return held
     U = np.where(ok, ub, 0.0)
     p_lo, p_hi = np.full(K, -np.inf), np.full(K, np.inf)

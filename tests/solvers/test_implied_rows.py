@@ -215,3 +215,36 @@ def test_held_jerk_rows_are_held_by_the_rows_kept(seed: int) -> None:
             if held[ax][k]:
                 n = np.array([c[k] for c in jerk[ax]])
                 assert max(_max_over(kept, n), _max_over(kept, -n)) <= 1.0 + 1e-9, (k, ax)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_one_row_a_point_holds_nothing_and_is_told_at_once(monkeypatch: pytest.MonkeyPatch, seed: int) -> None:
+    """Where at most one axis's row is left at each point (the others ``implied``), ``held_rows`` and
+    ``held_jerk_rows`` return at once (``lp._one_row_each``): the same masks as their whole evaluation, which the
+    random points above check against ``linprog``.  Half the seeds give one point two rows (the whole evaluation
+    runs), half give flat rows (beta = 0, eps = 0: the rules of one row alone, which can hold)."""
+    rng = np.random.default_rng(300 + seed)
+    K, axes = 200, [0, 1, 2]
+    live = rng.integers(0, 3, size=K)  # the one axis whose row is left at each point
+    implied = {ax: live != ax for ax in axes}
+    if seed % 2:
+        implied[(int(live[7]) + 1) % 3][7] = False  # a second row at point 7
+    flat = rng.uniform(size=K) < (0.1 if seed >= 2 else 0.0)
+    alpha = {ax: rng.normal(size=K) * 3.0 for ax in axes}
+    beta = {ax: np.where(flat, 0.0, rng.normal(size=K)) for ax in axes}
+    acc = {ax: (alpha[ax], np.where(flat, 1.0, beta[ax])) for ax in axes}
+    jerk = {ax: (rng.normal(size=K), rng.normal(size=K), np.where(flat, 0.0, rng.normal(size=K))) for ax in axes}
+    ub = rng.uniform(0.05, 3.0, size=K)
+    plain = rng.uniform(size=K) < 0.9
+    quick = (lp.held_rows(alpha, beta, ub, plain, implied), lp.held_jerk_rows(acc, jerk, ub, plain, implied))
+    told = lp._one_row_each(implied, {ax: beta[ax] == 0.0 for ax in axes}, plain & np.isfinite(ub))
+    assert told == (seed == 0), told
+    monkeypatch.setattr(lp, "_one_row_each", lambda *args: False)
+    whole = (lp.held_rows(alpha, beta, ub, plain, implied), lp.held_jerk_rows(acc, jerk, ub, plain, implied))
+    np.testing.assert_array_equal(quick[0][0], whole[0][0])
+    for ax in axes:
+        np.testing.assert_array_equal(quick[0][1][ax], whole[0][1][ax])
+        np.testing.assert_array_equal(quick[1][ax], whole[1][ax])
+    if seed >= 2:  # flat rows: the one-row rules hold some (returning at once would have missed them)
+        masks = [whole[0][0], *whole[0][1].values(), *whole[1].values()]
+        assert any(h.any() for h in masks)
