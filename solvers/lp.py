@@ -392,7 +392,7 @@ class _Rows:
         self.passed = 0
         #: column scale sigma (ncols,): the solver's variables are y = chat / sigma (``WindowLP._col_scale``)
         self.col_scale = np.ones(ncols)
-        #: each model row's scale (``build``: the rows passed to the solver are divided by it), in model order
+        #: each model row's scale r (``build``: the rows passed to the solver are multiplied by it), in model order
         self.row_scale = np.zeros(0)
         #: (model rows, lo, hi) changed since the last solve, for the solver's model (``change_bounds``)
         self.bound_changes: list[tuple[NDArray[np.intp], FloatArray, FloatArray]] = []

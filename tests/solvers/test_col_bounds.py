@@ -19,6 +19,7 @@ from geometry import examples as ex
 from solvers import bspline, lp
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
+from tests.solvers.highs_runs import watch_highs_runs
 
 #: Models checked per schedule (each window's first HiGHS model) and columns per model.
 MODELS_PER_CASE = 3
@@ -31,14 +32,12 @@ def _first_models(monkeypatch: pytest.MonkeyPatch) -> dict[int, Any]:
     """The ``HighsLp`` at the first run of each of the first MODELS_PER_CASE HiGHS models (copies, as built: rows,
     scaled columns, bounds), by the model's id."""
     seen: dict[int, Any] = {}
-    run = lp.WindowLP._timed_run
 
     def kept(h: Any) -> None:
         if id(h) not in seen and len(seen) < MODELS_PER_CASE:
             seen[id(h)] = h.getLp()
-        run(h)
 
-    monkeypatch.setattr(lp.WindowLP, "_timed_run", staticmethod(kept))
+    watch_highs_runs(monkeypatch, before=kept)
     return seen
 
 

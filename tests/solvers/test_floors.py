@@ -24,6 +24,7 @@ from solvers import lp
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
 from tests.fdcheck import utilisation
+from tests.solvers.highs_runs import watch_highs_runs
 
 TS = 1e-3
 #: Allowed overshoot of any limit in the sampled output (issue: 1.01 x).
@@ -41,13 +42,11 @@ def _zigzag() -> Toolpath:
 
 def _statuses(monkeypatch: pytest.MonkeyPatch) -> collections.Counter[str]:
     seen: collections.Counter[str] = collections.Counter()
-    run = lp.WindowLP._timed_run
 
     def counted(h: Any) -> None:
-        run(h)
         seen[str(h.getModelStatus())] += 1
 
-    monkeypatch.setattr(lp.WindowLP, "_timed_run", staticmethod(counted))
+    watch_highs_runs(monkeypatch, after=counted)
     return seen
 
 

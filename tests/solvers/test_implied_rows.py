@@ -12,8 +12,6 @@ POINT_HELD_ROWS off) and the finite differences of the sampled positions (``test
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import pytest
 from scipy.optimize import linprog
@@ -24,6 +22,7 @@ from solvers import lp
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
 from tests.fdcheck import utilisation
+from tests.solvers.highs_runs import watch_highs_runs
 
 TS = 1e-3
 #: Allowed overshoot of any limit in the sampled output (issue: 1.01 x).
@@ -80,13 +79,7 @@ def test_two_dimensional_rows_off_parallel_are_kept() -> None:
 
 def _rows_passed(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     rows: list[int] = []
-    run = lp.WindowLP._timed_run
-
-    def counted(h: Any) -> None:
-        run(h)
-        rows.append(int(h.getNumRow()))
-
-    monkeypatch.setattr(lp.WindowLP, "_timed_run", staticmethod(counted))
+    watch_highs_runs(monkeypatch, after=lambda h: rows.append(int(h.getNumRow())))
     return rows
 
 

@@ -20,6 +20,7 @@ from solvers.errors import InfeasibleError
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
 from tests.fdcheck import utilisation
+from tests.solvers.highs_runs import watch_highs_runs
 
 TS = 1e-3
 #: Allowed overshoot of any limit in the sampled output (issue: 1.01 x).
@@ -31,13 +32,8 @@ MOTION_REL_TOL = 1e-6
 def _runs(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, int]]:
     """(rows, simplex iterations) of every HiGHS run."""
     seen: list[tuple[int, int]] = []
-    run = lp.WindowLP._timed_run
-
-    def counted(h: Any) -> None:
-        run(h)
-        seen.append((int(h.getNumRow()), int(h.getInfo().simplex_iteration_count)))
-
-    monkeypatch.setattr(lp.WindowLP, "_timed_run", staticmethod(counted))
+    watch_highs_runs(monkeypatch, after=lambda h: seen.append((int(h.getNumRow()),
+                                                                int(h.getInfo().simplex_iteration_count))))
     return seen
 
 
