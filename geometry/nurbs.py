@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import BSpline
 
+from geometry import native
 from geometry.errors import GeometryError
 
 FloatArray = NDArray[np.float64]
@@ -147,8 +148,29 @@ class NurbsSegment:
     def _spl(self) -> BSpline:
         """The homogeneous B-spline [wP, w], built on first evaluation (a dense G-code program holds
         hundreds of thousands of lines that ``Toolpath`` evaluates in closed form and never needs it)."""
-        hom = np.column_stack([self.control_points * self.weights[:, None], self.weights])
-        return BSpline(self.knots, hom, self.degree, extrapolate=False)
+        return BSpline(self.knots, self._hom_points, self.degree, extrapolate=False)
+
+    @cached_property
+    def _hom_points(self) -> FloatArray:
+        """Homogeneous control points [w P, w] (n, 4), C-contiguous."""
+        return np.ascontiguousarray(np.column_stack([self.control_points * self.weights[:, None], self.weights]))
+
+    @cached_property
+    def _taylor(self) -> native.Taylor | None:
+        """The polynomial form of each knot span for the compiled kernel (``geometry.native``); None without it."""
+        lib = native.library()
+        if lib is None:
+            return None
+        return native.taylor(lib, self.degree, self.knots, self._hom_points)
+
+    def _native(self, uu: FloatArray, order: int) -> FloatArray | None:
+        """C and its u-derivatives up to ``order`` at uu (clipped to the domain) by the compiled kernel
+        (``geometry.native``), (order + 1, K, 3); None without it."""
+        lib = native.library()
+        form = self._taylor if lib is not None else None
+        if lib is None or form is None:
+            return None
+        return native.nurbs_derivatives(lib, form, uu, order)
 
     @property
     def domain(self) -> tuple[float, float]:
@@ -172,6 +194,9 @@ class NurbsSegment:
         """
         lo, hi = self.domain
         uu = np.clip(np.asarray(u, dtype=np.float64), lo, hi)
+        fast = self._native(uu, 3)
+        if fast is not None:
+            return fast
         H = [self._hom(uu, order) for order in range(4)]  # each (K, 4)
         A = [h[:, :3] for h in H]
         W = [h[:, 3:4] for h in H]
@@ -185,10 +210,14 @@ class NurbsSegment:
         """|C'(u)| (mm per unit u), shape (K,)."""
         lo, hi = self.domain
         uu = np.clip(np.asarray(u, dtype=np.float64), lo, hi)
-        h0 = self._hom(uu, 0)
-        h1 = self._hom(uu, 1)
-        c0 = h0[:, :3] / h0[:, 3:4]
-        c1 = (h1[:, :3] - h1[:, 3:4] * c0) / h0[:, 3:4]
+        fast = self._native(uu, 1)
+        if fast is not None:
+            c1 = fast[1]
+        else:
+            h0 = self._hom(uu, 0)
+            h1 = self._hom(uu, 1)
+            c0 = h0[:, :3] / h0[:, 3:4]
+            c1 = (h1[:, :3] - h1[:, 3:4] * c0) / h0[:, 3:4]
         return np.asarray(np.sqrt(np.einsum("ij,ij->i", c1, c1)), dtype=np.float64)
 
     def _hom(self, u: FloatArray, order: int) -> FloatArray:
@@ -200,7 +229,11 @@ class NurbsSegment:
     def points(self, u: FloatArray) -> FloatArray:
         """C(u) only, (K, 3) mm."""
         lo, hi = self.domain
-        h = self._hom(np.clip(np.asarray(u, dtype=np.float64), lo, hi), 0)
+        uu = np.clip(np.asarray(u, dtype=np.float64), lo, hi)
+        fast = self._native(uu, 0)
+        if fast is not None:
+            return np.asarray(fast[0], dtype=np.float64)
+        h = self._hom(uu, 0)
         return np.asarray(h[:, :3] / h[:, 3:4], dtype=np.float64)
 
     def unit_tangents(self, u: FloatArray) -> FloatArray:

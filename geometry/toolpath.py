@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import fresnel
 
+from geometry import native
 from geometry.arcblend import Unblended
 from geometry.arclength import ArcLengthTable
 from geometry.clothoid import ClothoidSegment
@@ -335,6 +336,9 @@ class Piece:
 
 def arc_length_derivatives(D: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Map u-derivatives (4, K, 3) to arc-length derivatives C_s, C_ss, C_sss (K, 3 each)."""
+    lib = native.library()
+    if lib is not None:
+        return native.arc_length_derivatives(lib, D)
     C1, C2, C3 = D[1], D[2], D[3]
     g = np.einsum("ij,ij->i", C1, C1)
     g12 = np.einsum("ij,ij->i", C1, C2)

@@ -13,14 +13,13 @@ command and the CasADi version, and its shared library is looked up in the cache
 else ``$XDG_CACHE_HOME/feedsched`` or ``~/.cache/feedsched``); a missing one is compiled there once
 (~0.1-0.3 s; written under a temporary name and renamed, so processes compiling at once do not read a
 partial file).  Without a C compiler, with an unwritable cache directory or with DISABLE_ENV set, the
-function is used as given: the same values, by the virtual machine.
+function is used as given: the same values, by the virtual machine.  (The cache and the compile step are
+``geometry.native``'s, shared with its NURBS kernel.)
 """
 
 from __future__ import annotations
 
-import hashlib
 import os
-import shutil
 import subprocess
 import tempfile
 from pathlib import Path
@@ -28,32 +27,23 @@ from typing import Any
 
 import casadi as ca
 
-#: environment variables: the cache directory, and "1" to use the virtual machine only
-CACHE_ENV = "FEEDSCHED_CACHE_DIR"
-DISABLE_ENV = "FEEDSCHED_NO_COMPILE"
+from geometry import native
+from geometry.native import CACHE_ENV, DISABLE_ENV, cache_dir
+
+__all__ = ["CACHE_ENV", "CFLAGS", "DISABLE_ENV", "cache_dir", "compiled"]
+
 #: compile command (after the compiler): optimised, position-independent, exact IEEE arithmetic
 CFLAGS = ("-O1", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
-#: longest a compile may take (s) before the function stays the virtual machine's
-COMPILE_TIMEOUT_S = 120.0
-
-
-def cache_dir() -> Path:
-    """Where compiled functions are kept."""
-    given = os.environ.get(CACHE_ENV)
-    if given:
-        return Path(given)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "feedsched"
 
 
 def _compiler() -> str | None:
-    return shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    return native.compiler()
 
 
 def compiled(fun: Any) -> Any:
     """``fun`` (a CasADi Function) as a compiled external of the same name, inputs and outputs; ``fun``
     itself when it cannot be compiled or loaded (see the module's docstring)."""
-    if os.environ.get(DISABLE_ENV, "") not in ("", "0"):
+    if native.disabled():
         return fun
     cc = _compiler()
     if cc is None:
@@ -65,19 +55,7 @@ def compiled(fun: Any) -> Any:
             cg.add(fun)
             cg.generate(tmp + os.sep)
             source = (Path(tmp) / f"{name}.c").read_bytes()
-            version = str(getattr(ca, "__version__", ""))
-            key = hashlib.sha256(b"\0".join([source, " ".join(CFLAGS).encode(), version.encode(),
-                                             cc.encode()])).hexdigest()[:20]
-            out = cache_dir() / f"{name}-{key}.so"
-            if not out.exists():
-                out.parent.mkdir(parents=True, exist_ok=True)
-                part = out.with_name(f"{out.name}.{os.getpid()}.part")
-                try:
-                    subprocess.run([cc, *CFLAGS, str(Path(tmp) / f"{name}.c"), "-o", str(part), "-lm"],
-                                   check=True, capture_output=True, timeout=COMPILE_TIMEOUT_S)
-                    os.replace(part, out)
-                finally:
-                    part.unlink(missing_ok=True)
+        out = native.build(cc, name, source, CFLAGS, str(getattr(ca, "__version__", "")).encode())
         return ca.external(name, str(out))
     except (OSError, subprocess.SubprocessError, RuntimeError):
         return fun

@@ -1,0 +1,141 @@
+"""``geometry.native``: the compiled NURBS kernel against scipy's de Boor evaluation (the numpy path it replaces),
+the clamped ends exact, the arc-length map against its numpy formulas, and the fallbacks (disabled, no compiler,
+a compiler that fails).  The oracle tests against geomdl (test_nurbs_oracle.py) run on the kernel where it builds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from geometry import native
+from geometry import toolpath as tpm
+from geometry.nurbs import NurbsSegment
+from tests.geometry.nurbs_factory import random_nurbs
+
+#: kernel against scipy, per derivative order k: |difference| <= this x the largest |C^(k)| over the points (the
+#: Taylor form about each span's midpoint and de Boor's recursion round differently; seen: <= 4e-12 on the
+#: flower's C''', ~1e-13 on C)
+KERNEL_REL_TOL = 1e-9
+#: the arc-length map, the same formulas in C and numpy (sums and products in another order)
+ARC_REL_TOL = 1e-13
+
+
+def _lib() -> object:
+    lib = native.library()
+    if lib is None:
+        pytest.skip("no C compiler (or FEEDSCHED_NO_COMPILE): the numpy path is used")
+    return lib
+
+
+def _numpy_derivatives(seg: NurbsSegment, u: np.ndarray, monkeypatch: pytest.MonkeyPatch) -> np.ndarray:
+    with monkeypatch.context() as m:
+        m.setenv(native.DISABLE_ENV, "1")
+        assert native.library() is None
+        return seg.derivatives(u)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), degree=st.integers(1, 7), n_interior=st.integers(0, 12),
+       lo=st.floats(-1e3, 1e3), log_width=st.floats(-3.0, 3.0))
+def test_kernel_matches_scipy_de_boor(seed: int, degree: int, n_interior: int, lo: float, log_width: float) -> None:
+    """Random NURBS (weights 0.3-3, interior knots of multiplicity up to degree - 1, any domain): C, C', C'', C'''
+    at random parameters, at every knot and at both ends."""
+    _lib()
+    mp = pytest.MonkeyPatch()
+    try:
+        rng = np.random.default_rng(seed)
+        hi = lo + 10.0**log_width
+        seg = random_nurbs(rng, degree, n_interior, lo, hi).segment()
+        a, b = seg.domain
+        u = np.concatenate([np.sort(rng.uniform(a, b, 200)), rng.uniform(a, b, 50), seg.breakpoints,
+                            np.nextafter(seg.breakpoints, -np.inf), [a, b]])
+        got = seg.derivatives(u)
+        want = _numpy_derivatives(seg, u, mp)
+        for k in range(4):
+            scale = float(np.max(np.abs(want[k]))) + 1e-300
+            assert np.max(np.abs(got[k] - want[k])) <= KERNEL_REL_TOL * scale, k
+        # the lower orders as asked for alone: the same numbers as in the full evaluation
+        np.testing.assert_array_equal(seg.points(u), got[0])
+        np.testing.assert_array_equal(seg.speed(u), np.sqrt(np.einsum("ij,ij->i", got[1], got[1])))
+    finally:
+        mp.undo()
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3, 5])
+def test_clamped_ends_are_the_end_control_points_exactly(degree: int) -> None:
+    """Unit end weights: C at the domain's ends is the first and last control point bit for bit (the samples start
+    and end on the path's end points), as scipy's evaluation gave them."""
+    _lib()
+    rng = np.random.default_rng(degree)
+    raw = random_nurbs(rng, degree, 6, 0.25, 7.5)
+    w = raw.weights.copy()
+    w[0] = w[-1] = 1.0
+    seg = NurbsSegment.create(degree, raw.knots, raw.control_points, w)
+    a, b = seg.domain
+    ends = seg.points(np.array([a, b, b + 1.0, a - 1.0]))  # (outside the domain: clipped to it)
+    np.testing.assert_array_equal(ends[[0, 3]], raw.control_points[[0, 0]])
+    np.testing.assert_array_equal(ends[[1, 2]], raw.control_points[[-1, -1]])
+
+
+def test_arc_length_map_matches_its_numpy_formulas(monkeypatch: pytest.MonkeyPatch) -> None:
+    """C_s, C_ss, C_sss of random NURBS's derivatives, each point's vectors within ARC_REL_TOL of their largest
+    component."""
+    lib = _lib()
+    rng = np.random.default_rng(7)
+    D = np.concatenate([(seg := random_nurbs(rng, 3, 8, 0.0, 10.0**e).segment()).derivatives(
+        rng.uniform(*seg.domain, 200)) for e in (-2, 0, 2)], axis=1)
+    got = native.arc_length_derivatives(lib, D)  # type: ignore[arg-type]
+    monkeypatch.setenv(native.DISABLE_ENV, "1")
+    want = tpm.arc_length_derivatives(D)
+    for g, w in zip(got, want, strict=True):
+        scale = np.max(np.abs(w), axis=1, keepdims=True)
+        assert np.all(np.abs(g - w) <= ARC_REL_TOL * scale)
+
+
+def test_disabled_or_without_a_compiler_the_numpy_path_is_used(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+) -> None:
+    monkeypatch.setenv(native.CACHE_ENV, str(tmp_path / "c"))
+    monkeypatch.setenv(native.DISABLE_ENV, "1")
+    assert native.library() is None
+    monkeypatch.delenv(native.DISABLE_ENV)
+    native._nurbs_library.cache_clear()
+    try:
+        monkeypatch.setattr(native, "compiler", lambda: None)
+        assert native.library() is None
+        native._nurbs_library.cache_clear()
+        # a compiler that fails: no library left behind, the numpy path
+        bad = tmp_path / "badcc"
+        bad.write_text("#!/bin/sh\necho broken >&2\nexit 1\n")
+        bad.chmod(0o755)
+        monkeypatch.setattr(native, "compiler", lambda: str(bad))
+        assert native.library() is None
+        assert not [p for p in (tmp_path / "c").glob("*") if p.suffix in (".so", ".part")]
+        seg = random_nurbs(np.random.default_rng(3), 3, 4).segment()
+        u = np.linspace(*seg.domain, 50)
+        assert seg._native(u, 3) is None
+        assert np.isfinite(seg.derivatives(u)).all()
+    finally:
+        native._nurbs_library.cache_clear()
+
+
+def test_kernel_is_compiled_once_into_the_cache(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    if native.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.setenv(native.CACHE_ENV, str(tmp_path))
+    monkeypatch.delenv(native.DISABLE_ENV, raising=False)
+    native._nurbs_library.cache_clear()
+    try:
+        assert native.library() is not None
+        libs = sorted(tmp_path.glob("nurbs_kernel-*.so"))
+        assert len(libs) == 1 and not list(tmp_path.glob("*.part"))
+        stamp = libs[0].stat().st_mtime_ns
+        native._nurbs_library.cache_clear()
+        assert native.library() is not None  # found, not compiled again
+        assert libs[0].stat().st_mtime_ns == stamp and len(list(tmp_path.iterdir())) == 1
+    finally:
+        native._nurbs_library.cache_clear()
