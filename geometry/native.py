@@ -3,7 +3,7 @@
 Evaluating a NURBS segment with ``scipy.interpolate.BSpline`` takes one call per derivative order, and
 the quotient rule and the map to arc-length derivatives take ~30 numpy passes over (K, 3) arrays: on
 the flower's 9,000-point verification grid, 3.5 ms and 0.7 ms (the v + a schedule's largest share
-after HiGHS).  ``nurbs_kernel.c`` does the same per point in one pass (de Boor's basis function
+after HiGHS).  ``native.c`` does the same per point in one pass (de Boor's basis function
 derivatives, Piegl & Tiller A2.3, then the same quotient rule and arc-length formulas, in the same
 order of operations).
 
@@ -24,6 +24,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -41,8 +42,8 @@ DISABLE_ENV = "FEEDSCHED_NO_COMPILE"
 CFLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
 #: longest a compile may take (s) before the fallback is used
 COMPILE_TIMEOUT_S = 120.0
-#: the NURBS kernel's source, next to this module
-NURBS_SOURCE = Path(__file__).with_name("nurbs_kernel.c")
+#: the geometry package's kernels, next to this module
+SOURCE = Path(__file__).with_name("native.c")
 
 
 def cache_dir() -> Path:
@@ -88,18 +89,38 @@ def build(cc: str, name: str, source: bytes, flags: tuple[str, ...], extra: byte
 
 _F64 = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
 _I32 = np.ctypeslib.ndpointer(dtype=np.int32, flags="C_CONTIGUOUS")
+_I64 = np.ctypeslib.ndpointer(dtype=np.int64, flags="C_CONTIGUOUS")
+_U8 = np.ctypeslib.ndpointer(dtype=np.uint8, flags="C_CONTIGUOUS")
+#: ctypes argument types of array parameters, for the packages' ``declare`` functions
+F64, I32, I64, U8 = _F64, _I32, _I64, _U8
 
 
 @cache
-def _nurbs_library(cache_env: str | None, xdg: str | None, cc_env: str | None) -> ctypes.CDLL | None:
-    """The kernel for these values of CACHE_ENV, XDG_CACHE_HOME and CC (``library``)."""
+def _load(source: Path, name: str, declare: Callable[[ctypes.CDLL], None], cache_env: str | None,
+          xdg: str | None, cc_env: str | None) -> ctypes.CDLL | None:
+    """The library of ``source`` for these values of CACHE_ENV, XDG_CACHE_HOME and CC (``load``)."""
     cc = compiler()
     if cc is None:
         return None
     try:
-        lib = ctypes.CDLL(str(build(cc, "nurbs_kernel", NURBS_SOURCE.read_bytes(), CFLAGS)))
+        lib = ctypes.CDLL(str(build(cc, name, source.read_bytes(), CFLAGS)))
     except (OSError, subprocess.SubprocessError):
         return None
+    declare(lib)
+    return lib
+
+
+def load(source: Path, name: str, declare: Callable[[ctypes.CDLL], None]) -> ctypes.CDLL | None:
+    """The shared library of C ``source`` (compiled into the cache on first use, ``build``) with its functions'
+    types set by ``declare``; None when disabled or it cannot be built (the callers' numpy path then).  (Called
+    for every evaluation: it reads the environment only, ~1 us.)"""
+    env = os.environ
+    if env.get(DISABLE_ENV, "") not in ("", "0"):
+        return None
+    return _load(source, name, declare, env.get(CACHE_ENV), env.get("XDG_CACHE_HOME"), env.get("CC"))
+
+
+def _declare(lib: ctypes.CDLL) -> None:
     lib.fs_nurbs_taylor.restype = ctypes.c_int
     lib.fs_nurbs_taylor.argtypes = [ctypes.c_int, ctypes.c_int, _F64, _F64, ctypes.c_int, _I32, _F64, _F64]
     lib.fs_nurbs_eval.restype = ctypes.c_int
@@ -107,16 +128,15 @@ def _nurbs_library(cache_env: str | None, xdg: str | None, cc_env: str | None) -
                                   ctypes.c_int, _F64, ctypes.c_int, _F64]
     lib.fs_arc_ders.restype = None
     lib.fs_arc_ders.argtypes = [ctypes.c_int, _F64, _F64, _F64, _F64]
-    return lib
+    lib.fs_table_guess.restype = None
+    lib.fs_table_guess.argtypes = [ctypes.c_int, _F64, _F64, _F64, _F64, ctypes.c_void_p, ctypes.c_void_p,
+                                   ctypes.c_int, ctypes.c_int, _F64, _F64, _I64, _U8]
 
 
 def library() -> ctypes.CDLL | None:
-    """The NURBS kernel, compiled on first use; None when disabled or it cannot be built (the callers' numpy
-    path then).  (Called for every evaluation: it reads the environment only, ~1 us.)"""
-    env = os.environ
-    if env.get(DISABLE_ENV, "") not in ("", "0"):
-        return None
-    return _nurbs_library(env.get(CACHE_ENV), env.get("XDG_CACHE_HOME"), env.get("CC"))
+    """The geometry package's kernels (``native.c``), compiled on first use; None when disabled or it cannot be
+    built."""
+    return load(SOURCE, "geometry_native", _declare)
 
 
 @dataclass(frozen=True)
@@ -150,7 +170,7 @@ def taylor(lib: ctypes.CDLL, degree: int, knots: FloatArray, hom: FloatArray) ->
     mid = np.ascontiguousarray(0.5 * (U[span] + U[span + 1]))
     coef = np.empty((span.size, degree + 1, 4))
     if lib.fs_nurbs_taylor(degree, n, U, H, span.size, span, mid, coef) != 0:
-        raise MemoryError("nurbs_kernel: no memory for the basis functions")
+        raise MemoryError("geometry native kernel: no memory for the basis functions")
     return Taylor(degree, U, H, span, lo, mid, coef)
 
 
@@ -161,7 +181,7 @@ def nurbs_derivatives(lib: ctypes.CDLL, form: Taylor, u: FloatArray, order: int)
     out = np.empty((order + 1, u.size, 3))
     if u.size and lib.fs_nurbs_eval(form.degree, form.hom.shape[0], form.knots, form.hom, form.lo.size, form.span,
                                     form.lo, form.mid, form.coef, u.size, u, order, out) != 0:
-        raise MemoryError("nurbs_kernel: no memory for the basis functions")
+        raise MemoryError("geometry native kernel: no memory for the basis functions")
     return out
 
 
@@ -173,3 +193,23 @@ def arc_length_derivatives(lib: ctypes.CDLL, D: FloatArray) -> tuple[FloatArray,
     if K:
         lib.fs_arc_ders(K, D, d1, d2, d3)
     return d1, d2, d3
+
+
+def table_guess(lib: ctypes.CDLL, x_b: FloatArray, F_b: FloatArray, fa: FloatArray, fz: FloatArray,
+                fp: FloatArray | None, quintic: NDArray[np.bool_] | None, step: bool, y: FloatArray,
+                ) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.bool_]]:
+    """``geometry.quadrature.MonotoneTable.inverse``'s guesses at y (K,): x, each point's interval j, and where a
+    Newton step is to follow (``step``: the cubic guess was taken).  The same operations in the same order as
+    ``MonotoneTable._hermite`` and ``_quintic``: the same numbers."""
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    K = y.size
+    x, j, newton = np.empty(K), np.empty(K, dtype=np.int64), np.empty(K, dtype=np.uint8)
+    use_q = step and quintic is not None and fp is not None
+    fp_c = np.ascontiguousarray(fp, dtype=np.float64) if use_q and fp is not None else None
+    q_c = np.ascontiguousarray(quintic, dtype=np.uint8) if use_q and quintic is not None else None
+    if K:
+        lib.fs_table_guess(x_b.size, np.ascontiguousarray(x_b), np.ascontiguousarray(F_b),
+                           np.ascontiguousarray(fa), np.ascontiguousarray(fz),
+                           None if fp_c is None else fp_c.ctypes.data, None if q_c is None else q_c.ctypes.data,
+                           int(step), K, y, x, j, newton)
+    return x, j, newton.view(np.bool_)

@@ -39,6 +39,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from geometry import native
+
 FloatArray = NDArray[np.float64]
 Integrand = Callable[[FloatArray], FloatArray]
 
@@ -264,6 +266,14 @@ class MonotoneTable:
         (within the table's guess tolerance, in F's units).  With it: the quintic guess in the intervals
         flagged for it, one Newton step from the cubic guess elsewhere."""
         y = np.clip(np.asarray(y, dtype=np.float64), 0.0, self.total)
+        lib = native.library()
+        if lib is not None:  # the same guesses, compiled (``geometry.native.table_guess``)
+            x, j, step = native.table_guess(
+                lib, self.x_b, self.F_b, self.f_b if self.f_right is None else self.f_right,
+                self.f_b if self.f_left is None else self.f_left, self.fp_b, self.quintic, newton, y)
+            if newton and step.any():
+                x[step] = self._newton(y[step], j[step], x[step])
+            return np.where(y >= self.total, self.x_b[-1], np.where(y <= 0.0, self.x_b[0], x))
         j = np.clip(np.searchsorted(self.F_b, y, side="right") - 1, 0, self.F_b.size - 2)
         x = self._hermite(y, j)
         if newton:

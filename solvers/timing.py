@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.quadrature import MonotoneTable
-from solvers import bspline, kinematics
+from solvers import bspline, kinematics, native
 from solvers.errors import ScheduleError
 
 FloatArray = NDArray[np.float64]
@@ -146,20 +146,26 @@ class PieceProfile:
         """
         c, d, n = self.c, self.d, self.n_int
         xl = np.clip(np.asarray(xl, dtype=np.float64), -float(x0), float(n - x0))
-        k = np.clip(np.floor(xl).astype(np.int64) + x0, 0, n - 1)
-        t = xl - (k - x0)  # (exact: small whole numbers)
-        sdot = np.sqrt(np.maximum(bspline.value(c[k], c[k + 1], c[k + 2], t), 0.0))
-        if self.p is not None and self.f_mask is not None:
-            use = self.f_mask[k]
-            if use.any():
-                p, ku = self.p, k[use]
-                sdot[use] = bspline.value(p[ku], p[ku + 1], p[ku + 2], t[use])
+        lib = native.library() if self.p is None or self.f_mask is None else None
+        if lib is not None:  # the same numbers, compiled (``solvers.native``)
+            out = native.h_local(lib, n, d, c, x0, xl)
+        else:
+            k = np.clip(np.floor(xl).astype(np.int64) + x0, 0, n - 1)
+            t = xl - (k - x0)  # (exact: small whole numbers)
+            sdot = np.sqrt(np.maximum(bspline.value(c[k], c[k + 1], c[k + 2], t), 0.0))
+            if self.p is not None and self.f_mask is not None:
+                use = self.f_mask[k]
+                if use.any():
+                    p, ku = self.p, k[use]
+                    sdot[use] = bspline.value(p[ku], p[ku + 1], p[ku + 2], t[use])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                out = np.array(d / sdot, dtype=np.float64)
         x = xl + x0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out = np.array(d / sdot, dtype=np.float64)
         # the end intervals' closed form on their own points only (a long piece's table asks for ~10^5 points
         # a call, of which a handful are in the end intervals: 1.5 s of the 18.35 m path's sampling stage
-        # went to the rises' powers over every point)
+        # went to the rises' powers over every point); most calls have none (two reductions, not two masks)
+        if not x.size or (float(np.min(x)) >= 1.0 and float(np.max(x)) <= n - 1.0):
+            return np.asarray(out, dtype=np.float64)
         (g0, gL), (h0, hL) = self.rest_g, self.rest_h
         for on, w, q1, q2, g, h in (
             (x < 1.0, x, (c[1] - c[0]) / d, (c[0] - 2 * c[1] + c[2]) / d**2, g0, h0),

@@ -1,6 +1,7 @@
 """``geometry.native``: the compiled NURBS kernel against scipy's de Boor evaluation (the numpy path it replaces),
-the clamped ends exact, the arc-length map against its numpy formulas, and the fallbacks (disabled, no compiler,
-a compiler that fails).  The oracle tests against geomdl (test_nurbs_oracle.py) run on the kernel where it builds."""
+the clamped ends exact, the arc-length map against its numpy formulas, the monotone table's inverse guesses bit
+for bit against their numpy code, and the fallbacks (disabled, no compiler, a compiler that fails).  The oracle
+tests against geomdl (test_nurbs_oracle.py) run on the kernel where it builds."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from hypothesis import strategies as st
 from geometry import native
 from geometry import toolpath as tpm
 from geometry.nurbs import NurbsSegment
+from geometry.quadrature import MonotoneTable
 from tests.geometry.nurbs_factory import random_nurbs
 
 #: kernel against scipy, per derivative order k: |difference| <= this x the largest |C^(k)| over the points (the
@@ -96,6 +98,45 @@ def test_arc_length_map_matches_its_numpy_formulas(monkeypatch: pytest.MonkeyPat
         assert np.all(np.abs(g - w) <= ARC_REL_TOL * scale)
 
 
+def _inverse_numpy(table: MonotoneTable, y: np.ndarray, newton: bool, monkeypatch: pytest.MonkeyPatch) -> np.ndarray:
+    with monkeypatch.context() as m:
+        m.setenv(native.DISABLE_ENV, "1")
+        return table.inverse(y, newton)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), with_df=st.booleans(), with_jump=st.booleans(), newton=st.booleans())
+def test_table_inverse_guesses_are_the_numpy_code_bit_for_bit(
+    seed: int, with_df: bool, with_jump: bool, newton: bool,
+) -> None:
+    """F(x) = integral of f = 1 + a sin(b x) (+ a step at a jump) over random edges: ``MonotoneTable.inverse`` compiled
+    and in numpy give the same x for y across [0, total], at every breakpoint's F, and outside it (clipped); the
+    quintic guess where flagged (with f' given), the cubic guess and its Newton step elsewhere."""
+    _lib()
+    mp = pytest.MonkeyPatch()
+    try:
+        rng = np.random.default_rng(seed)
+        a, b = rng.uniform(0.0, 0.9), rng.uniform(0.1, 20.0)
+        jump = 0.37 if with_jump else np.inf
+
+        def f(x: np.ndarray) -> np.ndarray:
+            return np.asarray(1.0 + a * np.sin(b * x) + np.where(x >= jump, 0.5, 0.0), dtype=np.float64)
+
+        def df(x: np.ndarray) -> np.ndarray:
+            return np.asarray(a * b * np.cos(b * x), dtype=np.float64)
+
+        edges = np.unique(np.concatenate([[0.0, 1.0], rng.uniform(0.0, 1.0, rng.integers(0, 6)),
+                                          [0.37] if with_jump else []]))
+        table = MonotoneTable.build(f, edges, guess_tol=10.0 ** rng.uniform(-9, -5),
+                                    df=df if with_df and not with_jump else None,
+                                    jumps=np.array([0.37]) if with_jump else None, jump_eps=1e-12)
+        assert (table.quintic is not None) == (with_df and not with_jump)
+        y = np.concatenate([rng.uniform(-0.1, table.total + 0.1, 300), table.F_b, [0.0, table.total]])
+        np.testing.assert_array_equal(table.inverse(y, newton), _inverse_numpy(table, y, newton, mp))
+    finally:
+        mp.undo()
+
+
 def test_disabled_or_without_a_compiler_the_numpy_path_is_used(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
 ) -> None:
@@ -103,11 +144,11 @@ def test_disabled_or_without_a_compiler_the_numpy_path_is_used(
     monkeypatch.setenv(native.DISABLE_ENV, "1")
     assert native.library() is None
     monkeypatch.delenv(native.DISABLE_ENV)
-    native._nurbs_library.cache_clear()
+    native._load.cache_clear()
     try:
         monkeypatch.setattr(native, "compiler", lambda: None)
         assert native.library() is None
-        native._nurbs_library.cache_clear()
+        native._load.cache_clear()
         # a compiler that fails: no library left behind, the numpy path
         bad = tmp_path / "badcc"
         bad.write_text("#!/bin/sh\necho broken >&2\nexit 1\n")
@@ -120,7 +161,7 @@ def test_disabled_or_without_a_compiler_the_numpy_path_is_used(
         assert seg._native(u, 3) is None
         assert np.isfinite(seg.derivatives(u)).all()
     finally:
-        native._nurbs_library.cache_clear()
+        native._load.cache_clear()
 
 
 def test_kernel_is_compiled_once_into_the_cache(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
@@ -128,14 +169,14 @@ def test_kernel_is_compiled_once_into_the_cache(monkeypatch: pytest.MonkeyPatch,
         pytest.skip("no C compiler")
     monkeypatch.setenv(native.CACHE_ENV, str(tmp_path))
     monkeypatch.delenv(native.DISABLE_ENV, raising=False)
-    native._nurbs_library.cache_clear()
+    native._load.cache_clear()
     try:
         assert native.library() is not None
-        libs = sorted(tmp_path.glob("nurbs_kernel-*.so"))
+        libs = sorted(tmp_path.glob("geometry_native-*.so"))
         assert len(libs) == 1 and not list(tmp_path.glob("*.part"))
         stamp = libs[0].stat().st_mtime_ns
-        native._nurbs_library.cache_clear()
+        native._load.cache_clear()
         assert native.library() is not None  # found, not compiled again
         assert libs[0].stat().st_mtime_ns == stamp and len(list(tmp_path.iterdir())) == 1
     finally:
-        native._nurbs_library.cache_clear()
+        native._load.cache_clear()

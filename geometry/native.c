@@ -1,7 +1,8 @@
-/* NURBS evaluation per point: C(u) and its u-derivatives, and the map to arc-length derivatives.
+/* Per-point kernels of the geometry package: NURBS evaluation (C(u) and its u-derivatives), the map to
+ * arc-length derivatives, and the inverse guesses of a monotone table (geometry/quadrature.py).
  *
- * Compiled and loaded by geometry/native.py; the numpy path in geometry/nurbs.py and
- * geometry/toolpath.py computes the same formulas (tests/geometry/test_native.py compares them).
+ * Compiled and loaded by geometry/native.py; the numpy paths in geometry/nurbs.py, geometry/toolpath.py and
+ * geometry/quadrature.py compute the same formulas (tests/geometry/test_native.py compares them).
  *
  * fs_nurbs_ders: the homogeneous B-spline A(u) = sum_i N_{i,p}(u) [w_i P_i, w_i] and its derivatives by
  * de Boor's basis function derivatives (Piegl & Tiller, The NURBS Book, algorithms A2.1 and A2.3), then
@@ -20,6 +21,12 @@
  */
 #include <stdlib.h>
 #include <math.h>
+
+/* numpy's maximum and minimum: NaN if either argument is NaN */
+static double np_max(double a, double b) { return isnan(a) ? a : (isnan(b) ? b : (a > b ? a : (a < b ? b : a))); }
+static double np_min(double a, double b) { return isnan(a) ? a : (isnan(b) ? b : (a < b ? a : (a > b ? b : a))); }
+/* numpy's clip(x, lo, hi) = minimum(maximum(x, lo), hi) */
+static double np_clip(double x, double lo, double hi) { return np_min(np_max(x, lo), hi); }
 
 /* Basis functions N_{i-p..i,p} and their derivatives up to order nd (<= p) at u, ders[k*(p+1)+j]
  * (A2.3). Work arrays: ndu (p+1)^2, a 2(p+1), left and right p+1 each. */
@@ -196,5 +203,59 @@ void fs_arc_ders(int K, const double *D, double *d1, double *d2, double *d3) {
             d2[3 * (size_t)m + k] = b[k] * us2 + a[k] * uss;
             d3[3 * (size_t)m + k] = c[k] * us3 + b[k] * t2 + a[k] * usss;
         }
+    }
+}
+
+/* MonotoneTable.inverse's guesses (geometry/quadrature.py), the same operations in the same order as its numpy
+ * code, point by point: x with F(x) = y[q] for K values y.  Breakpoints x_b, F_b (nb), f at them from inside the
+ * interval on its right (fa) and left (fz); with fp (f' at the breakpoints, or NULL) and quintic flags (nb - 1),
+ * the quintic guess in flagged intervals.  out[q] = the guess, j[q] = its interval, and newton[q] = 1 where the
+ * cubic guess was taken and a Newton step is to follow (``step``: 0 without one). */
+void fs_table_guess(int nb, const double *x_b, const double *F_b, const double *fa, const double *fz,
+                    const double *fp, const unsigned char *quintic, int step, int K, const double *y_in,
+                    double *out, long long *j_out, unsigned char *newton) {
+    double total = F_b[nb - 1];
+    for (int q = 0; q < K; q++) {
+        double y = np_clip(y_in[q], 0.0, total);
+        /* searchsorted(F_b, y, 'right') - 1, clipped to [0, nb - 2] */
+        int a = 0, b = nb; /* first index with F_b[i] > y is in [a, b] */
+        while (a < b) {
+            int c = (a + b) / 2;
+            if (F_b[c] <= y) a = c + 1; else b = c;
+        }
+        int j = a - 1;
+        if (j < 0) j = 0;
+        if (j > nb - 2) j = nb - 2;
+        double x0 = x_b[j], x1 = x_b[j + 1];
+        double h = F_b[j + 1] - F_b[j];
+        double x;
+        int use_quintic = step && quintic != NULL && quintic[j];
+        if (use_quintic) {
+            double f0 = fa[j], f1 = fz[j + 1];
+            double t = (y - F_b[j]) / h;
+            double m0 = h / f0, m1 = h / f1;
+            double c0 = -h * h * fp[j] / pow(f0, 3.0), c1 = -h * h * fp[j + 1] / pow(f1, 3.0);
+            double t2 = t * t;
+            double t3 = t2 * t;
+            double b0 = 1.0 - t3 * (10.0 - t * (15.0 - 6.0 * t));
+            double b5 = 1.0 - b0;
+            double b1 = t * (1.0 - t2 * (6.0 - t * (8.0 - 3.0 * t)));
+            double u = 1.0 - t;
+            double b2 = 0.5 * t2 * pow(u, 3.0);
+            double b3 = 0.5 * t3 * (u * u);
+            double b4 = -t3 * (4.0 - t * (7.0 - 3.0 * t));
+            x = b0 * x0 + b1 * m0 + b2 * c0 + b3 * c1 + b4 * m1 + b5 * x1;
+        } else {
+            double t = h > 0.0 ? (y - F_b[j]) / h : 0.0;
+            double w = 3.0 * (x1 - x0);
+            double m0 = np_min(h / np_max(fa[j], 1e-300), w);
+            double m1 = np_min(h / np_max(fz[j + 1], 1e-300), w);
+            double t2 = t * t, t3 = t * t * t;
+            x = (2.0 * t3 - 3.0 * t2 + 1.0) * x0 + (t3 - 2.0 * t2 + t) * m0 + (-2.0 * t3 + 3.0 * t2) * x1
+                + (t3 - t2) * m1;
+        }
+        out[q] = np_clip(x, x0, x1);
+        j_out[q] = j;
+        newton[q] = (unsigned char)(step && !use_quintic);
     }
 }

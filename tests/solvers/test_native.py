@@ -1,0 +1,68 @@
+"""``solvers.native``: the time table's integrand compiled (``PieceProfile.h_local`` inside the piece) gives its numpy
+code's values bit for bit, on random profiles (the end intervals' closed form, segment offsets x0, points outside
+the piece clipped); profiles with the NLP's feed (f_mask) keep the numpy path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from geometry import native as gnative
+from solvers import native
+from solvers.timing import PieceProfile
+
+
+def _numpy_h(prof: PieceProfile, x0: int, xl: np.ndarray, mp: pytest.MonkeyPatch) -> np.ndarray:
+    with mp.context() as m:
+        m.setenv(gnative.DISABLE_ENV, "1")
+        assert native.library() is None
+        return prof.h_local(x0, xl)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 40), bumps=st.booleans())
+def test_h_local_compiled_is_the_numpy_code_bit_for_bit(seed: int, n: int, bumps: bool) -> None:
+    if native.library() is None:
+        pytest.skip("no C compiler (or FEEDSCHED_NO_COMPILE): the numpy path is used")
+    mp = pytest.MonkeyPatch()
+    try:
+        rng = np.random.default_rng(seed)
+        d = 10.0 ** rng.uniform(-2, 1)
+        c = rng.uniform(0.0, 1e4, n + 2) * 10.0 ** rng.uniform(-3, 3)
+        c[rng.random(n + 2) < 0.1] = 0.0  # (q touching 0 inside: h = inf, as in numpy)
+        c[0], c[-1] = -c[1], -c[-2]  # rest at both ends
+        g = (float(rng.uniform(-1, 1) * c[1]), 0.0) if bumps else (0.0, 0.0)
+        h = ((float(rng.uniform(0, 1) * c[1]), 0.0, 0.0, 0.0), ()) if bumps else ((), ())
+        prof = PieceProfile(0.0, n * d, d, c, rest_g=g, rest_h=h)
+        for x0 in (0, int(rng.integers(0, n))):
+            xl = np.concatenate([rng.uniform(-x0 - 0.5, n - x0 + 0.5, 400), np.arange(-x0, n - x0 + 1, 0.5)])
+            with np.errstate(all="ignore"):
+                got = prof.h_local(x0, xl)
+            np.testing.assert_array_equal(got, _numpy_h(prof, x0, xl, mp))
+    finally:
+        mp.undo()
+
+
+def test_profiles_with_the_nlps_feed_take_the_numpy_path(monkeypatch: pytest.MonkeyPatch) -> None:
+    calls: list[int] = []
+    real = native.h_local
+
+    def counted(*a: object) -> np.ndarray:
+        calls.append(1)
+        return real(*a)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(native, "h_local", counted)
+    n, d = 6, 1.0
+    c = np.array([-1.0, 1.0, 2.0, 2.0, 2.0, 2.0, 1.0, -1.0])
+    x = np.linspace(1.0, n - 1.0, 50)
+    plain = PieceProfile(0.0, n * d, d, c).h_local(0, x)
+    assert calls or native.library() is None
+    calls.clear()
+    p = np.sqrt(np.abs(c))
+    mask = np.array([False, False, True, True, False, False])
+    mixed = PieceProfile(0.0, n * d, d, c, p=p, f_mask=mask).h_local(0, x)
+    assert not calls
+    k = np.clip(np.floor(x).astype(int), 0, n - 1)
+    np.testing.assert_array_equal(mixed[~mask[k]], plain[~mask[k]])
