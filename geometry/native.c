@@ -183,8 +183,9 @@ int fs_nurbs_eval(int p, int n, const double *U, const double *Pw, int m, const 
     return 0;
 }
 
-/* D[(k*K + m)*3 + c] (k = 0..3) to C_s, C_ss, C_sss (K x 3 each). */
-void fs_arc_ders(int K, const double *D, double *d1, double *d2, double *d3) {
+/* D[(k*K + m)*3 + c] (k = 0..3) to C_s, C_ss, C_sss (K x 3 each, one after the other in out). */
+void fs_arc_ders(int K, const double *D, double *out) {
+    double *d1 = out, *d2 = out + 3 * (size_t)K, *d3 = out + 6 * (size_t)K;
     const double *C1 = D + 3 * (size_t)K, *C2 = D + 6 * (size_t)K, *C3 = D + 9 * (size_t)K;
     for (int m = 0; m < K; m++) {
         const double *a = C1 + 3 * (size_t)m, *b = C2 + 3 * (size_t)m, *c = C3 + 3 * (size_t)m;
@@ -215,15 +216,22 @@ void fs_table_guess(int nb, const double *x_b, const double *F_b, const double *
                     const double *fp, const unsigned char *quintic, int step, int K, const double *y_in,
                     double *out, long long *j_out, unsigned char *newton) {
     double total = F_b[nb - 1];
+    int j = 0;
     for (int q = 0; q < K; q++) {
         double y = np_clip(y_in[q], 0.0, total);
-        /* searchsorted(F_b, y, 'right') - 1, clipped to [0, nb - 2] */
-        int a = 0, b = nb; /* first index with F_b[i] > y is in [a, b] */
-        while (a < b) {
-            int c = (a + b) / 2;
-            if (F_b[c] <= y) a = c + 1; else b = c;
+        /* searchsorted(F_b, y, 'right') - 1 (the last breakpoint at or below y), clipped to [0, nb - 2]; sorted y
+         * mostly stay in the previous point's interval or move to the next one */
+        if (j + 1 < nb && F_b[j] <= y && y < F_b[j + 1]) {
+        } else if (j + 2 < nb && F_b[j + 1] <= y && y < F_b[j + 2]) {
+            j++;
+        } else {
+            int a = 0, b = nb; /* first index with F_b[i] > y is in [a, b] */
+            while (a < b) {
+                int c = (a + b) / 2;
+                if (F_b[c] <= y) a = c + 1; else b = c;
+            }
+            j = a - 1;
         }
-        int j = a - 1;
         if (j < 0) j = 0;
         if (j > nb - 2) j = nb - 2;
         double x0 = x_b[j], x1 = x_b[j + 1];

@@ -26,8 +26,8 @@ import subprocess
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -87,18 +87,27 @@ def build(cc: str, name: str, source: bytes, flags: tuple[str, ...], extra: byte
     return out
 
 
-_F64 = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
-_I32 = np.ctypeslib.ndpointer(dtype=np.int32, flags="C_CONTIGUOUS")
-_I64 = np.ctypeslib.ndpointer(dtype=np.int64, flags="C_CONTIGUOUS")
-_U8 = np.ctypeslib.ndpointer(dtype=np.uint8, flags="C_CONTIGUOUS")
-#: ctypes argument types of array parameters, for the packages' ``declare`` functions
-F64, I32, I64, U8 = _F64, _I32, _I64, _U8
+#: ctypes type of array parameters: a pointer, passed as ``ptr(a)`` of a C-contiguous array of the C type that the
+#: caller keeps referenced until the call returns (numpy's ``ndpointer`` checks took ~2 us an argument, and the
+#: checks are the wrappers' own: each makes its arrays contiguous of the right type first)
+P = ctypes.c_void_p
 
 
-@cache
-def _load(source: Path, name: str, declare: Callable[[ctypes.CDLL], None], cache_env: str | None,
-          xdg: str | None, cc_env: str | None) -> ctypes.CDLL | None:
-    """The library of ``source`` for these values of CACHE_ENV, XDG_CACHE_HOME and CC (``load``)."""
+def ptr(a: NDArray[Any]) -> int:
+    """The address of ``a``'s data."""
+    return int(a.ctypes.data)
+
+
+def f64(a: object) -> FloatArray:
+    """``a`` as a C-contiguous float64 array (itself if it is one)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+#: loaded libraries by name (None: could not be built), for the environment at their first use (``reset``)
+_LIBS: dict[str, ctypes.CDLL | None] = {}
+
+
+def _load(source: Path, name: str, declare: Callable[[ctypes.CDLL], None]) -> ctypes.CDLL | None:
     cc = compiler()
     if cc is None:
         return None
@@ -112,25 +121,33 @@ def _load(source: Path, name: str, declare: Callable[[ctypes.CDLL], None], cache
 
 def load(source: Path, name: str, declare: Callable[[ctypes.CDLL], None]) -> ctypes.CDLL | None:
     """The shared library of C ``source`` (compiled into the cache on first use, ``build``) with its functions'
-    types set by ``declare``; None when disabled or it cannot be built (the callers' numpy path then).  (Called
-    for every evaluation: it reads the environment only, ~1 us.)"""
-    env = os.environ
-    if env.get(DISABLE_ENV, "") not in ("", "0"):
+    types set by ``declare``; None when DISABLE_ENV is set or it cannot be built (the callers' numpy path then).
+    Called for every evaluation: it reads DISABLE_ENV and looks the library up (~1.5 us); the cache directory and
+    the compiler are read at the first use (``reset`` forgets the libraries, for another environment)."""
+    if os.environ.get(DISABLE_ENV, "") not in ("", "0"):
         return None
-    return _load(source, name, declare, env.get(CACHE_ENV), env.get("XDG_CACHE_HOME"), env.get("CC"))
+    try:
+        return _LIBS[name]
+    except KeyError:
+        lib = _LIBS[name] = _load(source, name, declare)
+        return lib
+
+
+def reset() -> None:
+    """Forget the loaded libraries: the next use looks for them (and builds them) with the environment then."""
+    _LIBS.clear()
 
 
 def _declare(lib: ctypes.CDLL) -> None:
+    i = ctypes.c_int
     lib.fs_nurbs_taylor.restype = ctypes.c_int
-    lib.fs_nurbs_taylor.argtypes = [ctypes.c_int, ctypes.c_int, _F64, _F64, ctypes.c_int, _I32, _F64, _F64]
+    lib.fs_nurbs_taylor.argtypes = [i, i, P, P, i, P, P, P]
     lib.fs_nurbs_eval.restype = ctypes.c_int
-    lib.fs_nurbs_eval.argtypes = [ctypes.c_int, ctypes.c_int, _F64, _F64, ctypes.c_int, _I32, _F64, _F64, _F64,
-                                  ctypes.c_int, _F64, ctypes.c_int, _F64]
+    lib.fs_nurbs_eval.argtypes = [i, i, P, P, i, P, P, P, P, i, P, i, P]
     lib.fs_arc_ders.restype = None
-    lib.fs_arc_ders.argtypes = [ctypes.c_int, _F64, _F64, _F64, _F64]
+    lib.fs_arc_ders.argtypes = [i, P, P]
     lib.fs_table_guess.restype = None
-    lib.fs_table_guess.argtypes = [ctypes.c_int, _F64, _F64, _F64, _F64, ctypes.c_void_p, ctypes.c_void_p,
-                                   ctypes.c_int, ctypes.c_int, _F64, _F64, _I64, _U8]
+    lib.fs_table_guess.argtypes = [i, P, P, P, P, P, P, i, i, P, P, P, P]
 
 
 def library() -> ctypes.CDLL | None:
@@ -162,14 +179,13 @@ def taylor(lib: ctypes.CDLL, degree: int, knots: FloatArray, hom: FloatArray) ->
     the span's start, and the values agree with de Boor's evaluation to ~1e-15 of the control points' size
     (tests/geometry/test_native.py)."""
     n = hom.shape[0]
-    U = np.ascontiguousarray(knots, dtype=np.float64)
-    H = np.ascontiguousarray(hom, dtype=np.float64)
+    U, H = f64(knots), f64(hom)
     i = np.arange(degree, n)
     span = np.ascontiguousarray(i[U[i] < U[i + 1]], dtype=np.int32)
-    lo = np.ascontiguousarray(U[span])
-    mid = np.ascontiguousarray(0.5 * (U[span] + U[span + 1]))
+    lo = f64(U[span])
+    mid = f64(0.5 * (U[span] + U[span + 1]))
     coef = np.empty((span.size, degree + 1, 4))
-    if lib.fs_nurbs_taylor(degree, n, U, H, span.size, span, mid, coef) != 0:
+    if lib.fs_nurbs_taylor(degree, n, ptr(U), ptr(H), span.size, ptr(span), ptr(mid), ptr(coef)) != 0:
         raise MemoryError("geometry native kernel: no memory for the basis functions")
     return Taylor(degree, U, H, span, lo, mid, coef)
 
@@ -177,22 +193,23 @@ def taylor(lib: ctypes.CDLL, degree: int, knots: FloatArray, hom: FloatArray) ->
 def nurbs_derivatives(lib: ctypes.CDLL, form: Taylor, u: FloatArray, order: int) -> FloatArray:
     """C and its u-derivatives up to ``order`` (<= 3) at u (K,) inside the domain, (order + 1, K, 3), from the
     NURBS's ``Taylor`` form."""
-    u = np.ascontiguousarray(u, dtype=np.float64)
+    u = f64(u)
     out = np.empty((order + 1, u.size, 3))
-    if u.size and lib.fs_nurbs_eval(form.degree, form.hom.shape[0], form.knots, form.hom, form.lo.size, form.span,
-                                    form.lo, form.mid, form.coef, u.size, u, order, out) != 0:
+    if u.size and lib.fs_nurbs_eval(form.degree, form.hom.shape[0], ptr(form.knots), ptr(form.hom), form.lo.size,
+                                    ptr(form.span), ptr(form.lo), ptr(form.mid), ptr(form.coef), u.size, ptr(u),
+                                    order, ptr(out)) != 0:
         raise MemoryError("geometry native kernel: no memory for the basis functions")
     return out
 
 
 def arc_length_derivatives(lib: ctypes.CDLL, D: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``geometry.toolpath.arc_length_derivatives`` of D (4, K, 3), by the kernel."""
-    D = np.ascontiguousarray(D, dtype=np.float64)
+    D = f64(D)
     K = D.shape[1]
-    d1, d2, d3 = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
+    out = np.empty((3, K, 3))
     if K:
-        lib.fs_arc_ders(K, D, d1, d2, d3)
-    return d1, d2, d3
+        lib.fs_arc_ders(K, ptr(D), ptr(out))
+    return out[0], out[1], out[2]
 
 
 def table_guess(lib: ctypes.CDLL, x_b: FloatArray, F_b: FloatArray, fa: FloatArray, fz: FloatArray,
@@ -201,15 +218,14 @@ def table_guess(lib: ctypes.CDLL, x_b: FloatArray, F_b: FloatArray, fa: FloatArr
     """``geometry.quadrature.MonotoneTable.inverse``'s guesses at y (K,): x, each point's interval j, and where a
     Newton step is to follow (``step``: the cubic guess was taken).  The same operations in the same order as
     ``MonotoneTable._hermite`` and ``_quintic``: the same numbers."""
-    y = np.ascontiguousarray(y, dtype=np.float64)
+    y = f64(y)
     K = y.size
     x, j, newton = np.empty(K), np.empty(K, dtype=np.int64), np.empty(K, dtype=np.uint8)
     use_q = step and quintic is not None and fp is not None
-    fp_c = np.ascontiguousarray(fp, dtype=np.float64) if use_q and fp is not None else None
+    fp_c = f64(fp) if use_q and fp is not None else None
     q_c = np.ascontiguousarray(quintic, dtype=np.uint8) if use_q and quintic is not None else None
+    xb, Fb, fa_c, fz_c = f64(x_b), f64(F_b), f64(fa), f64(fz)
     if K:
-        lib.fs_table_guess(x_b.size, np.ascontiguousarray(x_b), np.ascontiguousarray(F_b),
-                           np.ascontiguousarray(fa), np.ascontiguousarray(fz),
-                           None if fp_c is None else fp_c.ctypes.data, None if q_c is None else q_c.ctypes.data,
-                           int(step), K, y, x, j, newton)
+        lib.fs_table_guess(xb.size, ptr(xb), ptr(Fb), ptr(fa_c), ptr(fz_c), None if fp_c is None else ptr(fp_c),
+                           None if q_c is None else ptr(q_c), int(step), K, ptr(y), ptr(x), ptr(j), ptr(newton))
     return x, j, newton.view(np.bool_)

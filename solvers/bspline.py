@@ -21,6 +21,8 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from solvers import native
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
@@ -34,8 +36,12 @@ def basis(
         k: (K,) index of the first active control point (= knot interval).
         W0, W1, W2: (K, 3) weights of c_k, c_{k+1}, c_{k+2} for q, q' (1/mm), q'' (1/mm^2).
     """
+    hi = n_int - 1 if k_hi is None else k_hi
+    lib = native.library()
+    if lib is not None:  # the same numbers, compiled (``solvers.native``)
+        return native.basis(lib, np.asarray(s, dtype=np.float64), d, k_lo, hi)
     x = np.asarray(s, dtype=np.float64) / d
-    k = np.clip(np.floor(x), k_lo, n_int - 1 if k_hi is None else k_hi).astype(np.int64)
+    k = np.clip(np.floor(x), k_lo, hi).astype(np.int64)
     t = x - k
     W0 = np.column_stack([(1 - t) ** 2 / 2, (-2 * t * t + 2 * t + 1) / 2, t * t / 2])
     W1 = np.column_stack([-(1 - t), 1 - 2 * t, t]) / d
@@ -60,8 +66,10 @@ def combination(k: IntArray, terms: list[tuple[FloatArray, FloatArray]], col0: i
     the designs' common sparsity (3 non-zeros a row, explicit zeros kept): the same values, summed in the
     same order, as the sparse products and sums, at a fraction of their cost (the LP's rows)."""
     K = k.size
-    return sp.csr_matrix((combination_data(terms).ravel(), design_columns(k, col0), np.arange(0, 3 * K + 1, 3)),
-                         shape=(K, ncols))
+    # (32-bit indices, as scipy would make them: given 64-bit ones it scans them to see that they fit, twice the
+    # constructor's ~30 us)
+    return sp.csr_matrix((combination_data(terms).ravel(), design_columns(k, col0).astype(np.int32),
+                          np.arange(0, 3 * K + 1, 3, dtype=np.int32)), shape=(K, ncols))
 
 
 def combination_data(terms: list[tuple[FloatArray, FloatArray]]) -> FloatArray:
@@ -78,8 +86,11 @@ def evaluate(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """q, q', q'' at piece-local s of the profile whose control points c start at
     global index ``col0``; knot intervals clamped to [k_lo, k_hi] (default: all of c)."""
-    x = np.asarray(s, dtype=np.float64) / d
     hi = col0 + c.size - 3 if k_hi is None else k_hi
+    lib = native.library()
+    if lib is not None:  # the same numbers, compiled (``solvers.native``)
+        return native.evaluate(lib, c, np.asarray(s, dtype=np.float64), d, k_lo, hi, col0)
+    x = np.asarray(s, dtype=np.float64) / d
     k = np.clip(np.floor(x), k_lo, hi).astype(np.int64)
     t = x - k
     i = k - col0

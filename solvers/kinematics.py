@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.toolpath import PathSamples
+from solvers import native
 
 FloatArray = NDArray[np.float64]
 FeedDerivs = tuple[FloatArray, FloatArray, FloatArray]
@@ -42,6 +43,9 @@ def axis_kinematics(g: PathSamples, sdot: FloatArray, sddot: FloatArray, sdddot:
     FloatArray, FloatArray, FloatArray
 ]:
     """Axis v, a, j, each (K, 3)."""
+    lib = native.library()
+    if lib is not None:  # the same numbers, compiled (``solvers.native``)
+        return native.axis_kinematics(lib, sdot, sddot, sdddot, g.d1, g.d2, g.d3)
     f = sdot[:, None]
     f2 = f * f  # (the per-point factors on (K, 1) first, then one product per (K, 3) term; no float
     # powers: 1.5x faster than g.d2 * f * f and f**3 on 4e3-1.6e5 points)

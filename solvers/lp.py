@@ -352,6 +352,36 @@ def _admit(
     return lo, hi
 
 
+def select_rows(A: sp.csr_matrix, which: NDArray[np.bool_]) -> sp.csr_matrix:
+    """A[which] (rows where ``which``, in order): the same matrix as scipy's indexing, which took ~180 us for a
+    900-row window's rows (~40 us here)."""
+    idx = np.flatnonzero(which)
+    counts = np.diff(A.indptr)[idx]
+    indptr = np.zeros(idx.size + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    # each kept row's entries: its start, plus 0 .. count - 1
+    take = np.repeat(A.indptr[:-1][idx] - indptr[:-1], counts) + np.arange(int(indptr[-1]))
+    nnz_ok = indptr[-1] < 2**31
+    itype = np.int32 if nnz_ok and A.shape[1] < 2**31 else np.int64
+    return sp.csr_matrix((A.data[take], A.indices[take].astype(itype), indptr.astype(itype)),
+                         shape=(idx.size, A.shape[1]))
+
+
+def stack_rows(blocks: list[sp.csr_matrix]) -> sp.csr_matrix:
+    """sp.vstack(blocks, format="csr") for CSR blocks of the same column count (their entries one after the other;
+    ~250 -> ~50 us for a window's six blocks)."""
+    ncols = blocks[0].shape[1]
+    nnz = [b.indptr[-1] for b in blocks]
+    offs = np.cumsum([0, *nnz[:-1]])
+    total = int(sum(nnz))
+    itype = np.int32 if total < 2**31 and ncols < 2**31 else np.int64
+    indptr = np.concatenate([np.zeros(1, dtype=itype)] + [(b.indptr[1:] + o).astype(itype) for b, o in zip(blocks, offs,
+                                                                                                        strict=True)])
+    data = np.concatenate([b.data[: b.indptr[-1]] for b in blocks])
+    indices = np.concatenate([b.indices[: b.indptr[-1]].astype(itype) for b in blocks])
+    return sp.csr_matrix((data, indices, indptr), shape=(int(indptr.size - 1), ncols))
+
+
 def column_reach(
     k: IntArray, W0: FloatArray, cap: FloatArray, ncols: int, min_basis: float, ok: NDArray[np.bool_] | None = None
 ) -> FloatArray:
@@ -434,7 +464,7 @@ class _Rows:
         stopped with InsufficientProgress)."""
         if len(self.blocks) <= first:
             return sp.csr_matrix((0, self.ncols)), np.zeros(0), np.zeros(0), np.zeros(0)
-        A = sp.vstack(self.blocks[first:], format="csr")
+        A = stack_rows(self.blocks[first:])
         if any(np.may_share_memory(A.data, b.data) for b in self.blocks[first:]):  # (scaled in place below)
             A = A.copy()
         A.data[np.abs(A.data) < TINY_COEF] = 0.0
@@ -806,7 +836,7 @@ class WindowLP:
             self._add(rows, A, -np.ones(s.size), np.ones(s.size), s)
         elif need.any():
             k = int(need.sum())
-            self._add(rows, A[need], -np.ones(k), np.ones(k), s[need])
+            self._add(rows, select_rows(A, need), -np.ones(k), np.ones(k), s[need])
 
     def _add(self, rows: _Rows, A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, s: FloatArray) -> None:
         """Add rows at points s; on inherited intervals widen them to admit the previous solution (and on
@@ -870,11 +900,11 @@ class WindowLP:
         rec = rows.velocity_rows if velocity_only else None
         if rec is not None and rec[1].size == ub.size:
             block, had = rec
-            lo_h, hi_h = self._widened(V[had], np.zeros(int(had.sum())), ub[had] / Q, g.s[had])
+            lo_h, hi_h = self._widened(select_rows(V, had), np.zeros(int(had.sum())), ub[had] / Q, g.s[had])
             rows.change_bounds(block, lo_h, hi_h)
             v_held = v_held | had  # (those points have their row)
         if v_held.any():
-            V, ub_v, s_v = V[~v_held], ub[~v_held], g.s[~v_held]
+            V, ub_v, s_v = select_rows(V, ~v_held), ub[~v_held], g.s[~v_held]
         else:
             ub_v, s_v = ub, g.s
         n_blocks = len(rows.blocks)

@@ -1,6 +1,7 @@
 /* Per-point kernels of the solvers package, compiled and loaded by solvers/native.py (geometry/native.py's
  * loader); the numpy paths compute the same operations in the same order (tests/solvers/test_native.py). */
 #include <math.h>
+#include <stddef.h>
 
 /* numpy's maximum: NaN if either argument is NaN */
 static double np_max(double a, double b) { return isnan(a) ? a : (isnan(b) ? b : (a > b ? a : (a < b ? b : a))); }
@@ -19,5 +20,66 @@ void fs_h_local(int n, double d, const double *c, int x0, int K, const double *x
         double u = 1.0 - t;
         double v = 0.5 * (c[k] * u * u + c[k + 1] * (1.0 + 2.0 * t * u) + c[k + 2] * t * t);
         out[m] = d / sqrt(np_max(v, 0.0));
+    }
+}
+
+/* bspline.basis: knot interval k (clamped to [k_lo, k_hi]) and the weights W0, W1, W2 (K x 3 each, one after the
+ * other in W) of c_k, c_k+1, c_k+2 in q, q' and q'' at s[m]. */
+void fs_basis(int K, const double *s, double d, int k_lo, int k_hi, long long *k_out, double *W) {
+    double *W0 = W, *W1 = W + 3 * (size_t)K, *W2 = W + 6 * (size_t)K;
+    double w2a = 1.0 / (d * d), w2b = -2.0 / (d * d);
+    for (int m = 0; m < K; m++) {
+        double x = s[m] / d;
+        double kf = np_min(np_max(floor(x), (double)k_lo), (double)k_hi);
+        long long k = isnan(kf) ? (long long)k_lo : (long long)kf;
+        double t = x - (double)k;
+        double u = 1.0 - t;
+        k_out[m] = k;
+        W0[3 * m] = u * u / 2.0;
+        W0[3 * m + 1] = ((-2.0 * t) * t + 2.0 * t + 1.0) / 2.0;
+        W0[3 * m + 2] = t * t / 2.0;
+        W1[3 * m] = -u / d;
+        W1[3 * m + 1] = (1.0 - 2.0 * t) / d;
+        W1[3 * m + 2] = t / d;
+        W2[3 * m] = w2a;
+        W2[3 * m + 1] = w2b;
+        W2[3 * m + 2] = w2a;
+    }
+}
+
+/* bspline.evaluate: q, q', q'' at s[m] of the control points c (starting at global index col0), knot intervals
+ * clamped to [k_lo, hi]; q, q', q'' one after the other in out. */
+void fs_evaluate(int K, const double *s, double d, int k_lo, int hi, int col0, const double *c, double *out) {
+    double *q = out, *q1 = out + K, *q2 = out + 2 * (size_t)K;
+    double dd = d * d;
+    for (int m = 0; m < K; m++) {
+        double x = s[m] / d;
+        double kf = np_min(np_max(floor(x), (double)k_lo), (double)hi);
+        long long k = isnan(kf) ? (long long)k_lo : (long long)kf;
+        double t = x - (double)k;
+        long long i = k - col0;
+        double c0 = c[i], c1 = c[i + 1], c2 = c[i + 2];
+        double a2 = c0 - 2.0 * c1 + c2;
+        double a1 = c1 - c0;
+        double u = 1.0 - t;
+        q[m] = 0.5 * (c0 * u * u + c1 * (1.0 + 2.0 * t * u) + c2 * t * t);
+        q1[m] = (a1 + a2 * t) / d;
+        q2[m] = a2 / dd;
+    }
+}
+
+/* kinematics.axis_kinematics: v = x_s sdot, a = x_ss sdot^2 + x_s sddot, j = x_sss sdot^3 + 3 x_ss sdot sddot +
+ * x_s sdddot (K x 3 each, one after the other in out). */
+void fs_axis_kinematics(int K, const double *sdot, const double *sddot, const double *sdddot, const double *d1,
+                        const double *d2, const double *d3, double *out) {
+    double *v = out, *a = out + 3 * (size_t)K, *j = out + 6 * (size_t)K;
+    for (int m = 0; m < K; m++) {
+        double f = sdot[m], f2 = f * f, f3 = f2 * f, g = sddot[m], h = sdddot[m], fg = 3.0 * f * g;
+        for (int c = 0; c < 3; c++) {
+            int i = 3 * m + c;
+            v[i] = d1[i] * f;
+            a[i] = d2[i] * f2 + d1[i] * g;
+            j[i] = d3[i] * f3 + d2[i] * fg + d1[i] * h;
+        }
     }
 }

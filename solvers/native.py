@@ -1,6 +1,10 @@
 """The solvers package's compiled kernels (``native.c``), loaded by ``geometry.native.load``: compiled once per
 machine into its cache, None without a C compiler or with FEEDSCHED_NO_COMPILE=1 (the callers' numpy path).
 
+``basis``, ``evaluate`` (``solvers.bspline``) and ``axis_kinematics`` (``solvers.kinematics``): the B-spline's
+basis weights, q, q', q'', and the axes' v, a, j, each point on its own: the LP's verification grid (~9,000
+points), the samples and the checkpoints, ~15 numpy passes each.
+
 ``h_local``: the time table's integrand dt/dx = d / sqrt(q) inside a piece (``timing.PieceProfile.h_local``), the
 same operations in the same order as its numpy code, point by point: the time table's build evaluates it at
 ~33,000 points in 12 calls and its Newton steps at ~25,000 more (flower loop, v + a), where each numpy pass was a
@@ -16,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry import native as gnative
+from geometry.native import f64, ptr
 
 FloatArray = NDArray[np.float64]
 
@@ -23,9 +28,15 @@ SOURCE = Path(__file__).with_name("native.c")
 
 
 def _declare(lib: ctypes.CDLL) -> None:
+    i, d, P = ctypes.c_int, ctypes.c_double, gnative.P
     lib.fs_h_local.restype = None
-    lib.fs_h_local.argtypes = [ctypes.c_int, ctypes.c_double, gnative.F64, ctypes.c_int, ctypes.c_int, gnative.F64,
-                               gnative.F64]
+    lib.fs_h_local.argtypes = [i, d, P, i, i, P, P]
+    lib.fs_basis.restype = None
+    lib.fs_basis.argtypes = [i, P, d, i, i, P, P]
+    lib.fs_evaluate.restype = None
+    lib.fs_evaluate.argtypes = [i, P, d, i, i, i, P, P]
+    lib.fs_axis_kinematics.restype = None
+    lib.fs_axis_kinematics.argtypes = [i, P, P, P, P, P, P, P]
 
 
 def library() -> ctypes.CDLL | None:
@@ -35,8 +46,41 @@ def library() -> ctypes.CDLL | None:
 
 def h_local(lib: ctypes.CDLL, n: int, d: float, c: FloatArray, x0: int, xl: FloatArray) -> FloatArray:
     """d / sqrt(max(q, 0)) at x = x0 + xl (K,) of the profile with n knot intervals, control points c (n + 2,)."""
-    xl = np.ascontiguousarray(xl, dtype=np.float64)
-    out = np.empty(xl.size)
-    if xl.size:
-        lib.fs_h_local(n, d, np.ascontiguousarray(c, dtype=np.float64), x0, xl.size, xl, out)
+    xl_c, c_c = f64(xl), f64(c)
+    out = np.empty(xl_c.size)
+    if xl_c.size:
+        lib.fs_h_local(n, d, ptr(c_c), x0, xl_c.size, ptr(xl_c), ptr(out))
     return out
+
+
+def basis(lib: ctypes.CDLL, s: FloatArray, d: float, k_lo: int, k_hi: int,
+          ) -> tuple[NDArray[np.int64], FloatArray, FloatArray, FloatArray]:
+    """``bspline.basis`` (the same numbers)."""
+    s_c = f64(s)
+    K = s_c.size
+    k, W = np.empty(K, dtype=np.int64), np.empty((3, K, 3))
+    if K:
+        lib.fs_basis(K, ptr(s_c), d, k_lo, k_hi, ptr(k), ptr(W))
+    return k, W[0], W[1], W[2]
+
+
+def evaluate(lib: ctypes.CDLL, c: FloatArray, s: FloatArray, d: float, k_lo: int, hi: int, col0: int,
+             ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``bspline.evaluate`` (the same numbers)."""
+    s_c, c_c = f64(s), f64(c)
+    K = s_c.size
+    out = np.empty((3, K))
+    if K:
+        lib.fs_evaluate(K, ptr(s_c), d, k_lo, hi, col0, ptr(c_c), ptr(out))
+    return out[0], out[1], out[2]
+
+
+def axis_kinematics(lib: ctypes.CDLL, sdot: FloatArray, sddot: FloatArray, sdddot: FloatArray, d1: FloatArray,
+                    d2: FloatArray, d3: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``kinematics.axis_kinematics`` (the same numbers)."""
+    f, g, h, x1, x2, x3 = f64(sdot), f64(sddot), f64(sdddot), f64(d1), f64(d2), f64(d3)
+    K = f.size
+    out = np.empty((3, K, 3))
+    if K:
+        lib.fs_axis_kinematics(K, ptr(f), ptr(g), ptr(h), ptr(x1), ptr(x2), ptr(x3), ptr(out))
+    return out[0], out[1], out[2]
