@@ -44,7 +44,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from geometry.toolpath import PathSamples
-from solvers import bspline, kinematics
+from solvers import bspline, kinematics, native
 from solvers.errors import InfeasibleError, SolverFailure
 from solvers.machine import Machine
 
@@ -391,7 +391,13 @@ def column_reach(
 
     k (K,): each point's first nonzero control point (``bspline.basis``, counted from the window's first); W0 (K, 3):
     the basis weights b_k, b_k+1, b_k+2 there; cap (K,).  Points in order of s (each column's points together:
-    per-column minima by ``np.minimum.reduceat``; otherwise ``np.minimum.at``, the same minima, ~10x slower)."""
+    per-column minima by ``np.minimum.reduceat``; otherwise ``np.minimum.at``, the same minima, ~10x slower).
+    Compiled where it can be (``solvers.native``: the same minima, in any order)."""
+    lib = native.library()
+    if lib is not None:
+        fast = native.column_reach(lib, k, W0, cap, ncols, min_basis, ok)
+        if fast is not None:
+            return fast
     out = np.full(ncols, np.inf)
     for i in range(3):
         sel = W0[:, i] >= min_basis
@@ -696,11 +702,19 @@ def axis_moves(g: PathSamples, ax: int) -> bool:
     return bool(np.max(np.abs(g.d1[:, ax])) + np.max(np.abs(g.d2[:, ax])) > AXIS_EPS)
 
 
+def _min_ratio(X: FloatArray, num: FloatArray, square: bool) -> FloatArray:
+    """min over the axes of num / x where x > AXIS_EPS (inf elsewhere), x = X^2 (``square``) or |X| (K,)."""
+    lib = native.library()
+    if lib is not None:  # the same numbers, compiled (``solvers.native``)
+        return native.min_ratio(lib, X, num, AXIS_EPS, square)
+    x = X**2 if square else np.abs(X)
+    with np.errstate(divide="ignore"):
+        return np.asarray(np.min(np.where(x > AXIS_EPS, num[None, :] / x, np.inf), axis=1), dtype=np.float64)
+
+
 def velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
     """Upper bound on q at points g (K,): min(Fmax^2, programmed feed^2, min_x vmax_x^2 / x_s^2)."""
-    x2 = g.d1**2
-    with np.errstate(divide="ignore"):
-        ub = np.min(np.where(x2 > AXIS_EPS, lim.vmax[None, :] ** 2 / x2, np.inf), axis=1)
+    ub = _min_ratio(g.d1, lim.vmax**2, True)
     if lim.feed_max is not None:
         ub = np.minimum(ub, lim.feed_max**2)
     if g.feed_limit is not None:
@@ -1570,12 +1584,10 @@ class WindowLP:
         ub = self._velocity_bound(g)
         lim = self.lim
         with np.errstate(divide="ignore", invalid="ignore"):
-            qa = np.min(np.where(np.abs(g.d2) > AXIS_EPS, lim.amax[None, :] / np.abs(g.d2), np.inf), axis=1)
+            qa = _min_ratio(g.d2, lim.amax, False)
             cap = np.minimum(ub, qa)
             if lim.jerk:
-                qj = np.min(
-                    np.where(np.abs(g.d3) > AXIS_EPS, lim.jmax[None, :] / np.abs(g.d3), np.inf), axis=1
-                ) / np.sqrt(ub)
+                qj = _min_ratio(g.d3, lim.jmax, False) / np.sqrt(ub)
                 cap = np.minimum(cap, qj)
         out = np.asarray(cap, dtype=np.float64)
         self._cap_cache = (g, out)

@@ -83,3 +83,36 @@ void fs_axis_kinematics(int K, const double *sdot, const double *sddot, const do
         }
     }
 }
+
+/* min over the three axes of num[c] / x where x > eps (else inf), x = X[m][c]^2 (square) or |X[m][c]| (numpy's
+ * np.min(np.where(x > eps, num / x, inf), axis=1): NaN if any term is NaN). */
+void fs_min_ratio(int K, const double *X, const double *num, double eps, int square, double *out) {
+    for (int m = 0; m < K; m++) {
+        double best = INFINITY;
+        for (int c = 0; c < 3; c++) {
+            double x = X[3 * m + c];
+            x = square ? x * x : fabs(x);
+            double r = x > eps ? num[c] / x : INFINITY;
+            best = c == 0 ? r : np_min(best, r);
+        }
+        out[m] = best;
+    }
+}
+
+/* lp.column_reach: out[j] (ncols, filled with inf by the caller) = min over points m and i = 0..2 with
+ * j = k[m] + i, W0[m][i] >= min_basis (and ok[m], if ok) of cap[m] / W0[m][i].  Returns 0, or -1 if a column is
+ * out of range (the caller's numpy path then). */
+int fs_column_reach(int K, const long long *k, const double *W0, const double *cap, int ncols, double min_basis,
+                    const unsigned char *ok, double *out) {
+    for (int m = 0; m < K; m++) {
+        if (ok != NULL && !ok[m]) continue;
+        for (int i = 0; i < 3; i++) {
+            double w = W0[3 * m + i];
+            if (!(w >= min_basis)) continue;
+            long long j = k[m] + i;
+            if (j < 0 || j >= ncols) return -1;
+            out[j] = np_min(out[j], cap[m] / w);
+        }
+    }
+    return 0;
+}

@@ -5,6 +5,9 @@ machine into its cache, None without a C compiler or with FEEDSCHED_NO_COMPILE=1
 basis weights, q, q', q'', and the axes' v, a, j, each point on its own: the LP's verification grid (~9,000
 points), the samples and the checkpoints, ~15 numpy passes each.
 
+``min_ratio``: the tightest axis's bound at each point (the LP's velocity bound vmax^2 / x_s^2, and its caps
+amax / |x_ss|, jmax / |x_sss|) on the verification grid.
+
 ``h_local``: the time table's integrand dt/dx = d / sqrt(q) inside a piece (``timing.PieceProfile.h_local``), the
 same operations in the same order as its numpy code, point by point: the time table's build evaluates it at
 ~33,000 points in 12 calls and its Newton steps at ~25,000 more (flower loop, v + a), where each numpy pass was a
@@ -35,6 +38,10 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.fs_basis.argtypes = [i, P, d, i, i, P, P]
     lib.fs_evaluate.restype = None
     lib.fs_evaluate.argtypes = [i, P, d, i, i, i, P, P]
+    lib.fs_column_reach.restype = ctypes.c_int
+    lib.fs_column_reach.argtypes = [i, P, P, P, i, d, P, P]
+    lib.fs_min_ratio.restype = None
+    lib.fs_min_ratio.argtypes = [i, P, P, d, i, P]
     lib.fs_axis_kinematics.restype = None
     lib.fs_axis_kinematics.argtypes = [i, P, P, P, P, P, P, P]
 
@@ -84,3 +91,27 @@ def axis_kinematics(lib: ctypes.CDLL, sdot: FloatArray, sddot: FloatArray, sdddo
     if K:
         lib.fs_axis_kinematics(K, ptr(f), ptr(g), ptr(h), ptr(x1), ptr(x2), ptr(x3), ptr(out))
     return out[0], out[1], out[2]
+
+
+def min_ratio(lib: ctypes.CDLL, X: FloatArray, num: FloatArray, eps: float, square: bool) -> FloatArray:
+    """np.min(np.where(x > eps, num / x, np.inf), axis=1) with x = X**2 (``square``) or |X|, X (K, 3), num (3,)."""
+    X_c, n_c = f64(X), f64(num)
+    K = X_c.shape[0]
+    out = np.empty(K)
+    if K:
+        lib.fs_min_ratio(K, ptr(X_c), ptr(n_c), eps, int(square), ptr(out))
+    return out
+
+
+def column_reach(lib: ctypes.CDLL, k: NDArray[np.int64], W0: FloatArray, cap: FloatArray, ncols: int,
+                 min_basis: float, ok: NDArray[np.bool_] | None) -> FloatArray | None:
+    """``lp.column_reach`` (the same minima); None if a point's column is outside [0, ncols)."""
+    k_c = np.ascontiguousarray(k, dtype=np.int64)
+    W_c, cap_c = f64(W0), f64(cap)
+    ok_c = None if ok is None else np.ascontiguousarray(ok, dtype=np.uint8)
+    out = np.full(ncols, np.inf)
+    K = k_c.size
+    if K and lib.fs_column_reach(K, ptr(k_c), ptr(W_c), ptr(cap_c), ncols, min_basis,
+                                 None if ok_c is None else ptr(ok_c), ptr(out)) != 0:
+        return None
+    return out

@@ -66,3 +66,45 @@ def test_profiles_with_the_nlps_feed_take_the_numpy_path(monkeypatch: pytest.Mon
     assert not calls
     k = np.clip(np.floor(x).astype(int), 0, n - 1)
     np.testing.assert_array_equal(mixed[~mask[k]], plain[~mask[k]])
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), K=st.integers(0, 300))
+def test_grid_kernels_are_the_numpy_code_bit_for_bit(seed: int, K: int) -> None:
+    """bspline.basis and evaluate, kinematics.axis_kinematics, lp._min_ratio and lp.column_reach compiled and in numpy,
+    on random points (some outside the clamped intervals), control points, geometry (some axes flat) and caps."""
+    from geometry.toolpath import PathSamples
+    from solvers import bspline, kinematics, lp
+
+    if native.library() is None:
+        pytest.skip("no C compiler (or FEEDSCHED_NO_COMPILE): the numpy path is used")
+    rng = np.random.default_rng(seed)
+    n, d = int(rng.integers(3, 30)), float(10.0 ** rng.uniform(-2, 1))
+    s = np.sort(rng.uniform(-0.2 * d, (n + 0.2) * d, K))
+    c = rng.uniform(-1.0, 1e3, n + 2)
+    k_lo, k_hi = int(rng.integers(0, 2)), n - 1 - int(rng.integers(0, 2))
+    D = rng.normal(size=(3, K, 3)) * 10.0 ** rng.uniform(-3, 3, size=(3, 1, 1))
+    D[:, rng.random(K) < 0.2, int(rng.integers(0, 3))] = 0.0
+    g = PathSamples(s, np.zeros((K, 3)), D[0], D[1], D[2])
+    num = rng.uniform(1.0, 1e4, 3)
+    ok = rng.random(K) < 0.8
+    k_basis, W0, *_ = bspline.basis(s, d, n, k_lo, k_hi)
+    cap = rng.uniform(0.0, 1e4, K)
+
+    def everything() -> list[np.ndarray]:
+        kb, *W = bspline.basis(s, d, n, k_lo, k_hi)
+        q3 = bspline.evaluate(c, s, d, k_lo, k_hi)
+        vaj = kinematics.axis_kinematics(g, *kinematics.from_q(*q3))
+        ratios = [lp._min_ratio(X, num, sq) for X in D for sq in (True, False)]
+        reach = [lp.column_reach(k_basis - k_lo, W0, cap, n + 2 - k_lo, 0.25, o) for o in (None, ok)]
+        return [kb.astype(np.float64), *W, *q3, *vaj, *ratios, *reach]
+
+    got = everything()
+    mp = pytest.MonkeyPatch()
+    try:
+        mp.setenv(gnative.DISABLE_ENV, "1")
+        want = everything()
+    finally:
+        mp.undo()
+    for x, y in zip(got, want, strict=True):
+        np.testing.assert_array_equal(x, y)
