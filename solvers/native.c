@@ -7,9 +7,12 @@
 static double np_max(double a, double b) { return isnan(a) ? a : (isnan(b) ? b : (a > b ? a : (a < b ? b : a))); }
 static double np_min(double a, double b) { return isnan(a) ? a : (isnan(b) ? b : (a < b ? a : (a > b ? b : a))); }
 
-/* PieceProfile.h_local (solvers/timing.py) inside the piece: dt/dx = d / sqrt(q) at x = x0 + xl[m], q the uniform
- * quadratic B-spline of the n knot intervals' control points c (n + 2) in its basis form (bspline.value). */
-void fs_h_local(int n, double d, const double *c, int x0, int K, const double *xl_in, double *out) {
+/* PieceProfile.h_local (solvers/timing.py): dt/dx = d / sqrt(q) at x = x0 + xl[m], q the uniform quadratic B-spline
+ * of the n knot intervals' control points c (n + 2) in its basis form (bspline.value); with ``ends``, in the end
+ * intervals their closed form (no bumps or rises: q12 = q1, q2 of the first, then of the last interval). */
+void fs_h_local(int n, double d, const double *c, int x0, int K, const double *xl_in, int ends, const double *q12,
+                double *out) {
+    double root_d = 2.0 * sqrt(d);
     for (int m = 0; m < K; m++) {
         double xl = np_min(np_max(xl_in[m], -(double)x0), (double)(n - x0));
         double fl = floor(xl);
@@ -20,6 +23,17 @@ void fs_h_local(int n, double d, const double *c, int x0, int K, const double *x
         double u = 1.0 - t;
         double v = 0.5 * (c[k] * u * u + c[k + 1] * (1.0 + 2.0 * t * u) + c[k + 2] * t * t);
         out[m] = d / sqrt(np_max(v, 0.0));
+        if (!ends) continue;
+        /* the end intervals' closed form without bumps: 2 sqrt(d) / sqrt(q1 + q2 d w^2 / 2), w from the rest end */
+        double x = xl + (double)x0;
+        if (x < 1.0) {
+            double r = q12[0] + 0.5 * q12[1] * d * x * x;
+            out[m] = root_d / sqrt(r);
+        } else if (x > n - 1.0) {
+            double w = (double)(n - x0) - xl;
+            double r = q12[2] + 0.5 * q12[3] * d * w * w;
+            out[m] = root_d / sqrt(r);
+        }
     }
 }
 

@@ -33,7 +33,7 @@ SOURCE = Path(__file__).with_name("native.c")
 def _declare(lib: ctypes.CDLL) -> None:
     i, d, P = ctypes.c_int, ctypes.c_double, gnative.P
     lib.fs_h_local.restype = None
-    lib.fs_h_local.argtypes = [i, d, P, i, i, P, P]
+    lib.fs_h_local.argtypes = [i, d, P, i, i, P, i, P, P]
     lib.fs_basis.restype = None
     lib.fs_basis.argtypes = [i, P, d, i, i, P, P]
     lib.fs_evaluate.restype = None
@@ -51,12 +51,16 @@ def library() -> ctypes.CDLL | None:
     return gnative.load(SOURCE, "solvers_native", _declare)
 
 
-def h_local(lib: ctypes.CDLL, n: int, d: float, c: FloatArray, x0: int, xl: FloatArray) -> FloatArray:
-    """d / sqrt(max(q, 0)) at x = x0 + xl (K,) of the profile with n knot intervals, control points c (n + 2,)."""
+def h_local(lib: ctypes.CDLL, n: int, d: float, c: FloatArray, x0: int, xl: FloatArray,
+            ends: tuple[float, float, float, float] | None) -> FloatArray:
+    """d / sqrt(max(q, 0)) at x = x0 + xl (K,) of the profile with n knot intervals, control points c (n + 2,); with
+    ``ends`` (q1, q2 of the first and of the last interval), the end intervals' closed form without bumps or rises
+    (``timing.PieceProfile.h_local``)."""
     xl_c, c_c = f64(xl), f64(c)
+    q12 = np.asarray(ends if ends is not None else (0.0, 0.0, 0.0, 0.0), dtype=np.float64)
     out = np.empty(xl_c.size)
     if xl_c.size:
-        lib.fs_h_local(n, d, ptr(c_c), x0, xl_c.size, ptr(xl_c), ptr(out))
+        lib.fs_h_local(n, d, ptr(c_c), x0, xl_c.size, ptr(xl_c), int(ends is not None), ptr(q12), ptr(out))
     return out
 
 

@@ -147,8 +147,14 @@ class PieceProfile:
         c, d, n = self.c, self.d, self.n_int
         xl = np.clip(np.asarray(xl, dtype=np.float64), -float(x0), float(n - x0))
         lib = native.library() if self.p is None or self.f_mask is None else None
+        (g0, gL), (h0, hL) = self.rest_g, self.rest_h
         if lib is not None:  # the same numbers, compiled (``solvers.native``)
-            out = native.h_local(lib, n, d, c, x0, xl)
+            if g0 or gL or any(h0) or any(hL):  # (bumps or rises: their closed form below)
+                out = native.h_local(lib, n, d, c, x0, xl, None)
+            else:
+                return native.h_local(lib, n, d, c, x0, xl, (
+                    (c[1] - c[0]) / d, (c[0] - 2 * c[1] + c[2]) / d**2, -(c[-1] - c[-2]) / d,
+                    (c[-3] - 2 * c[-2] + c[-1]) / d**2))
         else:
             k = np.clip(np.floor(xl).astype(np.int64) + x0, 0, n - 1)
             t = xl - (k - x0)  # (exact: small whole numbers)
@@ -166,7 +172,6 @@ class PieceProfile:
         # went to the rises' powers over every point); most calls have none (two reductions, not two masks)
         if not x.size or (float(np.min(x)) >= 1.0 and float(np.max(x)) <= n - 1.0):
             return np.asarray(out, dtype=np.float64)
-        (g0, gL), (h0, hL) = self.rest_g, self.rest_h
         for on, w, q1, q2, g, h in (
             (x < 1.0, x, (c[1] - c[0]) / d, (c[0] - 2 * c[1] + c[2]) / d**2, g0, h0),
             ((x > n - 1.0) & (x >= 1.0), (n - x0) - xl, -(c[-1] - c[-2]) / d, (c[-3] - 2 * c[-2] + c[-1]) / d**2,
