@@ -4,9 +4,11 @@
  * Compiled and loaded by geometry/native.py; the numpy paths in geometry/nurbs.py, geometry/toolpath.py and
  * geometry/quadrature.py compute the same formulas (tests/geometry/test_native.py compares them).
  *
- * fs_nurbs_ders: the homogeneous B-spline A(u) = sum_i N_{i,p}(u) [w_i P_i, w_i] and its derivatives by
- * de Boor's basis function derivatives (Piegl & Tiller, The NURBS Book, algorithms A2.1 and A2.3), then
- * the quotient rule (eq. 4.8):
+ * fs_nurbs_taylor, fs_nurbs_eval: the homogeneous B-spline A(u) = sum_i N_{i,p}(u) [w_i P_i, w_i] as a Taylor
+ * polynomial about each knot span's midpoint, its coefficients from de Boor's basis function derivatives
+ * (Piegl & Tiller, The NURBS Book, algorithm A2.3) there; per point Horner for A and three derivatives (de Boor's
+ * basis functions at the point itself on a span's start and at the domain's end), then the quotient rule
+ * (eq. 4.8):
  *
  *     C   = A / W
  *     C'   = (A'   - W' C) / W

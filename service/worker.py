@@ -16,18 +16,22 @@ from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Any
 
+from geometry import native as geometry_native
 from service.convert import Budget, Result, check_budget, columns_of, from_schedule, meta_of, ndjson_rows, to_problem
 from service.errors import problem_from_exception
 from service.schemas import ScheduleRequest
+from solvers import native as solvers_native
 from solvers import nlp
 from solvers.pipeline import Options, SampleBlock, schedule, schedule_stream
 
 #: Seconds between checks that the parent process is still alive.
 PARENT_POLL_S = 0.25
 
-# the NLP's compiled derivative functions for the default options, once here: the forkserver imports this
-# module, so every solver process starts with them loaded
+# the NLP's compiled derivative functions for the default options and the compiled per-point kernels, once here:
+# the forkserver imports this module, so every solver process starts with them loaded
 nlp.warm_interval_functions(Options().nlp_checkpoints_per_interval)
+geometry_native.library()
+solvers_native.library()
 
 
 class Cancelled(Exception):

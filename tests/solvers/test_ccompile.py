@@ -105,7 +105,8 @@ def test_without_a_compiler_or_when_disabled_the_function_is_used_as_given(
 
 def test_the_service_worker_module_loads_the_default_interval_functions() -> None:
     """``service.worker`` (which the service's forkserver imports) builds the default options' interval
-    functions at import, so a solver process forked from it does not build them again (a fresh process)."""
+    functions and loads the per-point kernels at import, so a solver process forked from it does not build them
+    again (a fresh process)."""
     import subprocess
     import sys
 
@@ -118,6 +119,8 @@ def test_the_service_worker_module_loads_the_default_interval_functions() -> Non
         "    nlp._interval_function(na, False, 4)\n"
         "    nlp._interval_function(na, False, 4, values_only=True)\n"
         "assert nlp._interval_functions.cache_info().misses == m\n"
+        "from geometry import native\n"
+        "assert native.disabled() or {'geometry_native', 'solvers_native'} <= set(native._LIBS), native._LIBS\n"
     )
     root = Path(__file__).resolve().parents[2]
     out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300)
