@@ -17,6 +17,7 @@ follow from the quotient rule (Piegl & Tiller eq. 4.8):
 
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -155,22 +156,21 @@ class NurbsSegment:
         """Homogeneous control points [w P, w] (n, 4), C-contiguous."""
         return np.ascontiguousarray(np.column_stack([self.control_points * self.weights[:, None], self.weights]))
 
-    @cached_property
-    def _taylor(self) -> native.Taylor | None:
-        """The polynomial form of each knot span for the compiled kernel (``geometry.native``); None without it."""
-        lib = native.library()
-        if lib is None:
-            return None
-        return native.taylor(lib, self.degree, self.knots, self._hom_points)
+    def _taylor(self, lib: ctypes.CDLL) -> native.Taylor:
+        """The polynomial form of each knot span for the compiled kernel (``geometry.native``), built on first use."""
+        form: native.Taylor | None = self.__dict__.get("_taylor_form")
+        if form is None:
+            form = native.taylor(lib, self.degree, self.knots, self._hom_points)
+            self.__dict__["_taylor_form"] = form  # (a cache on a frozen dataclass, as cached_property keeps one)
+        return form
 
     def _native(self, uu: FloatArray, order: int) -> FloatArray | None:
         """C and its u-derivatives up to ``order`` at uu (clipped to the domain) by the compiled kernel
         (``geometry.native``), (order + 1, K, 3); None without it."""
         lib = native.library()
-        form = self._taylor if lib is not None else None
-        if lib is None or form is None:
+        if lib is None:
             return None
-        return native.nurbs_derivatives(lib, form, uu, order)
+        return native.nurbs_derivatives(lib, self._taylor(lib), uu, order)
 
     @property
     def domain(self) -> tuple[float, float]:

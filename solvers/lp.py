@@ -375,8 +375,8 @@ def stack_rows(blocks: list[sp.csr_matrix]) -> sp.csr_matrix:
     offs = np.cumsum([0, *nnz[:-1]])
     total = int(sum(nnz))
     itype = np.int32 if total < 2**31 and ncols < 2**31 else np.int64
-    indptr = np.concatenate([np.zeros(1, dtype=itype)] + [(b.indptr[1:] + o).astype(itype) for b, o in zip(blocks, offs,
-                                                                                                        strict=True)])
+    shifted = [(b.indptr[1:] + o).astype(itype) for b, o in zip(blocks, offs, strict=True)]
+    indptr = np.concatenate([np.zeros(1, dtype=itype), *shifted])
     data = np.concatenate([b.data[: b.indptr[-1]] for b in blocks])
     indices = np.concatenate([b.indices[: b.indptr[-1]].astype(itype) for b in blocks])
     return sp.csr_matrix((data, indices, indptr), shape=(int(indptr.size - 1), ncols))

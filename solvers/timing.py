@@ -129,6 +129,12 @@ class PieceProfile:
         """dt/dx, seconds per unit x (``h_local`` with x0 = 0)."""
         return self.h_local(0, x)
 
+    def _end_slopes(self) -> tuple[float, float, float, float]:
+        """|q'| at the rest end and q'' of the first knot interval, then of the last (``h_local``'s closed form)."""
+        c, d = self.c, self.d
+        return ((c[1] - c[0]) / d, (c[0] - 2 * c[1] + c[2]) / d**2, -(c[-1] - c[-2]) / d,
+                (c[-3] - 2 * c[-2] + c[-1]) / d**2)
+
     def h_local(self, x0: int, xl: FloatArray) -> FloatArray:
         """dt/dx at x = x0 + xl, seconds per unit x; x0 a whole number of knot intervals.
 
@@ -152,9 +158,7 @@ class PieceProfile:
             if g0 or gL or any(h0) or any(hL):  # (bumps or rises: their closed form below)
                 out = native.h_local(lib, n, d, c, x0, xl, None)
             else:
-                return native.h_local(lib, n, d, c, x0, xl, (
-                    (c[1] - c[0]) / d, (c[0] - 2 * c[1] + c[2]) / d**2, -(c[-1] - c[-2]) / d,
-                    (c[-3] - 2 * c[-2] + c[-1]) / d**2))
+                return native.h_local(lib, n, d, c, x0, xl, self._end_slopes())
         else:
             k = np.clip(np.floor(xl).astype(np.int64) + x0, 0, n - 1)
             t = xl - (k - x0)  # (exact: small whole numbers)
@@ -172,10 +176,10 @@ class PieceProfile:
         # went to the rises' powers over every point); most calls have none (two reductions, not two masks)
         if not x.size or (float(np.min(x)) >= 1.0 and float(np.max(x)) <= n - 1.0):
             return np.asarray(out, dtype=np.float64)
+        q1_0, q2_0, q1_L, q2_L = self._end_slopes()
         for on, w, q1, q2, g, h in (
-            (x < 1.0, x, (c[1] - c[0]) / d, (c[0] - 2 * c[1] + c[2]) / d**2, g0, h0),
-            ((x > n - 1.0) & (x >= 1.0), (n - x0) - xl, -(c[-1] - c[-2]) / d, (c[-3] - 2 * c[-2] + c[-1]) / d**2,
-             gL, hL),
+            (x < 1.0, x, q1_0, q2_0, g0, h0),
+            ((x > n - 1.0) & (x >= 1.0), (n - x0) - xl, q1_L, q2_L, gL, hL),
         ):
             if not on.any():
                 continue
