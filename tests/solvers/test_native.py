@@ -108,3 +108,30 @@ def test_grid_kernels_are_the_numpy_code_bit_for_bit(seed: int, K: int) -> None:
         mp.undo()
     for x, y in zip(got, want, strict=True):
         np.testing.assert_array_equal(x, y)
+
+
+#: the flower's motion with the NURBS kernel against scipy's evaluation (rounding moves degenerate LP vertices;
+#: seen: equal to 12 digits)
+NURBS_MOTION_REL = 1e-3
+
+
+@pytest.mark.parametrize("jerk", [False, True])
+def test_schedules_with_the_kernels_on_and_off(monkeypatch: pytest.MonkeyPatch, jerk: bool) -> None:
+    """Lines (evaluated in closed form: no NURBS kernel) give the same samples bit for bit with every kernel on or
+    off; the flower (NURBS) the same motion within NURBS_MOTION_REL."""
+    from geometry import examples as ex
+    from solvers.machine import router
+    from solvers.pipeline import Options, schedule
+
+    if native.library() is None or gnative.library() is None:
+        pytest.skip("no C compiler (or FEEDSCHED_NO_COMPILE): the numpy path is used")
+    m, o = router(), Options(method="lp", jerk=jerk)
+    on = {name: schedule(tp(), m, o) for name, tp in (("corner", ex.square_corner), ("flower", lambda: ex.flower(1)))}
+    monkeypatch.setenv(gnative.DISABLE_ENV, "1")
+    off = {name: schedule(tp(), m, o) for name, tp in (("corner", ex.square_corner), ("flower", lambda: ex.flower(1)))}
+    a, b = on["corner"].samples, off["corner"].samples
+    for x, y in ((a.t, b.t), (a.s, b.s), (a.position, b.position), (a.velocity, b.velocity),
+                 (a.acceleration, b.acceleration), (a.jerk, b.jerk)):
+        np.testing.assert_array_equal(x, y)
+    mt_on, mt_off = on["flower"].summary["motion_time"], off["flower"].summary["motion_time"]
+    assert abs(mt_on - mt_off) <= NURBS_MOTION_REL * mt_off
