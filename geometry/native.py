@@ -128,7 +128,7 @@ def load(source: Path, name: str, declare: Callable[[ctypes.CDLL], None]) -> cty
     types set by ``declare``; None when DISABLE_ENV is set or it cannot be built (the callers' numpy path then).
     Called for every evaluation: it reads DISABLE_ENV and looks the library up (~1.5 us); the cache directory and
     the compiler are read at the first use (``reset`` forgets the libraries, for another environment)."""
-    if os.environ.get(DISABLE_ENV, "") not in ("", "0"):
+    if disabled():
         return None
     try:
         return _LIBS[name]

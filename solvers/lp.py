@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import clarabel
 import highspy
@@ -352,6 +353,11 @@ def _admit(
     return lo, hi
 
 
+def _index_type(nnz: int, ncols: int) -> type[np.signedinteger[Any]]:
+    """The CSR index type scipy would choose: 32-bit where nnz and the columns fit, else 64-bit."""
+    return np.int32 if nnz < 2**31 and ncols < 2**31 else np.int64
+
+
 def select_rows(A: sp.csr_matrix, which: NDArray[np.bool_]) -> sp.csr_matrix:
     """A[which] (rows where ``which``, in order): the same matrix as scipy's indexing, which took ~180 us for a
     900-row window's rows (~40 us here)."""
@@ -361,8 +367,7 @@ def select_rows(A: sp.csr_matrix, which: NDArray[np.bool_]) -> sp.csr_matrix:
     np.cumsum(counts, out=indptr[1:])
     # each kept row's entries: its start, plus 0 .. count - 1
     take = np.repeat(A.indptr[:-1][idx] - indptr[:-1], counts) + np.arange(int(indptr[-1]))
-    nnz_ok = indptr[-1] < 2**31
-    itype = np.int32 if nnz_ok and A.shape[1] < 2**31 else np.int64
+    itype = _index_type(int(indptr[-1]), A.shape[1])
     return sp.csr_matrix((A.data[take], A.indices[take].astype(itype), indptr.astype(itype)),
                          shape=(idx.size, A.shape[1]))
 
@@ -373,8 +378,7 @@ def stack_rows(blocks: list[sp.csr_matrix]) -> sp.csr_matrix:
     ncols = blocks[0].shape[1]
     nnz = [b.indptr[-1] for b in blocks]
     offs = np.cumsum([0, *nnz[:-1]])
-    total = int(sum(nnz))
-    itype = np.int32 if total < 2**31 and ncols < 2**31 else np.int64
+    itype = _index_type(int(sum(nnz)), ncols)
     shifted = [(b.indptr[1:] + o).astype(itype) for b, o in zip(blocks, offs, strict=True)]
     indptr = np.concatenate([np.zeros(1, dtype=itype), *shifted])
     data = np.concatenate([b.data[: b.indptr[-1]] for b in blocks])
@@ -1602,11 +1606,9 @@ class WindowLP:
         spec = self.spec
         if spec.start_fixed is not None and not spec.end_rest:
             return np.full(n, np.inf)
-        xs = np.abs(g.d1)
 
         def tangential(lim: FloatArray) -> float:
-            with np.errstate(divide="ignore"):
-                return float(np.min(np.where(xs > AXIS_EPS, lim[None, :] / xs, np.inf)))
+            return float(np.min(_min_ratio(g.d1, lim, False)))
 
         peak = (np.arange(n) - 0.5) * spec.d  # column j's basis function peaks half an interval before k0 + j
         r = np.full(n, np.inf)
