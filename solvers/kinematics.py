@@ -18,6 +18,8 @@ Shapes: s-like arrays (K,), axis arrays (K, 3); units mm, s.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -25,7 +27,38 @@ from geometry.toolpath import PathSamples
 from solvers import native
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 FeedDerivs = tuple[FloatArray, FloatArray, FloatArray]
+
+
+# Reductions over the axes of an axis array (K, n), n >= 1 small (the three axes): the columns combined one
+# after the other, in place.  The same values as numpy's reductions along axis 1 (max and min propagate NaN as
+# they do), which run an inner loop per row: on (7000, 3) np.max(X, axis=1) took ~480 us, this ~16 us.
+def _by_columns(X: NDArray[Any], op: np.ufunc) -> NDArray[Any]:
+    out = X[:, 0].copy()
+    for i in range(1, X.shape[1]):
+        op(out, X[:, i], out=out)
+    return out
+
+
+def row_max(X: FloatArray) -> FloatArray:
+    """np.max(X, axis=1) of X (K, n)."""
+    return _by_columns(X, np.maximum)
+
+
+def row_min(X: FloatArray) -> FloatArray:
+    """np.min(X, axis=1) of X (K, n)."""
+    return _by_columns(X, np.minimum)
+
+
+def row_any(B: BoolArray) -> BoolArray:
+    """np.any(B, axis=1) of B (K, n)."""
+    return _by_columns(B, np.logical_or)
+
+
+def row_all(B: BoolArray) -> BoolArray:
+    """np.all(B, axis=1) of B (K, n)."""
+    return _by_columns(B, np.logical_and)
 
 
 def from_q(q: FloatArray, q1: FloatArray, q2: FloatArray) -> FeedDerivs:

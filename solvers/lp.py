@@ -973,7 +973,7 @@ class WindowLP:
         with np.errstate(divide="ignore"):
             fu = np.where(xs * dr["b"] > 0, REST_FEED_BUDGET * dr["umax"] / (xs * dr["b"]), np.inf)
             fe = np.where(xs * dr["Kv"] > 0, REST_FEED_BUDGET * REST_DRIVE_SHARE * dr["emax"] / (xs * dr["Kv"]), np.inf)
-        return np.asarray(np.minimum(np.min(fu, axis=1), np.min(fe, axis=1)), dtype=np.float64)
+        return np.minimum(kinematics.row_min(fu), kinematics.row_min(fe))
 
     def _rest_drive_rows(self, rows: _Rows, g: PathSamples, Q: float, R: FloatArray, qstar: FloatArray | None) -> None:
         r"""Control signal and servo error rows at points g next to a rest end (lp+nlp: those knot intervals
@@ -1678,7 +1678,7 @@ class WindowLP:
         n = spec.ncols
         k, W0, _, _ = bspline.basis(g.s, spec.d, spec.n_int, spec.k0, spec.k1 - 1)
         cols = k[:, None] - spec.k0 + np.arange(3)[None, :]  # (K, 3): the control points nonzero at each point
-        ok = self._plain_points(g.s) & np.all(col_lo[cols] >= 0.0, axis=1)
+        ok = self._plain_points(g.s) & kinematics.row_all(col_lo[cols] >= 0.0)
         bound = column_reach(k - spec.k0, W0, self._velocity_bound(g) / Q, n, COL_HI_MIN_BASIS, ok)
         out = col_hi.copy()
         free = (col_lo[:n] < col_hi[:n]) & (COL_HI_FACTOR * bound <= COL_HI_MAX_SCALED * sig[:n])
@@ -1732,14 +1732,15 @@ class WindowLP:
             uu = dr["M"] * a[rest] + dr["b"] * v[rest] + dr["c"]
             u_worst = np.where(unsure, np.abs(uu) + dr["d"], np.abs(uu + dr["d"] * np.sign(gr.d1)))
             e = dr["Kv"] * v[rest] + dr["Ka"] * a[rest] + (dr["Kj"] * j[rest] if c_star is not None else 0.0)
-            bad[rest] |= np.any(u_worst > dr["umax"] * tol, axis=1) | np.any(np.abs(e) > dr["emax"] * tol, axis=1)
+            bad[rest] |= (kinematics.row_any(u_worst > dr["umax"] * tol)
+                          | kinematics.row_any(np.abs(e) > dr["emax"] * tol))
             bad[rest] |= f[rest] > self._rest_feed_cap(gr) * tol
             a = np.where(rest[:, None], 0.0, a)
             j = np.where(rest[:, None], 0.0, j)
         aa = np.abs(a)
         for ax in range(3):  # + the impulse of velocity steps nearby
             aa[:, ax] += lim.amax[ax] * self._vstep_seen(c, g.s, ax, lim.amax[ax], V_KERNEL_A, 1)
-        bad |= np.any(aa > lim.amax[None, :] * tol, axis=1)
+        bad |= kinematics.row_any(aa > lim.amax[None, :] * tol)
         if c_star is not None:
             aj = np.abs(j)
             for ax in range(3):
@@ -1748,7 +1749,7 @@ class WindowLP:
                     near, M = step
                     aj[near, ax] += lim.jmax[ax] * (M @ self._eval(c, self._steps()[0])[0])
                 aj[:, ax] += lim.jmax[ax] * self._vstep_seen(c, g.s, ax, lim.jmax[ax], V_KERNEL_J, 2)
-            bad |= np.any(aj > lim.jmax[None, :] * tol, axis=1)
+            bad |= kinematics.row_any(aj > lim.jmax[None, :] * tol)
         return np.asarray(bad)
 
     def _run(self, rows: _Rows, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray) -> FloatArray:

@@ -1767,7 +1767,7 @@ class NlpRefiner:
                 for m, ax in enumerate(moving):
                     fac[:, m] = np.maximum(MIN_BOUND_FACTOR, fac[:, m] * scale_for(arr[:, ax]))
             else:
-                ratio = arr if arr.ndim == 1 else np.max(arr, axis=1)
+                ratio = arr if arr.ndim == 1 else kinematics.row_max(arr)
                 fac_k[:] = np.maximum(MIN_BOUND_FACTOR, fac_k * scale_for(ratio))
 
     def _row_bounds(
@@ -1963,7 +1963,7 @@ class NlpRefiner:
             ub = np.minimum(ub, g.feed_limit)
         if self.lim.vmax is not None:
             with np.errstate(divide="ignore"):
-                ub = np.minimum(ub, np.min(self.lim.vmax / np.abs(g.d1), axis=1))
+                ub = np.minimum(ub, kinematics.row_min(self.lim.vmax / np.abs(g.d1)))
         return ub
 
     def _fine_points(self, s0: float, s1: float, d: float, breaks: FloatArray) -> FloatArray:
@@ -2287,8 +2287,8 @@ def _rest_point(t: float, cps: tuple[Any, Any, Any], g: Any, h: list[Any], head:
 def _worst_util(util: dict[str, FloatArray], names: Sequence[str]) -> FloatArray:
     """The largest utilisation at each fine point (F,) over the ``names`` of ``util`` and their axes (each
     (F, 3) or (F,)): what a cut slot (``_Slots.place``) and a rest point (``_tighten_points``) answer to."""
-    return np.asarray(np.max(np.column_stack([u if u.ndim == 1 else np.max(u, axis=1)
-                                              for u in (util[k] for k in names)]), axis=1), dtype=np.float64)
+    return kinematics.row_max(np.column_stack([u if u.ndim == 1 else kinematics.row_max(u)
+                                               for u in (util[k] for k in names)]))
 
 
 def _tighten_scale(overshoot: Any) -> Any:
@@ -2471,7 +2471,7 @@ def _fast_cells(fine: FloatArray, util: dict[str, FloatArray]) -> FloatArray:
         if name == "step" or name.startswith("sampled_"):
             continue
         du = np.abs(np.diff(u, axis=0))
-        np.maximum(jump, du if du.ndim == 1 else np.max(du, axis=1), out=jump)
+        np.maximum(jump, du if du.ndim == 1 else kinematics.row_max(du), out=jump)
     cells = (jump > REFINE_UTIL) & (np.diff(fine) > 4 * BREAK_EPS_MM)
     return np.asarray(0.5 * (fine[:-1] + fine[1:])[cells], dtype=np.float64)
 

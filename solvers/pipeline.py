@@ -1845,17 +1845,17 @@ def _binding_at(
     s_glob = s_local + piece.s_start
     util: dict[str, FloatArray] = {}
     if not nlp or opt.nlp_axis_velocity or opt.nlp_kinematic:
-        util["velocity"] = np.max(np.abs(v) / lim.vmax, axis=1)
+        util["velocity"] = kinematics.row_max(np.abs(v) / lim.vmax)
     elif dr is not None and np.isfinite(dr["vmax"]).any():
-        util["velocity"] = np.max(np.abs(v) / dr["vmax"], axis=1)
+        util["velocity"] = kinematics.row_max(np.abs(v) / dr["vmax"])
     if not nlp or opt.nlp_kinematic:
-        util["acceleration"] = np.max(np.abs(a) / lim.amax, axis=1)
+        util["acceleration"] = kinematics.row_max(np.abs(a) / lim.amax)
         if opt.jerk or opt.nlp_kinematic:
-            util["jerk"] = np.max(np.abs(j) / lim.jmax, axis=1)
+            util["jerk"] = kinematics.row_max(np.abs(j) / lim.jmax)
     if dr is not None:
         u, e = drive_outputs(dr, v, a, j)
-        util["control_signal"] = np.max(np.abs(u) / dr["umax"], axis=1)
-        util["servo_error"] = np.max(np.abs(e) / dr["emax"], axis=1)
+        util["control_signal"] = kinematics.row_max(np.abs(u) / dr["umax"])
+        util["servo_error"] = kinematics.row_max(np.abs(e) / dr["emax"])
     cap = np.full(s_local.size, np.inf if lim.feed_max is None else lim.feed_max)
     if g.feed_limit is not None:
         cap = np.minimum(cap, g.feed_limit)

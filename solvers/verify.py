@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from solvers.kinematics import row_any, row_max
 from solvers.machine import drive_outputs
 
 FloatArray = NDArray[np.float64]
@@ -172,14 +173,13 @@ def check_rows(
         for kd, an, fd, limit in per:
             ua = np.abs(an) / limit
             uf = np.abs(fd) / limit
-            over[sl] |= np.any(ua > 1.0 + REPAIR_TOL, axis=1) | np.any(uf > 1.0 + FD_REPAIR_TOL, axis=1)
+            over[sl] |= row_any(ua > 1.0 + REPAIR_TOL) | row_any(uf > 1.0 + FD_REPAIR_TOL)
             both = np.maximum(ua, uf)
-            i2 = np.argmax(both, axis=1)
-            m = both[np.arange(c1 - c0), i2]
+            m = row_max(both)
             up = m > util[sl]
             util[sl] = np.where(up, m, util[sl])
             kind[sl] = np.where(up, kd, kind[sl])
-            axis[sl] = np.where(up, i2, axis[sl])
+            axis[sl][up] = np.argmax(both[up], axis=1)
     if lim.feed_cap is not None:
         uf_ = _feed_util(feed, lim.feed_cap)
         over |= uf_ > 1.0 + REPAIR_TOL
@@ -195,7 +195,7 @@ def analytic_over(feed: FloatArray, v: FloatArray, a: FloatArray, j: FloatArray,
     1 + REPAIR_TOL of an enforced limit (feed cap included): ``check_rows``' analytic half."""
     over = np.zeros(feed.shape[0], dtype=bool)
     for _, an, limit in _terms(v, a, j, lim):
-        over |= np.any(np.abs(an) / limit > 1.0 + REPAIR_TOL, axis=1)
+        over |= row_any(np.abs(an) / limit > 1.0 + REPAIR_TOL)
     if lim.feed_cap is not None:
         over |= _feed_util(feed, lim.feed_cap) > 1.0 + REPAIR_TOL
     return over
