@@ -164,8 +164,10 @@ KNOT_REFINEMENTS = 3
 #: (q <= 0.019 there), still stalled at 128 intervals and moves at 512.
 STUCK_REFINE_MAX_INTERVALS = 1024
 #: A piece refined because the LP held control points at their q floor keeps refining only while
-#: each refinement shortens its motion to under this share of the best so far.
+#: each refinement shortens its motion to under this share of the best so far ...
 FLOOR_REFINE_GAIN = 0.99
+#: ... or while at most this many refinements in a row have not
+FLOOR_REFINE_PATIENCE = 1
 #: ... and only up to this many knot intervals, and only on the default knot spacing (an explicit
 #: ``Options.knot_spacing`` is kept: the 45-loop flower at 4.63 mm went from 22 to 67 LP windows,
 #: 4 % less motion for ~3 x the compute)
@@ -601,7 +603,7 @@ def _refined(
     best: tuple[float, PieceProfile, list[int]] | None = None
     prof: PieceProfile | None = None
     joins: list[int] = []
-    attempt = 0
+    attempt = misses = 0
     while True:
         plan = plan_piece(piece, machine, opt, n_int, toolpath)
         floor_refine = _floor_refines(opt) and 2 * plan.n_int <= FLOOR_REFINE_MAX_INTERVALS
@@ -630,7 +632,11 @@ def _refined(
             if not floored and best is None and not behind:
                 break
             if not behind and best is not None and duration > FLOOR_REFINE_GAIN * best[0]:
-                break  # finer knots no longer pay
+                misses += 1
+                if misses > FLOOR_REFINE_PATIENCE:
+                    break  # finer knots no longer pay
+            elif not behind and best is not None:
+                misses = 0
             if best is None or duration < best[0]:
                 best = (duration, prof, joins)
             if not floored and not behind:

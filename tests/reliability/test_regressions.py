@@ -338,6 +338,28 @@ def test_refinements_coarser_than_the_rest_plan_do_not_end_the_search(monkeypatc
     assert float(sch.summary["motion_time"]) == pytest.approx(best, rel=1e-9)
 
 
+#: bench seed 610's motion with the default knots against its motion on PLATEAU_FINE_INTERVALS explicit knot
+#: intervals (no refinement): at most this ratio (0.0294 / 0.0288 s measured; 0.0397 s when the refinements
+#: stopped on the plateau)
+PLATEAU_MOTION_RATIO = 1.05
+PLATEAU_FINE_INTERVALS = 432
+
+
+def test_refinements_go_on_over_a_plateau() -> None:
+    """Bench seed 610 (lp): a 2.04 mm piece whose LP holds a control point at its floor on every plan, refined from
+    its plan's 27 intervals: 0.0580 s, 54: 0.0397 s, 108: 0.0394 s (under FLOOR_REFINE_GAIN's 1 %: the refinements
+    stopped there), 216: 0.0294 s.  One refinement without the gain no longer ends them (FLOOR_REFINE_PATIENCE).
+    Truth: the same path on 432 explicit knot intervals (``Options.knot_spacing``, not refined): 0.0288 s."""
+    case = gen.case(610, "bench")
+    out = harness.run(case, "lp")
+    assert out.ok, out.describe()
+    tp = case.toolpath()
+    sch = schedule(tp, case.lp_machine, Options(method="lp"))
+    fine = schedule(tp, case.lp_machine, Options(method="lp", knot_spacing=tp.length / PLATEAU_FINE_INTERVALS))
+    ratio = float(sch.summary["motion_time"]) / float(fine.summary["motion_time"])
+    assert ratio <= PLATEAU_MOTION_RATIO, (sch.summary["motion_time"], fine.summary["motion_time"])
+
+
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_stalled_highs_run_is_stopped_and_solved_cold(monkeypatch: pytest.MonkeyPatch) -> None:
     """Bench seed 949 (lp): on its fourth knot refinement (128 intervals) a cut round's hot-started dual
