@@ -1,37 +1,43 @@
-r"""Probe (session 33): an interior-point method on the LP that HiGHS solves first in the flower's v + a schedule.
+r"""Probe (session 33): an interior point on the LP that HiGHS solves first in the flower's v + a schedule.
 
 Not the shipped solver: a measurement for the next step.  The flower loop's stage-1 model (1,894 rows, 179
-columns; ``solvers.lp.WindowLP`` with HiGHS, ``Options(method="lp", jerk=False)``) is captured as HiGHS gets
-it (scaled rows and columns) and solved three ways, each timed as the median of REPEATS in turn:
+columns; ``solvers.lp.WindowLP`` with HiGHS, ``Options(method="lp", jerk=False)``) is captured as HiGHS gets it
+(scaled rows and columns) and solved four ways, each timed as the median of REPEATS in turn:
 
-- HiGHS from scratch (its dual simplex, as the pipeline runs it: ~490 iterations);
-- a Mehrotra predictor-corrector interior point in numpy with the normal matrix G^T D G banded;
-- the same, with a dense Cholesky (the iteration count and solution are the same: a check of the banded one).
+- HiGHS from its slack basis, as the pipeline runs it (its dual simplex: ~490 iterations);
+- Mehrotra's predictor-corrector interior point in numpy, the normal matrix G^T D G banded (``mehrotra``);
+- the same compiled (``lp_ipm_probe.c``: a row's two bounds share its coefficients);
+- HiGHS from the basis the compiled solution points to (``basis``: the n rows and columns with the largest z / w,
+  each at the bound where it is largest, nonbasic; the others basic).
 
-Every finite row bound and column bound is one inequality c = G y + o >= 0 (two per two-sided row), slack
-w > 0, multiplier z > 0; minimise cost . y (HiGHS's cost, -w of ``WindowLP``).  Newton step with the slack
-and multiplier steps eliminated:
+Every finite row bound and column bound is one inequality c = G y + o >= 0 (two per two-sided row; an equality as
+two, whose slacks go to 0 together: the infeasible start takes it in its stride), slack w > 0, multiplier z > 0;
+minimise cost . y (HiGHS's cost, -w of ``WindowLP``).  Newton step with the slack and multiplier steps eliminated:
 
     (G^T D G) dy = G^T z - cost + G^T (t / w - z - D r_p),   D = z / w,   r_p = c - w
     dw = G dy + r_p,   dz = t / w - z - D dw
 
 predictor t = 0, corrector t = sigma mu - dw_aff dz_aff with sigma = (mu_aff / mu)^3; steps 0.995 of the way to
 the boundary, w and z separately; stop when the residuals and the gap are below TOL (relative).  Each row of G
-reads <= 3 consecutive control points (a uniform quadratic B-spline), so G^T D G is pentadiagonal; it is formed by
-one ``bincount`` over each row's pairs of non-zeros.
+reads <= 3 consecutive control points (a uniform quadratic B-spline), so G^T D G is pentadiagonal.
 
-Measured in session 33 (one run): 15 iterations; the solution within 1.6e-8 of HiGHS's (|y| <= 2), objective
-4e-11 relative; numpy banded ~15 ms (~1 ms an iteration, ~30 numpy calls on arrays of 4,140-20,796 elements:
-overhead-bound), HiGHS ~7-10 ms.  A compiled kernel would do an iteration's ~100 kflop in ~0.05 ms.
+Measured in session 33: 15 iterations; the solution within 1.6e-8 of HiGHS's (|y| <= 2), objective 4e-11
+relative.  numpy ~1 ms an iteration (overhead-bound), 1.3-1.4x HiGHS's cold run; compiled ~0.2 ms an iteration on
+this machine (scatter-adds into the normal matrix and A^T u are chained through memory); HiGHS from the basis: 8
+iterations to its own vertex (within 1.2e-13), ~2.3 ms of which most is its fixed cost of a run.  See the README
+(Status, session 33) for what this means for the pipeline.
 
     python -m bench.lp_ipm_probe
 """
 
 from __future__ import annotations
 
+import ctypes
 import statistics
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import highspy
@@ -42,6 +48,8 @@ from numpy.typing import NDArray
 
 from bench._common import emit, env_info
 from geometry import examples
+from geometry import native as gnative
+from geometry.native import f64, ptr
 from solvers import lp
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
@@ -54,6 +62,8 @@ MAX_ITERATIONS = 80
 #: share of the way to the boundary of w and z
 STEP_SHARE = 0.995
 REPEATS = 7
+#: the compiled interior point (the same algorithm, a row's two bounds sharing its coefficients)
+C_SOURCE = Path(__file__).with_name("lp_ipm_probe.c")
 
 
 def capture() -> tuple[highspy.HighsLp, FloatArray]:
@@ -127,21 +137,16 @@ def _banded_solver(ab: FloatArray) -> Callable[[FloatArray], FloatArray]:
     return lambda rhs: np.asarray(sla.cho_solve_banded((factor, True), rhs), dtype=np.float64)
 
 
-def _dense_solver(M: FloatArray) -> Callable[[FloatArray], FloatArray]:
-    cf = sla.cho_factor(M)
-    return lambda rhs: np.asarray(sla.cho_solve(cf, rhs), dtype=np.float64)
-
-
 def _max_step(v: FloatArray, dv: FloatArray) -> float:
     neg = dv < 0.0
     return float(min(1.0, np.min(-v[neg] / dv[neg]))) if neg.any() else 1.0
 
 
-def mehrotra(G: sp.csr_matrix, o: FloatArray, cost: FloatArray, banded: bool) -> tuple[FloatArray, int]:
+def mehrotra(G: sp.csr_matrix, o: FloatArray, cost: FloatArray) -> tuple[FloatArray, int]:
     """min cost . y s.t. G y + o >= 0: (y, iterations); raises RuntimeError without convergence."""
     m, n = G.shape
     Gt = G.T.tocsr()
-    normal = BandedNormal(G) if banded else None
+    normal = BandedNormal(G)
     y = np.zeros(n)
     w = np.maximum(G @ y + o, 1.0)
     z = np.ones(m)
@@ -154,10 +159,7 @@ def mehrotra(G: sp.csr_matrix, o: FloatArray, cost: FloatArray, banded: bool) ->
                 and mu * m < TOL * (1.0 + abs(float(cost @ y)))):
             return y, it
         D = z / w
-        if normal is not None:
-            solve = _banded_solver(normal(D))
-        else:
-            solve = _dense_solver((Gt @ sp.diags(D) @ G).toarray())
+        solve = _banded_solver(normal(D))
         base = Gtz - cost
 
         def direction(t: FloatArray, w: FloatArray = w, z: FloatArray = z, D: FloatArray = D, rp: FloatArray = rp,
@@ -175,7 +177,94 @@ def mehrotra(G: sp.csr_matrix, o: FloatArray, cost: FloatArray, banded: bool) ->
     raise RuntimeError(f"no convergence in {MAX_ITERATIONS} iterations")
 
 
-def _highs_cold(model: highspy.HighsLp) -> tuple[float, int]:
+# ----- compiled (``lp_ipm_probe.c``), and HiGHS from the basis its solution points to ------------------------------
+
+
+def _declare(lib: ctypes.CDLL) -> None:
+    i, d, P = ctypes.c_int, ctypes.c_double, gnative.P
+    lib.fs_lp_ipm.restype = ctypes.c_int
+    lib.fs_lp_ipm.argtypes = [i, i, P, P, P, P, P, P, P, P, i, d, i, d, P, P, P, P, P]
+
+
+def _bandwidth(A: sp.csr_matrix) -> int:
+    """The largest spread of the columns within one row of A (the normal matrix's half-bandwidth)."""
+    full = np.diff(A.indptr) > 0
+    if not full.any():
+        return 0
+    starts = A.indptr[:-1][full]
+    return int(np.max(np.maximum.reduceat(A.indices, starts) - np.minimum.reduceat(A.indices, starts)))
+
+
+@dataclass(frozen=True)
+class Activity:
+    """The compiled interior point's result: y (n,), its iterations, and per row and column the largest z / w over
+    its bounds (-1 without a finite bound) and whether that bound is the upper one."""
+
+    y: FloatArray
+    iterations: int
+    ratio_row: FloatArray
+    upper_row: NDArray[np.bool_]
+    ratio_col: FloatArray
+    upper_col: NDArray[np.bool_]
+
+
+def compiled(A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, col_lo: FloatArray, col_hi: FloatArray,
+             cost: FloatArray, tol: float = TOL) -> Activity:
+    """min cost . y s.t. lo <= A y <= hi, col_lo <= y <= col_hi (infinite bounds as +-inf), compiled; A's columns
+    in their order (banded: the flower's rows read <= 3 consecutive control points)."""
+    lib = gnative.load(C_SOURCE, "bench_lp_ipm_probe", _declare)
+    if lib is None:
+        raise RuntimeError("no C compiler (or FEEDSCHED_NO_COMPILE): the compiled interior point is not available")
+    A = A.sorted_indices()  # (the kernel reads each row's columns in ascending order)
+    nr, n = A.shape
+    indptr, indices, val = A.indptr.astype(np.int32), A.indices.astype(np.int32), f64(A.data)
+    lo_c, hi_c, clo_c, chi_c, cost_c = f64(lo), f64(hi), f64(col_lo), f64(col_hi), f64(cost)
+    y, rr, rc = np.empty(n), np.empty(nr), np.empty(n)
+    ur, uc = np.empty(nr, dtype=np.int32), np.empty(n, dtype=np.int32)
+    its = lib.fs_lp_ipm(nr, n, ptr(indptr), ptr(indices), ptr(val), ptr(lo_c), ptr(hi_c), ptr(clo_c), ptr(chi_c),
+                        ptr(cost_c), _bandwidth(A), tol, MAX_ITERATIONS, STEP_SHARE, ptr(y), ptr(rr), ptr(ur), ptr(rc),
+                        ptr(uc))
+    if its < 0:
+        raise RuntimeError(f"the compiled interior point stopped with status {its}")
+    return Activity(y, int(its), rr, ur.astype(bool), rc, uc.astype(bool))
+
+
+def basis(act: Activity) -> highspy.HighsBasis:
+    """HiGHS's basis with the n rows and columns of the largest z / w nonbasic (each at the bound where it is
+    largest: active at the optimum), the others basic."""
+    n, nr = act.ratio_col.size, act.ratio_row.size
+    ratio = np.concatenate([act.ratio_col, act.ratio_row])
+    chosen = np.argpartition(-ratio, n - 1)[:n]
+    upper = np.concatenate([act.upper_col, act.upper_row])[chosen]
+    S = highspy.HighsBasisStatus
+    cols, rows = [S.kBasic] * n, [S.kBasic] * nr
+    for e, u in zip(chosen.tolist(), upper.tolist(), strict=True):
+        if e < n:
+            cols[e] = S.kUpper if u else S.kLower
+        else:
+            rows[e - n] = S.kUpper if u else S.kLower
+    out = highspy.HighsBasis()
+    out.col_status, out.row_status = cols, rows
+    out.valid = True
+    return out
+
+
+def _bounds(model: highspy.HighsLp) -> tuple[sp.csr_matrix, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The model's rows (CSR) and bounds, HiGHS's infinity as +-inf."""
+    a = model.a_matrix_
+    A = sp.csr_matrix((np.asarray(a.value_), np.asarray(a.index_), np.asarray(a.start_)),
+                      shape=(model.num_row_, model.num_col_))
+
+    def finite(x: Any) -> FloatArray:
+        x = np.asarray(x, dtype=np.float64)
+        return np.where(x >= highspy.kHighsInf, np.inf, np.where(x <= -highspy.kHighsInf, -np.inf, x))
+
+    return (A, finite(model.row_lower_), finite(model.row_upper_), finite(model.col_lower_),
+            finite(model.col_upper_))
+
+
+def _highs(model: highspy.HighsLp, start: highspy.HighsBasis | None = None) -> tuple[float, int, FloatArray]:
+    """HiGHS as ``WindowLP`` sets it up, from its slack basis or ``start``: (seconds, iterations, solution)."""
     h = highspy.Highs()  # type: ignore[no-untyped-call]
     h.setOptionValue("output_flag", False)
     h.setOptionValue("presolve", lp.PRESOLVE)
@@ -183,31 +272,49 @@ def _highs_cold(model: highspy.HighsLp) -> tuple[float, int]:
     h.setOptionValue("simplex_scale_strategy", lp.SIMPLEX_SCALE)
     h.passModel(model)
     t0 = time.perf_counter()
+    if start is not None:
+        h.setBasis(start)
     h.run()
-    return time.perf_counter() - t0, int(h.getInfo().simplex_iteration_count)
+    return (time.perf_counter() - t0, int(h.getInfo().simplex_iteration_count),
+            np.asarray(h.getSolution().col_value, dtype=np.float64))
 
 
 def main() -> dict[str, Any]:
     model, y_highs = capture()
     G, o, cost = inequalities(model)
+    A, lo, hi, col_lo, col_hi = _bounds(model)
     out: dict[str, Any] = {"bench": "lp_ipm_probe", "env": {**env_info(), "repeats": REPEATS}, "rows": model.num_row_,
-                           "columns": model.num_col_, "inequalities": int(G.shape[0])}
-    times: dict[str, list[float]] = {"highs": [], "ipm_banded": [], "ipm_dense": []}
+                           "columns": model.num_col_, "inequalities": int(G.shape[0]), "bandwidth": _bandwidth(A),
+                           "max_abs_y": float(np.max(np.abs(y_highs)))}
+    keys = ("highs_cold", "ipm_numpy", "ipm_compiled", "basis", "highs_from_basis")
+    times: dict[str, list[float]] = {k: [] for k in keys}
     for _ in range(REPEATS):
-        t, its = _highs_cold(model)
-        times["highs"].append(t)
-        out["highs_iterations"] = its
-        for key, banded in (("ipm_banded", True), ("ipm_dense", False)):
-            t0 = time.perf_counter()
-            y, its = mehrotra(G, o, cost, banded)
-            times[key].append(time.perf_counter() - t0)
-            out[f"{key}_iterations"] = its
-            out[f"{key}_max_abs_diff"] = float(np.max(np.abs(y - y_highs)))
-            out[f"{key}_objective_rel"] = float((cost @ y - cost @ y_highs) / abs(cost @ y_highs))
-    out["bandwidth"] = BandedNormal(G).bw
-    out["max_abs_y"] = float(np.max(np.abs(y_highs)))
-    out["median_ms"] = {k: 1e3 * statistics.median(v) for k, v in times.items()}
-    out["ratio_banded_over_highs"] = out["median_ms"]["ipm_banded"] / out["median_ms"]["highs"]
+        t, its, _ = _highs(model)
+        times["highs_cold"].append(t)
+        out["highs_cold_iterations"] = its
+        t0 = time.perf_counter()
+        y, its = mehrotra(G, o, cost)
+        times["ipm_numpy"].append(time.perf_counter() - t0)
+        out["ipm_numpy_iterations"] = its
+        out["ipm_numpy_max_abs_diff"] = float(np.max(np.abs(y - y_highs)))
+        out["ipm_numpy_objective_rel"] = float((cost @ y - cost @ y_highs) / abs(cost @ y_highs))
+        t0 = time.perf_counter()
+        act = compiled(A, lo, hi, col_lo, col_hi, cost)
+        t1 = time.perf_counter()
+        start = basis(act)
+        times["ipm_compiled"].append(t1 - t0)
+        times["basis"].append(time.perf_counter() - t1)
+        out["ipm_compiled_iterations"] = act.iterations
+        out["ipm_compiled_max_abs_diff"] = float(np.max(np.abs(act.y - y_highs)))
+        t, its, x = _highs(model, start)
+        times["highs_from_basis"].append(t)
+        out["highs_from_basis_iterations"] = its
+        out["highs_from_basis_max_abs_diff"] = float(np.max(np.abs(x - y_highs)))
+    med = {k: 1e3 * statistics.median(v) for k, v in times.items()}
+    out["median_ms"] = med
+    out["ratio_numpy_over_highs"] = med["ipm_numpy"] / med["highs_cold"]
+    started = med["ipm_compiled"] + med["basis"] + med["highs_from_basis"]
+    out["ratio_ipm_start_over_highs"] = started / med["highs_cold"]
     return out
 
 
