@@ -22,10 +22,18 @@ the boundary, w and z separately; stop when the residuals and the gap are below 
 reads <= 3 consecutive control points (a uniform quadratic B-spline), so G^T D G is pentadiagonal.
 
 Measured in session 33: 15 iterations; the solution within 1.6e-8 of HiGHS's (|y| <= 2), objective 4e-11
-relative.  numpy ~1 ms an iteration (overhead-bound), 1.3-1.4x HiGHS's cold run; compiled ~0.2 ms an iteration on
-this machine (scatter-adds into the normal matrix and A^T u are chained through memory); HiGHS from the basis: 8
-iterations to its own vertex (within 1.2e-13), ~2.3 ms of which most is its fixed cost of a run.  See the README
-(Status, session 33) for what this means for the pipeline.
+relative.  numpy ~1 ms an iteration (overhead-bound), 1.3-1.4x HiGHS's cold run; compiled ~0.15 ms an iteration on
+the 2-core machine (its loops over the ~4,000 bounds fused; the scatter-adds into the normal matrix and A^T u are
+chained through memory); HiGHS from the basis: 8 iterations to its own vertex (within 1.2e-13), ~2-3 ms, most of it
+a run's fixed cost (the basis's factorisation).
+
+In the pipeline (branch ``lp-start``, not merged: ``solvers/lpstart.py``, ``lp.LP_START`` for models of >= 100
+columns, the rest shapes' columns placed by reverse Cuthill-McKee): flower v + a 0.91x, with jerk 0.96x (in-process
+pairs), the same samples.  Not safe as it is: on random bench seeds 0-699 (lp) four windows' guessed bases left
+HiGHS at status NotSet ("excessive primal values"; a retry from the slack basis fixes them), and seed 503's guessed
+basis was singular (its 463 x 463 kernel, rows nonbasic x columns basic, cond 1.8e56) and **HiGHS 1.15.1
+segfaulted** on it.  The nonbasic rows need a rank-revealing choice (e.g. greedy by z / w, keeping a row only if it
+is independent of those kept: a sparse LU of the banded kernel) before it can land.
 
     python -m bench.lp_ipm_probe
 """
@@ -215,7 +223,6 @@ def compiled(A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, col_lo: FloatArra
     lib = gnative.load(C_SOURCE, "bench_lp_ipm_probe", _declare)
     if lib is None:
         raise RuntimeError("no C compiler (or FEEDSCHED_NO_COMPILE): the compiled interior point is not available")
-    A = A.sorted_indices()  # (the kernel reads each row's columns in ascending order)
     nr, n = A.shape
     indptr, indices, val = A.indptr.astype(np.int32), A.indices.astype(np.int32), f64(A.data)
     lo_c, hi_c, clo_c, chi_c, cost_c = f64(lo), f64(hi), f64(col_lo), f64(col_hi), f64(cost)
