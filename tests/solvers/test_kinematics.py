@@ -34,7 +34,7 @@ def test_row_reductions_at_the_edges(shape: tuple[int, int]) -> None:
     """No rows, and one column (a copy: the result is not a view of X)."""
     X = np.arange(float(np.prod(shape))).reshape(shape)
     out = kinematics.row_max(X)
-    np.testing.assert_array_equal(out, np.max(X, axis=1) if shape[0] else np.zeros(0))
+    np.testing.assert_array_equal(out, np.max(X, axis=1))
     out[...] = -1.0
     assert np.all(X >= 0.0)
 
