@@ -32,8 +32,10 @@ columns, the rest shapes' columns placed by reverse Cuthill-McKee): flower v + a
 pairs), the same samples.  Not safe as it is: on random bench seeds 0-699 (lp) four windows' guessed bases left
 HiGHS at status NotSet ("excessive primal values"; a retry from the slack basis fixes them), and seed 503's guessed
 basis was singular (its 463 x 463 kernel, rows nonbasic x columns basic, cond 1.8e56) and **HiGHS 1.15.1
-segfaulted** on it.  The nonbasic rows need a rank-revealing choice (e.g. greedy by z / w, keeping a row only if it
-is independent of those kept: a sparse LU of the banded kernel) before it can land.
+segfaulted** on it.  Such bases are singular as a rule (the flower's 179 x 179 kernel too: a degenerate vertex has
+more active rows than columns in places); HiGHS mends them, so a singularity check rejects them all.  The nonbasic
+rows need a rank-revealing choice (greedy by z / w, a row kept only if independent of those kept) before it can
+land.
 
     python -m bench.lp_ipm_probe
 """
