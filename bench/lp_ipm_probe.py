@@ -33,9 +33,10 @@ pairs), the same samples.  Not safe as it is: on random bench seeds 0-699 (lp) f
 HiGHS at status NotSet ("excessive primal values"; a retry from the slack basis fixes them), and seed 503's guessed
 basis was singular (its 463 x 463 kernel, rows nonbasic x columns basic, cond 1.8e56) and **HiGHS 1.15.1
 segfaulted** on it.  Such bases are singular as a rule (the flower's 179 x 179 kernel too: a degenerate vertex has
-more active rows than columns in places); HiGHS mends them, so a singularity check rejects them all.  The nonbasic
-rows need a rank-revealing choice (greedy by z / w, a row kept only if independent of those kept) before it can
-land.
+more active rows than columns in places); HiGHS mends them, so a singularity check rejects them all.  A
+rank-revealing choice (branch ``lp-start`` f524bae: greedy by z / w, a row kept only if independent of those kept)
+makes the flower's basis optimal as it is (0 iterations), but HiGHS still segfaulted from such bases on seeds 96
+and ~397, with highspy 1.15.1 and 1.16.0 alike: not safe in the solving process.
 
     python -m bench.lp_ipm_probe
 """
