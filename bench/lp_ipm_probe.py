@@ -98,22 +98,18 @@ def capture() -> tuple[highspy.HighsLp, FloatArray]:
     return seen[0], seen[1]
 
 
-def inequalities(model: highspy.HighsLp) -> tuple[sp.csr_matrix, FloatArray, FloatArray]:
-    """(G, o, cost): c = G y + o >= 0, one row per finite bound of a row or a column (an equality, lo = hi, as
-    two: their slacks go to 0 together, which the infeasible start takes in its stride on this model)."""
-    n, m = model.num_col_, model.num_row_
-    a = model.a_matrix_
-    if a.format_ != highspy.MatrixFormat.kRowwise:
-        raise ValueError("expected HiGHS's model row-wise, as WindowLP passes it")
-    A = sp.csr_matrix((np.asarray(a.value_), np.asarray(a.index_), np.asarray(a.start_)), shape=(m, n))
-    I = sp.identity(n, format="csr")
+def inequalities(A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, col_lo: FloatArray,
+                 col_hi: FloatArray) -> tuple[sp.csr_matrix, FloatArray]:
+    """(G, o): c = G y + o >= 0, one row per finite bound of a row of A or a column (an equality, lo = hi, as two:
+    their slacks go to 0 together, which the infeasible start takes in its stride on this model)."""
+    I = sp.identity(A.shape[1], format="csr")
     blocks, offs = [], []
-    for M, lo, hi in ((A, model.row_lower_, model.row_upper_), (I, model.col_lower_, model.col_upper_)):
-        for b, sgn in ((np.asarray(lo), 1.0), (np.asarray(hi), -1.0)):
-            f = np.isfinite(b) & (np.abs(b) < highspy.kHighsInf)
+    for M, lower, upper in ((A, lo, hi), (I, col_lo, col_hi)):
+        for b, sgn in ((lower, 1.0), (upper, -1.0)):
+            f = np.isfinite(b)
             blocks.append(sgn * M[f])
             offs.append(-sgn * b[f])
-    return sp.vstack(blocks, format="csr"), np.concatenate(offs), np.asarray(model.col_cost_, dtype=np.float64)
+    return sp.vstack(blocks, format="csr"), np.concatenate(offs)
 
 
 class BandedNormal:
@@ -262,6 +258,8 @@ def basis(act: Activity) -> highspy.HighsBasis:
 def _bounds(model: highspy.HighsLp) -> tuple[sp.csr_matrix, FloatArray, FloatArray, FloatArray, FloatArray]:
     """The model's rows (CSR) and bounds, HiGHS's infinity as +-inf."""
     a = model.a_matrix_
+    if a.format_ != highspy.MatrixFormat.kRowwise:
+        raise ValueError("expected HiGHS's model row-wise, as WindowLP passes it")
     A = sp.csr_matrix((np.asarray(a.value_), np.asarray(a.index_), np.asarray(a.start_)),
                       shape=(model.num_row_, model.num_col_))
 
@@ -275,11 +273,7 @@ def _bounds(model: highspy.HighsLp) -> tuple[sp.csr_matrix, FloatArray, FloatArr
 
 def _highs(model: highspy.HighsLp, start: highspy.HighsBasis | None = None) -> tuple[float, int, FloatArray]:
     """HiGHS as ``WindowLP`` sets it up, from its slack basis or ``start``: (seconds, iterations, solution)."""
-    h = highspy.Highs()  # type: ignore[no-untyped-call]
-    h.setOptionValue("output_flag", False)
-    h.setOptionValue("presolve", lp.PRESOLVE)
-    h.setOptionValue("simplex_dual_edge_weight_strategy", lp.DUAL_EDGE_WEIGHT)
-    h.setOptionValue("simplex_scale_strategy", lp.SIMPLEX_SCALE)
+    h = lp.new_highs()
     h.passModel(model)
     t0 = time.perf_counter()
     if start is not None:
@@ -291,8 +285,9 @@ def _highs(model: highspy.HighsLp, start: highspy.HighsBasis | None = None) -> t
 
 def main() -> dict[str, Any]:
     model, y_highs = capture()
-    G, o, cost = inequalities(model)
     A, lo, hi, col_lo, col_hi = _bounds(model)
+    cost = np.asarray(model.col_cost_, dtype=np.float64)
+    G, o = inequalities(A, lo, hi, col_lo, col_hi)
     out: dict[str, Any] = {"bench": "lp_ipm_probe", "env": {**env_info(), "repeats": REPEATS}, "rows": model.num_row_,
                            "columns": model.num_col_, "inequalities": int(G.shape[0]), "bandwidth": _bandwidth(A),
                            "max_abs_y": float(np.max(np.abs(y_highs)))}
