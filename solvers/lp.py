@@ -184,8 +184,8 @@ HELD_ROW_MARGIN = 1e-9
 #: 3.0144 s with two, 3.0136 s with three.  One: with two, bench seeds 0-59 (lp+nlp) had 23 NLP fallbacks
 #: instead of 3 ('Infeasible_Problem_Detected', also with REST_DRIVE_SHARE 0.9: the LP's state at knot 1,
 #: inside its limits, is one the NLP's f spline, f'' constant per interval, cannot continue from after a
-#: steep ramp; README "The rest zones", branch restshift) and seed 54 took 1.74 x the motion time; with
-#: one, seeds 10, 13, 15, 51, 54 have no fallback and are as fast or faster than without the rows.
+#: steep ramp; docs/benchmark-history.md "The rest zones", branch restshift) and seed 54 took 1.74 x the
+#: motion time; with one, seeds 10, 13, 15, 51, 54 have no fallback and are as fast or faster than without the rows.
 REST_DRIVE_INTERVALS = 1
 #: Share of emax the LP's rows next to a rest end give the servo error (lp+nlp, ``WindowLP._rest_drive_rows``).
 REST_DRIVE_SHARE = 0.99

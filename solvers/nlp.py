@@ -182,8 +182,8 @@ MAX_SOLVE_CPU_S = 5.0
 #: first (last) window with the rest interval's q as the quadratic from rest to the f spline's state at the
 #: inner knot (``_Shape._rest_rows``), so that state is the NLP's to choose instead of the LP's (whose rest
 #: interval holds the drive's rows only conservatively, and whose state the f spline may not be able to
-#: continue: README "The rest zones").  If such a window fails, the chain is solved again from (to) the
-#: LP's state at the inner knot, as without.
+#: continue: docs/benchmark-history.md "The rest zones").  If such a window fails, the chain is solved again
+#: from (to) the LP's state at the inner knot, as without.
 REST_ENDS = True
 #: ... and gives a rest interval's q one more degree of freedom: q = the quadratic from rest + g b, with
 #: b = tau (1 - tau)^2 (``bspline.rest_bump``: 0 at both ends, slope 0 at the inner knot) and g = p_rest f_in,

@@ -785,7 +785,7 @@ def test_curvature_jump_at_a_tight_turn_couples_only_the_points_it_can_reach(
     acceleration limits add over 3 Ts, and a break whose share stays within ``lp.STEP_CONST_SHARE`` is
     charged it as a constant: 6.71 s with either, and the samples pass the independent checker.  (Two
     dips at the floor remain, 0.24 and 0.62 s, where the cap at the apex holds the quadratic's
-    control points on a 76 um knot spacing: see the README.)"""
+    control points on a 76 um knot spacing: see docs/history.md, session 26.)"""
     monkeypatch.setattr(lp, "DUAL_EDGE_WEIGHT", edge_weight)
     case = gen.case(894, "bench")
     sch = schedule(case.toolpath(), case.lp_machine, Options(method="lp", sample_period=TS))
