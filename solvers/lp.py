@@ -139,19 +139,30 @@ PRESOLVE = "off"
 #: 0.9985 x against the default (seeds 550 and 566 0.45 x and 0.54 x, 663 +2.9 %, the rest within 2.4 %), lp+nlp
 #: within 0.5 % in all 200 compared.  Dantzig (0) was not faster (session 24).
 DUAL_EDGE_WEIGHT = 1
-#: HiGHS's simplex scaling (``simplex_scale_strategy``; 2, equilibration, is HiGHS's default).  Off (0) was
-#: tried in session 29 and not kept: HiGHS time -10 to -30 % on a flower loop and -29 / -44 % on the 18.35 m
-#: path (with jerk / v+a), and random bench seeds 0-399 (bench profile, both methods) all passed, but method lp's
-#: motion time over seeds 0-80 was never shorter and up to 2.7 % longer (seeds 46, 25, 54: +2.7, +2.3, +1.6 %;
-#: geometric mean +0.08 %) for 0.93x the CPU.  ``python -m bench.lp_switch --switch no_scale`` compares them.
-SIMPLEX_SCALE = 2
+#: HiGHS's simplex scaling (``simplex_scale_strategy``): off (0) since session 34; 2, equilibration, is HiGHS's
+#: default and what a window that does not reach optimality is solved with once more (``_highs_run``).  The rows
+#: reach HiGHS scaled already (each by its largest coefficient, ``_Rows.build``; each column by its reach,
+#: ``_col_scale``), and HiGHS's own equilibration on top costs simplex iterations: flower v+a 511 -> 391, with
+#: jerk 616 -> 460.  Session 29 tried it and did not keep it (motion over bench seeds 0-80, lp: never shorter, up
+#: to +2.7 %, geometric mean +0.08 %).  Session 34, bench seeds 0-399 but 388, lp, in one process each: 0.87x the
+#: iterations, 0.90x the CPU; motion the same to 1e-6 in 355 of 398, 12 shorter (307 0.72x, 15 0.94x), 5 longer
+#: (276 1.81x, 302 +6.7 %, 340 +4.6 %, 25 +2.7 %), geometric mean +0.06 %, the total 1.00001x; the outliers go
+#: both ways, each a different vertex sending the rest-shape fallback or a sample repair down another path (seed
+#: 331's 0.45x is its cusp missed by the samples, see the README).  ``python -m bench.lp_switch --switch no_scale``
+#: compares the two.
+SIMPLEX_SCALE = 0
+#: ... and the scaling of the second try of a window that did not reach optimality (with the other presolve).
+SIMPLEX_SCALE_RETRY = 2
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.
 COL_SCALE_MIN_BASIS = 0.1
 COL_SCALE_FLOOR = 1e-12
 #: Each free control point's upper bound is COL_HI_FACTOR x the one its velocity rows imply, from the points where its
-#: basis function is at least COL_HI_MIN_BASIS (``WindowLP._implied_col_hi``).
-COL_HI_FACTOR = 2.0
+#: basis function is at least COL_HI_MIN_BASIS (``WindowLP._implied_col_hi``).  2 until session 34 (a margin, not
+#: needed: the rows imply the bound itself, and the floors stay below it, ``_col_scale`` taking its minimum over a
+#: superset of the points); at 1 the dual simplex starts nearer the optimum, flower v+a 391 -> 365 iterations, with
+#: jerk 460 -> 438, the same motion.
+COL_HI_FACTOR = 1.0
 COL_HI_MIN_BASIS = 0.25
 #: ... but none that is over this in the solver's scaled variables (``_col_scale``): a column next to a cusp's rest
 #: end, its scale ~1e-12 of Q, got a bound of 6e12 there, and HiGHS stopped with kSolveError.
@@ -1820,12 +1831,13 @@ class WindowLP:
     def _highs_run(self, h: highspy.Highs) -> FloatArray:
         self._timed_run(h)
         status = h.getModelStatus()
-        # Not optimal: once more with the other presolve setting, cold; but an infeasible model with a lower floor
-        # still to try goes to it (``solve``): a short piece's floors are infeasible next to its rest ends, and
-        # proving it twice took 4 of a 2.8 mm line's 5 solves
+        # Not optimal: once more with the other presolve setting and SIMPLEX_SCALE_RETRY, cold; but an infeasible
+        # model with a lower floor still to try goes to it (``solve``): a short piece's floors are infeasible next
+        # to its rest ends, and proving it twice took 4 of a 2.8 mm line's 5 solves
         infeasible = status == highspy.HighsModelStatus.kInfeasible
         if status != highspy.HighsModelStatus.kOptimal and not (infeasible and self.fallback_left):
             h.setOptionValue("presolve", "on" if PRESOLVE == "off" else "off")
+            h.setOptionValue("simplex_scale_strategy", SIMPLEX_SCALE_RETRY)
             h.clearSolver()
             self._timed_run(h)
             status = h.getModelStatus()
