@@ -18,6 +18,7 @@ follow from the quotient rule (Piegl & Tiller eq. 4.8):
 from __future__ import annotations
 
 import ctypes
+import math
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -49,6 +50,12 @@ SHARP_TURN_CUT_MM = 1e-4
 SHARP_TURN_CUT_MAX_MM = 4e-4
 #: Samples per knot span in the search for sharp turns.
 SHARP_TURN_SAMPLES = 16
+#: An interval between those samples whose tangent turns by more than this (rad) is searched for an apex in
+#: any case, even where the curvature at its ends could explain the turn.  Bench seed 866: a 176 degree turn
+#: of 0.2 um radius inside a knot span of 0.29 mm, whose 16 samples put 166 degrees between two points of
+#: radius 20 um: 2 chord x max kappa = 14.6 rad there, over the 2.9 rad turn, so it was not searched, and
+#: the LP, verifying limits only at its points, passed the cusp at speed (sampled jerk 24.8 x, a 422).
+SHARP_TURN_SEARCH_RAD = math.radians(30.0)
 #: Knot spans searched for sharp turns at once (bounds the temporaries of a long segment).
 SHARP_TURN_CHUNK = 4096
 
@@ -255,8 +262,9 @@ class NurbsSegment:
         whose tangent turns by more than ``tol_rad`` is searched for an apex if the turn is
         concentrated: more than twice what the curvature kappa at its ends explains (turn > 2 chord
         max kappa: the curvature peaks inside), or an end has a radius under SHARP_TURN_RADIUS_MM
-        (the apex is on a sample).  The search keeps the subinterval turning most, eight at a
-        time, down to a chord of 1e-3 x SHARP_TURN_CUT_MM: its midpoint is the apex, and a radius
+        (the apex is on a sample), or it turns by more than SHARP_TURN_SEARCH_RAD (a peak the end
+        curvature hides).  The search keeps the subinterval turning most, eight at a time, down to
+        a chord of 1e-3 x SHARP_TURN_CUT_MM: its midpoint is the apex, and a radius
         there of SHARP_TURN_RADIUS_MM or more is not a sharp turn.  Turns whose cut would reach the
         segment's ends are left alone, and so is a turn whose tangents at the cut differ by no
         more than ``tol_rad``."""
@@ -276,7 +284,7 @@ class NurbsSegment:
                 chord = np.linalg.norm(np.diff(D[0], axis=1), axis=2)
                 k_end = np.fmax(kappa[:, :-1], kappa[:, 1:])
                 flag = (turn > tol_rad) & ((turn > 2.0 * chord * k_end) | (k_end * SHARP_TURN_RADIUS_MM > 1.0)
-                                           | ~np.isfinite(k_end))
+                                           | ~np.isfinite(k_end) | (turn > SHARP_TURN_SEARCH_RAD))
             for i, j in zip(*np.nonzero(flag), strict=True):
                 cut = self._cut_around(float(uu[i, j]), float(uu[i, j + 1]), tol_rad)
                 if cut is not None and (not out or cut[0] > out[-1][1]):

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from geometry import examples
+from geometry import examples, nurbs
 from geometry.nurbs import SHARP_TURN_CUT_MM, NurbsSegment
 from geometry.toolpath import CORNER_TOL_DEG, Toolpath
 
@@ -92,3 +92,51 @@ def test_corner_tolerance_bounds_the_cut() -> None:
     """A near-cusp turning less than the corner tolerance is left alone (passed, not cut)."""
     seg = _parabola(1e-3, 1.0)
     assert seg.sharp_turns(math.radians(179.99)).shape == (0, 2)
+
+
+def _hidden_apex(x1: float) -> tuple[NurbsSegment, float]:
+    """A quadratic Bezier on the needle parabola y = (kappa0 / 2) x^2 (a = 1 mm, h = kappa0 / 2 mm, apex radius
+    1 / kappa0 = 0.2 um) from x = -1 to x = c with c = 1 - 2 x1: x(t) = -1 + (1 + c) t is linear in t, so the
+    sample t = 8 / 16 of ``sharp_turns`` lies x1 before the apex, on its flank (radius ~20 um for x1 = 0.9 um),
+    and the next, t = 9 / 16, 0.12 mm after it, where the tangent is nearly vertical: ~167 degrees between two
+    samples whose chord (~38 mm) times the flank's curvature explains any turn.  (P1 is where the end tangents
+    meet.)  Returns the segment and kappa0."""
+    kappa0 = 5000.0
+    h = kappa0 / 2.0
+    c = 1.0 - 2.0 * x1
+    P = np.array([[-1.0, h, 0.0], [(c - 1.0) / 2.0, -h * c, 0.0], [c, h * c * c, 0.0]])
+    return NurbsSegment.create(2, [0.0, 0.0, 0.0, 1.0, 1.0, 1.0], P, [1.0, 1.0, 1.0]), kappa0
+
+
+def test_an_apex_hidden_between_samples_is_found(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Bench seed 866's turn (176 degrees, 0.2 um radius) lay between two of the search's samples whose end
+    curvature explained the turn, so it was not searched, and the schedule passed it at speed.  An interval
+    turning by more than SHARP_TURN_SEARCH_RAD is searched anyway: the apex is found at the origin, to the
+    search's accuracy, and the cut is SHARP_TURN_CUT_MM (chord) from it on each side."""
+    x1 = 9e-4
+    seg, kappa0 = _hidden_apex(x1)
+    # the closed form: the two samples around the apex, their radii and the turn between them
+    t = np.array([8.0, 9.0]) / 16.0
+    x = -1.0 + (2.0 - 2.0 * x1) * t
+    assert x[0] == pytest.approx(-x1) and x[1] > 0.1
+    radius = (1.0 + (kappa0 * x) ** 2) ** 1.5 / kappa0
+    assert min(radius) > 10.0 * nurbs.SHARP_TURN_RADIUS_MM  # (both over 10 um: neither end is sharp)
+    turn = math.pi - math.atan(1.0 / (kappa0 * abs(x[0]))) - math.atan(1.0 / (kappa0 * x[1]))
+    assert turn > nurbs.SHARP_TURN_SEARCH_RAD
+    cuts = seg.sharp_turns(math.radians(CORNER_TOL_DEG))
+    assert cuts.shape == (1, 2)
+    ends = seg.points(cuts[0])
+    # the cut's chord from the apex (the origin): SHARP_TURN_CUT_MM, doubled while the radius at the cut point
+    # is under SHARP_TURN_RADIUS_MM (closed form: x^2 + (kappa0 x^2 / 2)^2 = chord^2 on the parabola)
+    chord = SHARP_TURN_CUT_MM
+    while chord < nurbs.SHARP_TURN_CUT_MAX_MM:
+        xc = math.sqrt((math.sqrt(1.0 + (kappa0 * chord) ** 2) - 1.0) * 2.0 / kappa0**2)
+        if (1.0 + (kappa0 * xc) ** 2) ** 1.5 / kappa0 >= nurbs.SHARP_TURN_RADIUS_MM:
+            break
+        chord *= 2.0
+    dist = np.linalg.norm(ends, axis=1)
+    assert np.all(np.abs(dist - chord) <= 2.0 * APEX_SHARE * chord), (dist, chord)
+    assert ends[0, 0] < 0.0 < ends[1, 0]  # (one on each side of the apex)
+    # without the search by angle the apex stays hidden (what the test guards)
+    monkeypatch.setattr(nurbs, "SHARP_TURN_SEARCH_RAD", math.inf)
+    assert seg.sharp_turns(math.radians(CORNER_TOL_DEG)).shape == (0, 2)

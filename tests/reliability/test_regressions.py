@@ -413,6 +413,7 @@ def test_corner_rest_step_is_shared_under_lp_too() -> None:
 @pytest.mark.parametrize(("seed", "method", "turn_deg"), [
     (1731, "lp", 150.0), (1731, "lp+nlp", 150.0), (1951, "lp", 150.0), (1951, "lp+nlp", 150.0),
     (1978, "lp+nlp", 13.0), (2053, "lp+nlp", 13.0), (2285, "lp", 11.0), (3010, "lp", 18.0),
+    (866, "lp", 100.0), (866, "lp+nlp", 100.0),
 ])
 def test_turn_of_nanometre_radius_inside_a_segment_is_a_corner(seed: int, method: str, turn_deg: float) -> None:
     """Bench seeds 1731 and 1951: a turn inside a segment sharper than any knot spacing resolves.
@@ -439,7 +440,12 @@ def test_turn_of_nanometre_radius_inside_a_segment_is_a_corner(seed: int, method
     refinement.  The cut now grows (doubling, up to SHARP_TURN_CUT_MAX_MM = 0.4 um) while the radius
     at the cut point is under SHARP_TURN_RADIUS_MM: a 67 degree corner, both methods pass.
     Now such a turn is cut out (``NurbsSegment.cut_sharp_turns``: 0.1 um chord each side of the apex)
-    and the tangent break left is a corner; and the stall test takes the peak of the feed in use."""
+    and the tangent break left is a corner; and the stall test takes the peak of the feed in use.
+    866 (lp failed in session 34's random bench: sampled jerk 24.8 x after 2 repair rounds; lp+nlp passed
+    in 54.6 s of motion): a 176 degree turn of 0.2 um radius at s = 325.92 mm that the search did not look
+    into, its 16 samples a knot span putting 166 degrees between two points of 20 um radius, which explained
+    the turn (``geometry.nurbs.SHARP_TURN_SEARCH_RAD``).  Cut into a corner (110 degrees between the cut
+    points, 0.4 um from the apex): lp 0.52 s, lp+nlp 0.56 s of motion."""
     case = gen.case(seed, "bench")
     out = harness.run(case, method)
     assert out.ok, out.describe()
