@@ -144,12 +144,11 @@ DUAL_EDGE_WEIGHT = 1
 #: reach HiGHS scaled already (each by its largest coefficient, ``_Rows.build``; each column by its reach,
 #: ``_col_scale``), and HiGHS's own equilibration on top costs simplex iterations: flower v+a 511 -> 391, with
 #: jerk 616 -> 460.  Session 29 tried it and did not keep it (motion over bench seeds 0-80, lp: never shorter, up
-#: to +2.7 %, geometric mean +0.08 %).  Session 34, bench seeds 0-399 but 388, lp, in one process each: 0.87x the
-#: iterations, 0.90x the CPU; motion the same to 1e-6 in 355 of 398, 12 shorter (307 0.72x, 15 0.94x), 5 longer
-#: (276 1.81x, 302 +6.7 %, 340 +4.6 %, 25 +2.7 %), geometric mean +0.06 %, the total 1.00001x; the outliers go
-#: both ways, each a different vertex sending the rest-shape fallback or a sample repair down another path (seed
-#: 331's 0.45x is its cusp missed by the samples, see the README).  ``python -m bench.lp_switch --switch no_scale``
-#: compares the two.
+#: to +2.7 %, geometric mean +0.08 %).  Session 34, random bench seeds 0-999 but 388 and 615, both methods, A/B
+#: (with COL_HI_FACTOR 1): 0 failures; lp motion geometric mean 0.9988 (960 of 997 the same, 29 shorter, 7 longer:
+#: 276 1.81x, 302 +6.2 %, 340 +4.5 %), lp+nlp 0.9996 (979 of 998 the same); worker time 0.79x / 0.85x.  The
+#: outliers go both ways, each another optimal vertex of integral q sending the rest-shape fallback or a sample
+#: repair down another path.  ``python -m bench.lp_switch --switch no_scale`` compares the two.
 SIMPLEX_SCALE = 0
 #: ... and the scaling of the second try of a window that did not reach optimality (with the other presolve).
 SIMPLEX_SCALE_RETRY = 2
