@@ -34,7 +34,6 @@ Clarabel (interior point), both fed the same sparse rows.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -68,13 +67,6 @@ TINY_SQRT_QSTAR = 1e-6
 VERIFY_TOL = 2e-3
 #: Verification points between consecutive checkpoints.
 VERIFY_SUBDIV = 8
-#: Where the tangent turns by more than this (rad) between neighbouring verification points, VERIFY_SUBDIV - 1 more
-#: points go between them, up to VERIFY_TURN_LEVELS times (``WindowLP._fine_geometry``): a turn narrower than the
-#: grid (bench seed 331: a 0.2 mm cusp of ~20 um radius in a 4.2 m path, its points ~3 mm apart) is otherwise
-#: seen only if a point happens to land on it, and the samples see it only if they do.  A flower loop's grid turns
-#: by at most ~1.3 degrees between points: no point is added on smooth paths.
-VERIFY_TURN_RAD = math.radians(10.0)
-VERIFY_TURN_LEVELS = 6
 #: Points across a rest interval with shapes (``WindowSpec.rest_shapes``) and towards its rest end where the LP has
 #: its rows besides the checkpoints (``WindowLP._row_points``).
 REST_SHAPE_POINTS = 32
@@ -767,18 +759,6 @@ class _ShapeRows:
 _LiveSteps = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 #: ``bspline.basis`` at points (k, W0, W1, W2) and the rest shapes there (None: the window has none).
 Basis = tuple[IntArray, FloatArray, FloatArray, FloatArray, _ShapeRows | None]
-
-
-def _merged(a: PathSamples, b: PathSamples) -> PathSamples:
-    """The points of a and b together, in order of s."""
-    order = np.argsort(np.concatenate([a.s, b.s]), kind="stable")
-
-    def both(x: FloatArray, y: FloatArray) -> FloatArray:
-        return np.concatenate([x, y])[order]
-
-    fl = None if a.feed_limit is None or b.feed_limit is None else both(a.feed_limit, b.feed_limit)
-    return PathSamples(both(a.s, b.s), both(a.position, b.position), both(a.d1, b.d1), both(a.d2, b.d2),
-                       both(a.d3, b.d3), fl)
 
 
 class WindowLP:
@@ -1588,24 +1568,10 @@ class WindowLP:
         return np.sort(np.concatenate([s_check, s_fine, br - BREAK_EPS_MM, br + BREAK_EPS_MM, q_knots, extra, *rest]))
 
     def _fine_geometry(self, s_check: FloatArray) -> PathSamples:
-        """Geometry on the verification grid of ``s_check`` (``_fine``, refined where the path turns by more than
-        VERIFY_TURN_RAD between its points), evaluated once per window."""
+        """Geometry on the verification grid of ``s_check``, evaluated once per window."""
         if self._fine_g is None or self._fine_g[0] is not s_check:
-            self._fine_g = (s_check, self._turn_refined(self.geometry(self._fine(s_check))))
+            self._fine_g = (s_check, self.geometry(self._fine(s_check)))
         return self._fine_g[1]
-
-    def _turn_refined(self, g: PathSamples) -> PathSamples:
-        """g with VERIFY_SUBDIV - 1 more points in every gap across which the unit tangent turns by more than
-        VERIFY_TURN_RAD (2 arcsin(|t_i+1 - t_i| / 2)), again in the new gaps, VERIFY_TURN_LEVELS times at most."""
-        frac = np.arange(1, VERIFY_SUBDIV) / VERIFY_SUBDIV
-        for _ in range(VERIFY_TURN_LEVELS):
-            chord = np.sqrt(np.sum(np.diff(g.d1, axis=0) ** 2, axis=1))
-            gap = np.flatnonzero(chord > 2.0 * math.sin(0.5 * VERIFY_TURN_RAD))
-            if gap.size == 0:
-                break
-            s_new = (g.s[gap, None] + (g.s[gap + 1] - g.s[gap])[:, None] * frac[None, :]).ravel()
-            g = _merged(g, self.geometry(s_new))
-        return g
 
     def _known_geometry(self, s: FloatArray) -> PathSamples:
         """Geometry at s (K,), the points on the verification grid taken from its geometry (``_fine_geometry``;
