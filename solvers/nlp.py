@@ -110,8 +110,13 @@ VERIFY_TOL = 2e-3
 VERIFY_SUBDIV = 4
 MAX_CUT_ROUNDS = 4
 #: A window whose best round is over a limit by at most this (fine grid) is accepted when
-#: tightening stalls (Ipopt fails on tightened bounds, or the rounds run out).
-ACCEPT_TOL = 5e-3
+#: tightening stalls (Ipopt fails on tightened bounds, or the rounds run out); the sampled re-check, within
+#: 1 % (``solvers.verify``), still judges what it gives.  5e-3 until session 34: bench seed 1881 lp+nlp (a
+#: 1.31 mm piece on 20 um knots, a G1 junction whose curvature jumps by 5.3 /mm) ended its rounds at 1.0058,
+#: and the chain fell back to the LP's feed, which the samples read at 1.044 x emax at the junction (the LP
+#: of lp+nlp leaves e next to a step to the NLP): a 422 after 2 repair rounds, since session 9's 64-interval
+#: plans (818095d).  With 8e-3 the NLP's feed is kept and passes (0.60 s of motion).
+ACCEPT_TOL = 8e-3
 #: A window's limits are verified this many knot intervals past its commit (the next window
 #: inherits the first of them whole and the second's start state).
 VERIFY_PAST_COMMIT = 2

@@ -399,6 +399,19 @@ def test_held_samples_over_a_limit_repair_their_own_piece() -> None:
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_nlp_window_near_its_limits_is_kept_over_the_lp_feed_at_a_step() -> None:
+    """Bench seed 1881 (lp+nlp, failing since session 9's 818095d; found in session 34): the NLP window over a
+    1.31 mm piece on 20 um knots ended its tightening rounds at 1.0058 between checkpoints, just over
+    ``nlp.ACCEPT_TOL`` (then 5e-3), so the chain kept the LP's feed, whose samples read 1.044 x emax at a G1
+    junction (curvature jump 5.3 /mm): the LP of lp+nlp leaves e next to a step to the NLP.  Both repair rounds
+    gave the same samples (a LimitViolationError).  Now the window is accepted, and the independent checker
+    passes the samples."""
+    out = harness.run(gen.case(1881, "bench"), "lp+nlp")
+    assert out.ok, out.describe()
+    assert out.nlp_fallback_statuses == []
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_corner_rest_step_is_shared_under_lp_too() -> None:
     """Bench seed 1723 (lp): at a 5.8 degree corner x moves on the same way through it, and each piece
     took the whole rest acceleration a_rest = jmax Ts / 2 (the corner share was applied under lp+nlp only),
