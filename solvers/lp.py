@@ -34,6 +34,7 @@ Clarabel (interior point), both fed the same sparse rows.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -65,8 +66,19 @@ TINY_COEF = 1e-9
 TINY_SQRT_QSTAR = 1e-6
 #: A point whose recomputed v/a/j exceeds its limit by more than this fraction gets a row.
 VERIFY_TOL = 2e-3
+#: Stage 2's q* is at most this many times the q at which the jerk's curvature term alone reaches jmax
+#: (``WindowLP._capped_qstar``).
+QSTAR_JERK_CAP = 1.5
 #: Verification points between consecutive checkpoints.
 VERIFY_SUBDIV = 8
+#: Where the tangent turns by more than this (rad) between neighbouring verification points, VERIFY_SUBDIV - 1 more
+#: points go between them for the cut rounds, up to VERIFY_TURN_LEVELS times (``WindowLP._check_geometry``): a turn
+#: narrower than the grid (bench seed 331: a 0.2 mm cusp of ~20 um radius in a 4.2 m path, its points ~3 mm apart)
+#: is otherwise seen only if a point happens to land on it, and the samples see it only if they do.  A flower
+#: loop's grid turns by at most ~1.3 degrees between points: no point is added on smooth paths.  The added points
+#: are checked only: the floors, column scales and implied bounds read the plain grid (``_fine_geometry``).
+VERIFY_TURN_RAD = math.radians(10.0)
+VERIFY_TURN_LEVELS = 6
 #: Points across a rest interval with shapes (``WindowSpec.rest_shapes``) and towards its rest end where the LP has
 #: its rows besides the checkpoints (``WindowLP._row_points``).
 REST_SHAPE_POINTS = 32
@@ -304,6 +316,12 @@ class LimitSet:
     #: acceleration and jerk rows in the knot intervals next to a rest end (lp+nlp without the NLP's
     #: kinematic rows: those intervals keep the LP's feed, ``WindowLP._rest_drive_rows``), or None
     rest_drive: dict[str, FloatArray] | None = None
+    #: check the cut rounds' limits at points added where the path turns sharply between the verification
+    #: grid's points (``WindowLP._check_geometry``): method lp, whose feed is the output.  Not lp+nlp: its NLP
+    #: windows refine their own grid at turns (``nlp._refine_turns``), and the LP seeing a turn its knots are
+    #: too coarse for slowed it far around the turn (bench seed 594 lp+nlp, a 0.42 mm radius in a 5.4 m path on
+    #: 85 mm knots: 0.565 -> 6.24 s of motion)
+    check_turns: bool = False
 
     @classmethod
     def from_machine(
@@ -324,7 +342,8 @@ class LimitSet:
                    v_step_limit(m, sample_period, jerk, rest_from_drive, kinematic,
                                 V_STEP_SHARE_DRIVE if rest_from_drive else V_STEP_SHARE),
                    None if rest_from_drive else sample_period,
-                   m.drive_arrays() if rest_from_drive and not kinematic and m.has_drives else None)
+                   m.drive_arrays() if rest_from_drive and not kinematic and m.has_drives else None,
+                   not rest_from_drive)
 
 
 def v_step_limit(
@@ -761,6 +780,18 @@ _LiveSteps = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 Basis = tuple[IntArray, FloatArray, FloatArray, FloatArray, _ShapeRows | None]
 
 
+def _merged(a: PathSamples, b: PathSamples) -> PathSamples:
+    """The points of a and b together, in order of s."""
+    order = np.argsort(np.concatenate([a.s, b.s]), kind="stable")
+
+    def both(x: FloatArray, y: FloatArray) -> FloatArray:
+        return np.concatenate([x, y])[order]
+
+    fl = None if a.feed_limit is None or b.feed_limit is None else both(a.feed_limit, b.feed_limit)
+    return PathSamples(both(a.s, b.s), both(a.position, b.position), both(a.d1, b.d1), both(a.d2, b.d2),
+                       both(a.d3, b.d3), fl)
+
+
 class WindowLP:
     r"""Builds and solves the two-stage LP of one window, with cutting planes.
 
@@ -794,6 +825,7 @@ class WindowLP:
         self.fallback_left = False
         self.Q = 1.0
         self._fine_g: tuple[FloatArray, PathSamples] | None = None
+        self._check_g: tuple[FloatArray, PathSamples] | None = None
         self._step_cache: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._vstep_cache: FloatArray | None = None
         #: ``_break_qmax`` for the Q it was computed at, and ``_vstep_live`` per (axis, limit, kernel, power, Q):
@@ -1166,6 +1198,21 @@ class WindowLP:
                 )[0]
         return q
 
+    def _capped_qstar(self, c_star: FloatArray, g: PathSamples) -> FloatArray:
+        """Stage 2's q* at the points g (K,): ``_qstar``, but at most QSTAR_JERK_CAP x the q at which the jerk's
+        curvature term alone reaches jmax, min over the axes of (jmax / |x_sss|)^(2/3).
+
+        The pseudo-jerk row sqrt(q*) (x_sss q + 1.5 x_ss q' + 0.5 x_s q'') <= jmax holds the true jerk
+        sqrt(q) (...) for any q* >= q (stage 2 has q <= q*), and is the more conservative the further q* is above
+        the q it ends with.  Stage 1 (v and a only) can leave q* many times above what the jerk allows: bench
+        seed 1864 (lp), q* ~4e9 mm^2/s^2 (65 m/s) over a knot span with |x_sss| = 0.08 /mm^2, where the row read
+        q <= 6.5e6 (2.5 m/s, the true bound 7.5 m/s), and on 3.6 mm knots the feed dipped from 14.7 m/s to
+        0.3 m/s around it with no limit above 0.2 of its value there."""
+        q = self._qstar(c_star, g.s)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            cap = QSTAR_JERK_CAP * _min_ratio(g.d3, self.lim.jmax, False) ** (2.0 / 3.0)
+        return np.asarray(np.minimum(q, cap), dtype=np.float64)
+
     # ----- solve -------------------------------------------------------------
     def solve(self, s_check: FloatArray) -> WindowResult:
         spec = self.spec
@@ -1283,7 +1330,7 @@ class WindowLP:
                                 floored(chat1, floors[0]), self._shapes(chat1 * Q))
 
         # stage 2: + q <= q*, pseudo-jerk
-        qstar = self._qstar(c_star, g.s)
+        qstar = self._capped_qstar(c_star, g)
 
         def stage2(lo: FloatArray, warm: _Rows | None = None) -> tuple[FloatArray, tuple[int, int, int]]:
             # a fresh model each time (the solver keeps its column bounds), or stage 1's own (``warm``, on its
@@ -1573,6 +1620,27 @@ class WindowLP:
             self._fine_g = (s_check, self.geometry(self._fine(s_check)))
         return self._fine_g[1]
 
+    def _check_geometry(self, s_check: FloatArray) -> PathSamples:
+        """The points the cut rounds check (``_cuts``): the verification grid (``_fine_geometry``) with
+        VERIFY_SUBDIV - 1 more points in every gap across which the unit tangent turns by more than VERIFY_TURN_RAD
+        (t_i . t_i+1 < cos VERIFY_TURN_RAD), again in the new gaps, VERIFY_TURN_LEVELS times at most (with
+        ``LimitSet.check_turns``; else the grid itself)."""
+        g = self._fine_geometry(s_check)
+        if not self.lim.check_turns:
+            return g
+        if self._check_g is not None and self._check_g[0] is s_check:
+            return self._check_g[1]
+        frac = np.arange(1, VERIFY_SUBDIV) / VERIFY_SUBDIV
+        cos_min = math.cos(VERIFY_TURN_RAD)
+        for _ in range(VERIFY_TURN_LEVELS):
+            gap = np.flatnonzero(np.einsum("ij,ij->i", g.d1[:-1], g.d1[1:]) < cos_min)  # (x_s: unit tangents)
+            if gap.size == 0:
+                break
+            s_new = (g.s[gap, None] + (g.s[gap + 1] - g.s[gap])[:, None] * frac[None, :]).ravel()
+            g = _merged(g, self.geometry(s_new))
+        self._check_g = (s_check, g)
+        return g
+
     def _known_geometry(self, s: FloatArray) -> PathSamples:
         """Geometry at s (K,), the points on the verification grid taken from its geometry (``_fine_geometry``;
         the same numbers: each point is evaluated on its own), the others evaluated.  The grid holds the
@@ -1716,8 +1784,8 @@ class WindowLP:
         s_check: FloatArray,
         c_star: FloatArray | None,
     ) -> tuple[FloatArray, tuple[int, int, int]]:
-        """Verify on a finer grid; add violated points as rows and re-solve."""
-        g = self._fine_geometry(s_check)
+        """Verify on a finer grid (``_check_geometry``); add violated points as rows and re-solve."""
+        g = self._check_geometry(s_check)
         rounds = added = 0
         for i in range(MAX_CUT_ROUNDS + 1):
             viol = self._violations(chat * Q, g, c_star)
@@ -1727,7 +1795,7 @@ class WindowLP:
             if c_star is None:
                 self._stage1_rows(rows, gv, Q, None)
             else:
-                qstar = self._qstar(c_star, gv.s)
+                qstar = self._capped_qstar(c_star, gv)
                 self._stage1_rows(rows, gv, Q, qstar)
                 self._jerk_rows(rows, gv, Q, qstar)
             chat = self._run(rows, w, col_lo, col_hi)

@@ -14,7 +14,7 @@ import pytest
 from geometry import primitives
 from geometry.nurbs import NurbsSegment
 from geometry.toolpath import Toolpath
-from solvers import lp, pipeline
+from solvers import lp, pipeline, verify
 from solvers.errors import ScheduleError
 from solvers.machine import Axis, AxisLimits, Machine, router
 from solvers.pipeline import Options, schedule
@@ -830,3 +830,63 @@ def test_short_piece_keeps_its_first_profile_when_refinements_are_slower() -> No
 
     candidates = [motion(tp.length / n) for n in (n_plan, pipeline.REST_MIN_INTERVALS)]
     assert motion(None) <= min(candidates) * (1.0 + 1e-9), candidates
+
+
+#: Bench seed 331 (lp): half-width of the arc-length window around the cusp's apex that is checked (mm).
+CUSP_WINDOW_MM = 2.0
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_turn_between_the_lp_grid_points_is_checked_by_the_lp() -> None:
+    """Bench seed 331 (lp): a 0.2 mm cusp of 20 um radius at s = 2108.9 mm in a 4.2 m path, its LP verification
+    points ~3 mm apart.  No point landed on it, so the LP passed it at ~940 mm/s (the 1 ms samples, 1.2 mm apart
+    there, straddled it and passed the checker), where the jerk's term f^3 x_sss alone reads 15 x jmax.  The cut
+    rounds now also check points added where the tangent turns by more than ``lp.VERIFY_TURN_RAD`` between grid
+    points: ~270 mm/s there (94 before q* was capped, ``lp.QSTAR_JERK_CAP``).  Truth: the geometry evaluated
+    densely around the apex, the feed read from the samples (linear in s between them: ~0.02 mm apart there
+    now)."""
+    case = gen.case(331, "bench")
+    out = harness.run(case, "lp")
+    assert out.ok, out.describe()
+    tp, m = case.toolpath(), case.lp_machine
+    sch = schedule(tp, m, Options(method="lp", max_samples=harness.MAX_SAMPLES))
+    piece = tp.pieces[0]
+    s = np.linspace(0.0, piece.length, 400_001)
+    s_apex = float(s[np.argmax(np.linalg.norm(tp.evaluate(s + piece.s_start, piece).d2, axis=1))]) + piece.s_start
+    near = np.linspace(s_apex - CUSP_WINDOW_MM, s_apex + CUSP_WINDOW_MM, 40_001)
+    g = tp.evaluate(near, piece)
+    assert 1.0 / float(np.max(np.linalg.norm(g.d2, axis=1))) < 0.05  # (the cusp: radius ~20 um)
+    feed = np.interp(near, np.asarray(sch.samples.s), np.asarray(sch.samples.feed))
+    jerk_term = np.max(feed[:, None] ** 3 * np.abs(g.d3), axis=0)
+    assert np.all(jerk_term <= m.limit_arrays()[2] * (1.0 + verify.FAIL_TOL))
+
+
+#: Bench seed 1864 (lp): the stretch around the knot span whose |x_sss| (0.08 /mm^2) sets the jerk's bound, mm.
+JERK_SPAN_MM = (280.0, 310.0)
+#: ... and the least share of that bound (the feed at which the jerk's curvature term alone reaches jmax) the
+#: feed keeps there: 0.44 with q* capped (``lp.QSTAR_JERK_CAP``), 0.14 without, 0.009 with the turn check alone.
+JERK_SPAN_FEED_SHARE = 0.25
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_stage_two_does_not_dip_far_below_the_jerk_bound() -> None:
+    """Bench seed 1864 (lp): stage 1 (v, a) left q* at ~4e9 mm^2/s^2 (65 m/s) over a knot span with
+    |x_sss| = 0.08 /mm^2; stage 2's pseudo-jerk row, linearised at sqrt(q*), read q <= 6.5e6 there (2.5 m/s
+    where the jerk allows 7.5 m/s), and on 3.6 mm knots the feed dipped from 14.7 m/s to 1.0 m/s (0.07 m/s
+    with the LP's turn check) with no limit above 0.2 of its value around it.  q* is now capped at
+    ``lp.QSTAR_JERK_CAP`` x the bound of the jerk's curvature term.  Truth: the geometry and the machine's jmax
+    (the bound), and the feed of the samples."""
+    case = gen.case(1864, "bench")
+    tp, m = case.toolpath(), case.lp_machine
+    sch = schedule(tp, m, Options(method="lp"))
+    piece = tp.pieces[0]
+    s = np.linspace(*JERK_SPAN_MM, 300_001)
+    g = tp.evaluate(s, piece)
+    jmax = m.limit_arrays()[2]
+    bound = float(np.min(np.min(jmax[None, :] / np.maximum(np.abs(g.d3), 1e-300), axis=1) ** (1.0 / 3.0)))
+    ss, f = np.asarray(sch.samples.s), np.asarray(sch.samples.feed)
+    inside = (ss >= JERK_SPAN_MM[0]) & (ss <= JERK_SPAN_MM[1])
+    assert inside.sum() > 3
+    assert float(np.min(f[inside])) >= JERK_SPAN_FEED_SHARE * bound
+    out = harness.run(case, "lp")
+    assert out.ok, out.describe()
