@@ -67,8 +67,10 @@ TINY_SQRT_QSTAR = 1e-6
 #: A point whose recomputed v/a/j exceeds its limit by more than this fraction gets a row.
 VERIFY_TOL = 2e-3
 #: Stage 2's q* is at most this many times the q at which the jerk's curvature term alone reaches jmax
-#: (``WindowLP._capped_qstar``).
-QSTAR_JERK_CAP = 1.5
+#: (``WindowLP._capped_qstar``).  Smaller caps gained more on bench seed 1864 (lp: 1.0 0.0789 s, 1.5 0.0833 s,
+#: 2 0.0882 s, none 0.1006 s) but cost the flower with jerk, where x_ss q' cancels part of x_sss q: 1.0 +0.44 %
+#: at default knots, 1.5 +0.29 % at 1 and 0.5 mm knots; at 2 its samples are those of no cap at all three.
+QSTAR_JERK_CAP = 2.0
 #: Verification points between consecutive checkpoints.
 VERIFY_SUBDIV = 8
 #: Where the tangent turns by more than this (rad) between neighbouring verification points, VERIFY_SUBDIV - 1 more
@@ -1207,7 +1209,8 @@ class WindowLP:
         the q it ends with.  Stage 1 (v and a only) can leave q* many times above what the jerk allows: bench
         seed 1864 (lp), q* ~4e9 mm^2/s^2 (65 m/s) over a knot span with |x_sss| = 0.08 /mm^2, where the row read
         q <= 6.5e6 (2.5 m/s, the true bound 7.5 m/s), and on 3.6 mm knots the feed dipped from 14.7 m/s to
-        0.3 m/s around it with no limit above 0.2 of its value there."""
+        1.0 m/s around it (0.07 m/s with the turn check, ``_check_geometry``) with no limit above 0.2 of its
+        value there."""
         q = self._qstar(c_star, g.s)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             cap = QSTAR_JERK_CAP * _min_ratio(g.d3, self.lim.jmax, False) ** (2.0 / 3.0)

@@ -842,7 +842,7 @@ def test_turn_between_the_lp_grid_points_is_checked_by_the_lp() -> None:
     points ~3 mm apart.  No point landed on it, so the LP passed it at ~940 mm/s (the 1 ms samples, 1.2 mm apart
     there, straddled it and passed the checker), where the jerk's term f^3 x_sss alone reads 15 x jmax.  The cut
     rounds now also check points added where the tangent turns by more than ``lp.VERIFY_TURN_RAD`` between grid
-    points: ~270 mm/s there (94 before q* was capped, ``lp.QSTAR_JERK_CAP``).  Truth: the geometry evaluated
+    points: ~255 mm/s there (94 before q* was capped, ``lp.QSTAR_JERK_CAP``).  Truth: the geometry evaluated
     densely around the apex, the feed read from the samples (linear in s between them: ~0.02 mm apart there
     now)."""
     case = gen.case(331, "bench")
@@ -864,7 +864,7 @@ def test_turn_between_the_lp_grid_points_is_checked_by_the_lp() -> None:
 #: Bench seed 1864 (lp): the stretch around the knot span whose |x_sss| (0.08 /mm^2) sets the jerk's bound, mm.
 JERK_SPAN_MM = (280.0, 310.0)
 #: ... and the least share of that bound (the feed at which the jerk's curvature term alone reaches jmax) the
-#: feed keeps there: 0.44 with q* capped (``lp.QSTAR_JERK_CAP``), 0.14 without, 0.009 with the turn check alone.
+#: feed keeps there: 0.32 with q* capped (``lp.QSTAR_JERK_CAP`` = 2), 0.14 without, 0.009 with the turn check alone.
 JERK_SPAN_FEED_SHARE = 0.25
 
 
