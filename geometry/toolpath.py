@@ -308,6 +308,17 @@ class PathSamples:
         fl = None if self.feed_limit is None else self.feed_limit[mask]
         return PathSamples(self.s[mask], self.position[mask], self.d1[mask], self.d2[mask], self.d3[mask], fl)
 
+    def concat(self, other: PathSamples) -> PathSamples:
+        """These points, then ``other``'s (feed limits only if both have them)."""
+        fl = None
+        if self.feed_limit is not None and other.feed_limit is not None:
+            fl = np.concatenate([self.feed_limit, other.feed_limit])
+        return PathSamples(
+            np.concatenate([self.s, other.s]), np.concatenate([self.position, other.position]),
+            np.concatenate([self.d1, other.d1]), np.concatenate([self.d2, other.d2]),
+            np.concatenate([self.d3, other.d3]), fl,
+        )
+
 
 @dataclass(frozen=True)
 class Corner:

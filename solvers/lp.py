@@ -782,18 +782,6 @@ _LiveSteps = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 Basis = tuple[IntArray, FloatArray, FloatArray, FloatArray, _ShapeRows | None]
 
 
-def _merged(a: PathSamples, b: PathSamples) -> PathSamples:
-    """The points of a and b together, in order of s."""
-    order = np.argsort(np.concatenate([a.s, b.s]), kind="stable")
-
-    def both(x: FloatArray, y: FloatArray) -> FloatArray:
-        return np.concatenate([x, y])[order]
-
-    fl = None if a.feed_limit is None or b.feed_limit is None else both(a.feed_limit, b.feed_limit)
-    return PathSamples(both(a.s, b.s), both(a.position, b.position), both(a.d1, b.d1), both(a.d2, b.d2),
-                       both(a.d3, b.d3), fl)
-
-
 class WindowLP:
     r"""Builds and solves the two-stage LP of one window, with cutting planes.
 
@@ -1640,7 +1628,8 @@ class WindowLP:
             if gap.size == 0:
                 break
             s_new = (g.s[gap, None] + (g.s[gap + 1] - g.s[gap])[:, None] * frac[None, :]).ravel()
-            g = _merged(g, self.geometry(s_new))
+            g_new = self.geometry(s_new)
+            g = g.concat(g_new).subset(np.argsort(np.concatenate([g.s, g_new.s]), kind="stable"))
         self._check_g = (s_check, g)
         return g
 

@@ -1879,7 +1879,7 @@ class NlpRefiner:
             return
         lt, rt = left[ok], right[ok]
         both = np.concatenate([lt, rt])
-        v, acc, j = kinematics.axis_kinematics(_take(g, both), *(x[both] for x in fd))
+        v, acc, j = kinematics.axis_kinematics(g.subset(both), *(x[both] for x in fd))
         e = np.abs(lim.Kv * v + lim.Ka * acc + lim.Kj * j).reshape(2, lt.size, 3)
         seen = lim.Kj * np.abs(acc[lt.size :] - acc[: lt.size]) / (2.0 * Ts)
         # a velocity step (tangent break passed at speed) is an impulse in the differences
@@ -2435,25 +2435,10 @@ def _find(sorted_s: FloatArray, s: FloatArray) -> NDArray[np.int64]:
     return np.where(sorted_s[i] == s, i, -1).astype(np.int64)
 
 
-def _take(g: PathSamples, idx: NDArray[np.int64]) -> PathSamples:
-    fl = None if g.feed_limit is None else g.feed_limit[idx]
-    return PathSamples(g.s[idx], g.position[idx], g.d1[idx], g.d2[idx], g.d3[idx], fl)
-
-
-def _concat(g1: PathSamples, g2: PathSamples) -> PathSamples:
-    fl = None
-    if g1.feed_limit is not None and g2.feed_limit is not None:
-        fl = np.concatenate([g1.feed_limit, g2.feed_limit])
-    return PathSamples(
-        np.concatenate([g1.s, g2.s]), np.concatenate([g1.position, g2.position]), np.concatenate([g1.d1, g2.d1]),
-        np.concatenate([g1.d2, g2.d2]), np.concatenate([g1.d3, g2.d3]), fl,
-    )
-
-
 def _merge(fine: FloatArray, g: PathSamples, s_new: FloatArray, g_new: PathSamples) -> tuple[FloatArray, PathSamples]:
     """Verification points and their geometry with new points added, sorted by s."""
     order = np.argsort(np.concatenate([fine, s_new]), kind="stable")
-    return np.concatenate([fine, s_new])[order], _take(_concat(g, g_new), order)
+    return np.concatenate([fine, s_new])[order], g.concat(g_new).subset(order)
 
 
 def _refine_turns(geometry: GeometryFn, fine: FloatArray, g: PathSamples) -> tuple[FloatArray, PathSamples]:
@@ -2703,12 +2688,12 @@ class _Prefetched:
         i = np.minimum(np.searchsorted(self.s, s), self.s.size - 1)
         hit = self.s[i] == s
         if hit.all():
-            return _take(self.g, i)
+            return self.g.subset(i)
         if not hit.any():
             return self.geometry(s)
         where = np.concatenate([np.flatnonzero(hit), np.flatnonzero(~hit)])
-        both = _concat(_take(self.g, i[hit]), self.geometry(s[~hit]))
-        return _take(both, np.argsort(where, kind="stable"))
+        both = self.g.subset(i[hit]).concat(self.geometry(s[~hit]))
+        return both.subset(np.argsort(where, kind="stable"))
 
 
 def _third_derivative_envelope(
