@@ -147,7 +147,7 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.fs_nurbs_taylor.restype = ctypes.c_int
     lib.fs_nurbs_taylor.argtypes = [i, i, P, P, i, P, P, P]
     lib.fs_nurbs_eval.restype = ctypes.c_int
-    lib.fs_nurbs_eval.argtypes = [i, i, P, P, i, P, P, P, P, i, P, i, P]
+    lib.fs_nurbs_eval.argtypes = [i, i, P, P, i, P, P, P, P, i, P, i, i, P]
     lib.fs_arc_ders.restype = None
     lib.fs_arc_ders.argtypes = [i, P, P]
     lib.fs_table_guess.restype = None
@@ -194,14 +194,15 @@ def taylor(lib: ctypes.CDLL, degree: int, knots: FloatArray, hom: FloatArray) ->
     return Taylor(degree, U, H, span, lo, mid, coef)
 
 
-def nurbs_derivatives(lib: ctypes.CDLL, form: Taylor, u: FloatArray, order: int) -> FloatArray:
+def nurbs_derivatives(lib: ctypes.CDLL, form: Taylor, u: FloatArray, order: int, exact_points: bool = False
+                      ) -> FloatArray:
     """C and its u-derivatives up to ``order`` (<= 3) at u (K,) inside the domain, (order + 1, K, 3), from the
-    NURBS's ``Taylor`` form."""
+    NURBS's ``Taylor`` form; with ``exact_points``, C itself from de Boor's algorithm at u, as on the numpy path."""
     u = f64(u)
     out = np.empty((order + 1, u.size, 3))
     if u.size and lib.fs_nurbs_eval(form.degree, form.hom.shape[0], ptr(form.knots), ptr(form.hom), form.lo.size,
                                     ptr(form.span), ptr(form.lo), ptr(form.mid), ptr(form.coef), u.size, ptr(u),
-                                    order, ptr(out)) != 0:
+                                    order, int(exact_points), ptr(out)) != 0:
         raise MemoryError("geometry native kernel: no memory for the basis functions")
     return out
 

@@ -171,13 +171,13 @@ class NurbsSegment:
             self.__dict__["_taylor_form"] = form  # (a cache on a frozen dataclass, as cached_property keeps one)
         return form
 
-    def _native(self, uu: FloatArray, order: int) -> FloatArray | None:
+    def _native(self, uu: FloatArray, order: int, exact_points: bool = False) -> FloatArray | None:
         """C and its u-derivatives up to ``order`` at uu (clipped to the domain) by the compiled kernel
         (``geometry.native``), (order + 1, K, 3); None without it."""
         lib = native.library()
         if lib is None:
             return None
-        return native.nurbs_derivatives(lib, self._taylor(lib), uu, order)
+        return native.nurbs_derivatives(lib, self._taylor(lib), uu, order, exact_points)
 
     @property
     def domain(self) -> tuple[float, float]:
@@ -191,17 +191,20 @@ class NurbsSegment:
         u = np.unique(self.knots)
         return u[(u >= lo) & (u <= hi)]
 
-    def derivatives(self, u: FloatArray) -> FloatArray:
+    def derivatives(self, u: FloatArray, exact_points: bool = False) -> FloatArray:
         """C and its first three u-derivatives.
 
         Args:
             u: (K,) parameters inside the domain.
+            exact_points: C by de Boor's algorithm at u in the compiled kernel too (the numpy path always
+                is): rounded to ~eps of the control points, not of the kernel's Taylor terms
+                (``geometry.native.nurbs_derivatives``).  For emitted positions, whose differences are read.
         Returns:
             (4, K, 3) array: [C, C', C'', C'''] in mm, mm/u, mm/u^2, mm/u^3.
         """
         lo, hi = self.domain
         uu = np.clip(np.asarray(u, dtype=np.float64), lo, hi)
-        fast = self._native(uu, 3)
+        fast = self._native(uu, 3, exact_points)
         if fast is not None:
             return fast
         H = [self._hom(uu, order) for order in range(4)]  # each (K, 4)

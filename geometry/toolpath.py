@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Final, overload
 
 import numpy as np
@@ -653,9 +654,9 @@ class Toolpath:
         return np.where(s >= self.offsets[kk + 1], self._generic[kk].length, x)
 
     def _derivatives(
-        self, s: FloatArray, piece: Piece | None, exact: bool = True
+        self, s: FloatArray, piece: Piece | None, exact: bool = True, precise: bool = False
     ) -> tuple[IntArray, FloatArray]:
-        """Sub-segment index (K,) and C, C', C'', C''' (4, K, 3) at arc lengths s."""
+        """Sub-segment index (K,) and C, C', C'', C''' (4, K, 3) at arc lengths s (``evaluate``)."""
         k = self._sub_index(s, piece)
         x = s - self.offsets[k]
         D = np.empty((4, s.size, 3))
@@ -665,8 +666,12 @@ class Toolpath:
         for kk, m in self._generic_runs(k):
             table = self._generic[kk]
             seg = table.segment
-            um = table.u_of_s(self._table_x(kk, s[m], x[m]), exact)
-            Dk = seg.derivatives(um)
+            xk = self._table_x(kk, s[m], x[m])
+            um = table.u_of_s(xk, exact or precise)
+            if precise and isinstance(seg, NurbsSegment):
+                Dk = seg.derivatives(um, exact_points=True)
+            else:
+                Dk = seg.derivatives(um)
             lo, hi = seg.domain
             # zero speed, or a rounding residue of it (|C'| ~ 1e-16 at a cusp's knot): no tangent there
             tiny = ZERO_SPEED_SHARE * table.length / (hi - lo)
@@ -675,22 +680,49 @@ class Toolpath:
                 us = um[stuck]
                 nudge = np.where(us < 0.5 * (lo + hi), 1.0, -1.0) * ZERO_SPEED_NUDGE * (hi - lo)
                 Dk[1:, stuck, :] = seg.derivatives(us + nudge)[1:]
+            if precise:  # C(u) + (C' / |C'|) (s - s(u)): along the tangent by u's arc-length residual
+                speed2 = np.einsum("ij,ij->i", Dk[1], Dk[1])
+                ok = speed2 > 0.0
+                r = np.where(ok, (xk - table.s_of_u(um)) / np.sqrt(np.where(ok, speed2, 1.0)), 0.0)
+                Dk[0] += Dk[1] * r[:, None]
             D[:, m, :] = Dk
         return k, D
 
-    def evaluate(self, s: FloatArray, piece: Piece | None = None, exact: bool = True) -> PathSamples:
+    def evaluate(
+        self, s: FloatArray, piece: Piece | None = None, exact: bool = True, precise: bool = False
+    ) -> PathSamples:
         """Position and arc-length derivatives at arc lengths s (mm), shape (K,).
 
         With ``piece`` given, points are evaluated on that piece's sub-segments
         only (so a corner's s is evaluated on the correct side).  ``exact=False`` maps s to u
         by the arc-length table's Hermite guess alone (within 1e-10 mm along the curve, see
         ``geometry.arclength``), for the solvers' checkpoint geometry; samples are exact.
+
+        ``precise``: positions smooth to a few units in the last place of the coordinates (``coordinate_scale``),
+        for samples whose differences resolve limits near that (about twice the cost of ``exact``).  Otherwise
+        a point carries u's own rounding, ulp(u) |C'(u)|, and the quintic guess's QUINTIC_TOL (2e-13 mm), both
+        uneven from point to point, and the compiled kernel's Taylor rounding, which near a long span's ends
+        follows partial sums larger than the control points: bench seed 5029 lp (a segment 6 mm long over u in
+        [0, 0.025], |C'| = 5.1e3 mm) had ~1e-13 mm of such noise, and its amax_x Ts^2 is 9.7e-12 mm: the
+        second differences of its samples read 1.2 % over the limit.  With it, C(u) is moved along the
+        tangent by the residual s - s(u), which the table gives to ~ulp(s), and C itself comes from de Boor's
+        algorithm (``NurbsSegment.derivatives``' ``exact_points``): 0.2 % there
+        (tests/geometry/test_point_precision.py).
         """
         s = np.asarray(s, dtype=np.float64)
-        k, D = self._derivatives(s, piece, exact)
+        k, D = self._derivatives(s, piece, exact, precise)
         d1, d2, d3 = arc_length_derivatives(D)
         fl = None if self._feed is None else np.asarray(self._feed[self.sub_origin[k]], dtype=np.float64)
         return PathSamples(s=s, position=D[0], d1=d1, d2=d2, d3=d3, feed_limit=fl)
+
+    @cached_property
+    def coordinate_scale(self) -> float:
+        """The largest coordinate (mm) a point is computed from: NURBS control points and the sub-segments'
+        ends.  A point's rounding is a few units in its last place."""
+        ends = float(np.max(np.abs(self.positions(self.offsets))))
+        cps = [float(np.max(np.abs(t.segment.control_points))) for t in self._generic.values()
+               if isinstance(t.segment, NurbsSegment)]
+        return max([ends, *cps])
 
     def positions(self, s: FloatArray, piece: Piece | None = None) -> FloatArray:
         """C(s) only, (K, 3) mm."""

@@ -192,10 +192,22 @@ SAMPLE_REPAIR_ROUNDS = 2
 #: 122 (a 2.2 mm path on 1.27 um knots) read 1.0124 x servo error at its second-last sample, the stop,
 #: through both repair rounds (1.0082 x before session 23's dfa0a7a moved the NLP's iterates by rounding).
 REPAIR_STEP_SHARE = 0.6
+#: An lp+nlp piece still over its limits after that round gets one more, with the steps at this share: bench seed
+#: 5844 (3.5 mm, 9 pieces between 8 corners, ~14 samples each) read 1.039 x servo error at 0.6, the differences
+#: across a rest mixing its acceleration step with the NLP's jerk at its limit right beside it (central jerk
+#: 1.05e7 against 6.1e6 analytic); 0.4, 0.3 and 0.2 pass it.  Only pieces that would otherwise fail take it.
+LAST_STEP_SHARE = 0.3
 #: Points verified per sample gap next to a sample found over a limit.
 REPAIR_SUBDIV = 8
 #: Samples computed per chunk (bounds memory in the reconstruction).
 SAMPLE_CHUNK = 100_000
+#: The noise of plain sample positions (``Toolpath.evaluate`` without ``precise``), in units in the last place of
+#: the path's ``coordinate_scale``: second differences of 1 um steps on segments long in mm and short in u read up
+#: to 154 such units (tests/geometry/test_point_precision.py), so a point ~40; the margin covers other shapes.
+POINT_NOISE_ULPS = 256.0
+#: ... and the share of a promised limit that noise may reach in the sampled differences before the samples take
+#: precise points (``precise_points``).
+PRECISE_POINTS_SHARE = 1e-4
 
 
 def auto_nlp_workers() -> int:
@@ -1233,7 +1245,7 @@ SAMPLE_SPLIT_MIN = 20_000
 
 def _sample_piece(
     toolpath: Toolpath, piece: Piece, prof: PieceProfile, tm: PieceTiming, t0: float, k_lo: int, k_hi: int,
-    Ts: float, workers: int = 1,
+    Ts: float, workers: int = 1, precise: bool = False,
 ) -> TimeSamples:
     """Time reconstruction (spec §7) of one piece at t_k = k Ts, k_lo <= k < k_hi, the piece starting at t0 (s).
 
@@ -1256,12 +1268,13 @@ def _sample_piece(
     proc = None
     if split:
         proc = multiprocessing.get_context("fork").Process(
-            target=_fill_samples, args=(toolpath, piece, prof, tm, t0, t[mid:], tuple(c[mid:] for c in cols)),
+            target=_fill_samples,
+            args=(toolpath, piece, prof, tm, t0, t[mid:], tuple(c[mid:] for c in cols), precise),
             daemon=True,
         )
         proc.start()
     try:
-        _fill_samples(toolpath, piece, prof, tm, t0, t[:mid], tuple(c[:mid] for c in cols))
+        _fill_samples(toolpath, piece, prof, tm, t0, t[:mid], tuple(c[:mid] for c in cols), precise)
     except BaseException:
         if proc is not None:
             proc.terminate()
@@ -1270,22 +1283,22 @@ def _sample_piece(
     if proc is not None:
         proc.join()
         if proc.exitcode != 0:  # (the process failed: this one samples its half)
-            _fill_samples(toolpath, piece, prof, tm, t0, t[mid:], tuple(c[mid:] for c in cols))
+            _fill_samples(toolpath, piece, prof, tm, t0, t[mid:], tuple(c[mid:] for c in cols), precise)
     s_out, feed, pos, vel, acc, jerk = cols
     return TimeSamples(t=t, s=s_out, feed=feed, position=pos, velocity=vel, acceleration=acc, jerk=jerk)
 
 
 def _fill_samples(
     toolpath: Toolpath, piece: Piece, prof: PieceProfile, tm: PieceTiming, t0: float, t: FloatArray,
-    cols: tuple[FloatArray, ...],
+    cols: tuple[FloatArray, ...], precise: bool = False,
 ) -> None:
     """``_sample_piece``'s columns (s, feed, position, velocity, acceleration, jerk) at global times t, into
-    cols, SAMPLE_CHUNK samples at a time."""
+    cols, SAMPLE_CHUNK samples at a time (``precise``: ``Toolpath.evaluate``'s)."""
     s_out, feed, pos, vel, acc, jerk = cols
     for a in range(0, t.size, SAMPLE_CHUNK):
         b = min(t.size, a + SAMPLE_CHUNK)
         s_local = np.clip(tm.s_at(t[a:b] - t0), 0.0, piece.length)
-        g, f, v, ac, jk = _kinematics(toolpath, piece, prof, s_local)
+        g, f, v, ac, jk = _kinematics(toolpath, piece, prof, s_local, precise)
         s_out[a:b] = s_local + piece.s_start
         feed[a:b] = f
         pos[a:b] = g.position
@@ -1316,10 +1329,10 @@ def _feed_cap(lim: LimitSet, toolpath: Toolpath, s: FloatArray) -> FloatArray | 
 
 
 def _kinematics(
-    toolpath: Toolpath, piece: Piece, prof: PieceProfile, s_local: FloatArray
+    toolpath: Toolpath, piece: Piece, prof: PieceProfile, s_local: FloatArray, precise: bool = False
 ) -> tuple[PathSamples, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Geometry and v, a, j (K, 3) and feed (K,) at piece-local s."""
-    g = toolpath.evaluate(s_local + piece.s_start, piece)
+    """Geometry and v, a, j (K, 3) and feed (K,) at piece-local s (``precise``: ``Toolpath.evaluate``'s)."""
+    g = toolpath.evaluate(s_local + piece.s_start, piece, precise=precise)
     fd = prof.feed(s_local)
     return (g, fd[0], *kinematics.axis_kinematics(g, *fd))
 
@@ -1439,6 +1452,16 @@ class _Carry:
         return _Carry(held, before, bool(chk.rows.over[n_rel - 1]))
 
 
+def precise_points(toolpath: Toolpath, limits: verify.Limits, Ts: float) -> bool:
+    """Whether the samples' positions need ``Toolpath.evaluate``'s ``precise`` points: when the plain points' noise,
+    POINT_NOISE_ULPS units in the last place of the path's ``coordinate_scale``, can reach PRECISE_POINTS_SHARE of a
+    promised limit in the differences of ``solvers.verify`` (never on the router: ~1e-8 of its amax; bench
+    seed 5029, amax_x = 9.7e-6 mm/s^2: 6 x).  Precise points cost about twice the geometry of a sample (flower:
+    +13 % of the schedule's compute)."""
+    noise = POINT_NOISE_ULPS * float(np.spacing(toolpath.coordinate_scale))
+    return verify.noise_share(limits, Ts, noise) > PRECISE_POINTS_SHARE
+
+
 def _piece_blocks(
     toolpath: Toolpath, piece: Piece, prof: PieceProfile, timing: PieceTiming, t0: float, k_lo: int, k_hi: int,
     block: int, carry: _Carry, last: bool, limits: verify.Limits, lim: LimitSet, Ts: float, workers: int = 1,
@@ -1453,10 +1476,11 @@ def _piece_blocks(
     whole piece.  The held samples' analytic flags (``_Recheck.held_over``) count only at the piece's final
     block; inside the piece those samples are re-checked in full with the next block."""
     starts = list(range(k_lo, k_hi, block)) or [k_lo]
+    precise = precise_points(toolpath, limits, Ts)
     for a in starts:
         b = min(k_hi, a + block)
         final = b >= k_hi
-        own = _sample_piece(toolpath, piece, prof, timing, t0, a, b, Ts, workers)
+        own = _sample_piece(toolpath, piece, prof, timing, t0, a, b, Ts, workers, precise)
         seq = own if carry.held is None else concat_samples([carry.held, own])
         del own  # (a copy in seq unless nothing was held)
         if last and final and seq.t.size:
@@ -1636,15 +1660,17 @@ def schedule_stream(
             owner = np.clip(np.searchsorted(starts, s_bad, side="right") - 1, 0, n_pieces - 1)
             s_loc = s_bad[owner == i] - piece.s_start
             s_loc = s_loc[(s_loc > 0.0) & (s_loc < piece.length)]
-            if not s_loc.size or rounds == SAMPLE_REPAIR_ROUNDS:
+            # one round more under lp+nlp where the last one leaves the piece over its limits (``LAST_STEP_SHARE``)
+            last_resort = nlp and rounds == SAMPLE_REPAIR_ROUNDS and worst[2] > 1.0 + verify.FAIL_TOL
+            if not s_loc.size or (rounds >= SAMPLE_REPAIR_ROUNDS and not last_resort):
                 break
             # the piece again with those points verified (LP windows before the first changed one are
             # reused), then re-sampled
             rounds += 1
             verify_s = np.union1d(verify_s, s_loc)
             lim_r = lim
-            if nlp and rounds == SAMPLE_REPAIR_ROUNDS:  # the steps at REPAIR_STEP_SHARE of the budget
-                share = REPAIR_STEP_SHARE / REST_SHARE
+            if nlp and rounds >= SAMPLE_REPAIR_ROUNDS:  # the steps at REPAIR_STEP_SHARE of the budget, or less
+                share = (REPAIR_STEP_SHARE if rounds == SAMPLE_REPAIR_ROUNDS else LAST_STEP_SHARE) / REST_SHARE
                 lim_r = replace(lim, a_rest=lim.a_rest * share,
                                 a_step=None if lim.a_step is None else lim.a_step * share)
                 cache = {}  # (its windows were solved with the full share)

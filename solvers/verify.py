@@ -242,3 +242,21 @@ def check(
     """The whole schedule at once, held at rest before the first and after the last sample."""
     rows = check_rows(Ts, rest_padded(position), feed, v, a, j, lim)
     return SampleCheck(spread(rows.over), rows.worst())
+
+
+def noise_share(lim: Limits, Ts: float, noise_mm: float) -> float:
+    """The largest share of a promised limit that position noise of ``noise_mm`` (each sample off by up to that,
+    independently) can put into the finite differences above: v by up to 2 n / Ts, a by 4 n / Ts^2, j by
+    8 n / Ts^3, and u, e by their drive terms' sums of those (|M| a + |b| v, |Kv| v + |Ka| a + |Kj| j; the
+    constant c + d sign(v) is no difference).  0 with no limit enforced."""
+    dv, da, dj = 2.0 * noise_mm / Ts, 4.0 * noise_mm / Ts**2, 8.0 * noise_mm / Ts**3
+    shares = [0.0]
+    for d, limit in ((dv, lim.vmax), (da, lim.amax), (dj, lim.jmax)):
+        if limit is not None:
+            shares.append(float(np.max(d / limit)))
+    if lim.drive is not None:
+        dr = lim.drive
+        shares.append(float(np.max((np.abs(dr["M"]) * da + np.abs(dr["b"]) * dv) / dr["umax"])))
+        shares.append(float(np.max((np.abs(dr["Kv"]) * dv + np.abs(dr["Ka"]) * da + np.abs(dr["Kj"]) * dj)
+                                   / dr["emax"])))
+    return max(shares)

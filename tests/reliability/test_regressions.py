@@ -890,3 +890,14 @@ def test_stage_two_does_not_dip_far_below_the_jerk_bound() -> None:
     assert float(np.min(f[inside])) >= JERK_SPAN_FEED_SHARE * bound
     out = harness.run(case, "lp")
     assert out.ok, out.describe()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_servo_error_across_rests_on_a_path_of_short_pieces() -> None:
+    """Found (bench seed 5844, lp+nlp): 3.5 mm in 9 pieces between 8 corners, ~14 samples a piece.  The central
+    differences across a rest mix its acceleration step with the NLP's jerk at its limit right beside it (jerk
+    1.05e7 against 6.1e6 analytic) and read 1.039 x emax after both repair rounds, with the steps at
+    REPAIR_STEP_SHARE in the second.  Now a piece still over its limits gets one more round at LAST_STEP_SHARE."""
+    out = harness.run(gen.case(5844, "bench"), "lp+nlp")
+    assert out.ok, out.describe()
+    assert out.utilisation["servo_error_x"] <= 1.0 + verify.FAIL_TOL
