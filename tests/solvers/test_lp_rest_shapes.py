@@ -61,6 +61,28 @@ def test_rest_shapes_are_the_unit_bump_and_rises(head: bool) -> None:
             np.testing.assert_array_equal(got, ref)
 
 
+def test_a_point_on_a_rest_intervals_inner_knot_is_evaluated_as_the_interval_it_is_in() -> None:
+    """``bspline.evaluate`` puts s = k d in interval k (floor(s / d)); the shapes go with it
+    (``bspline.on_rest_interval``).  At the last interval's inner knot q'' is its right-hand limit (with the tail's
+    shapes), at the first interval's outer knot its right-hand limit (the next interval's, without the head's):
+    bench seeds 1478 and 1617 lp read jerk 1.11 / 1.25 x exactly at such a knot, with s > k d leaving the tail's
+    shapes out there."""
+    rng = np.random.default_rng(3)
+    n, d = 12, 0.7
+    R = len(bspline.REST_RISE_POWERS)
+    prof = PieceProfile(s_start=0.0, length=n * d, d=d, c=np.concatenate([[0.0], rng.uniform(1e3, 2e3, n), [0.0]]),
+                        rest_g=(350.0, -420.0),
+                        rest_h=(tuple(rng.uniform(-200, 200, R)), tuple(rng.uniform(-200, 200, R))))
+    for s_knot in ((n - 1) * d, d):
+        assert np.floor(s_knot / d) == round(s_knot / d)  # (exactly on the knot in evaluate's arithmetic)
+        at = prof.feed(np.array([s_knot]))
+        right = prof.feed(np.array([s_knot + 1e-9 * d]))
+        for got, want in zip(at, right, strict=True):
+            assert got[0] == pytest.approx(want[0], rel=1e-6)
+    assert bspline.on_rest_interval(np.array([(n - 1) * d]), d, n - 1, False)[0]
+    assert not bspline.on_rest_interval(np.array([d]), d, 0, True)[0]
+
+
 def test_lp_rows_and_evaluation_match_the_time_tables_profile() -> None:
     """A one-window piece with rest shapes at both ends: the LP's designs of q, q', q'' (its rows) times a
     solution vector, and its own evaluation, equal the profile the pipeline builds from it
