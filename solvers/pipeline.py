@@ -65,9 +65,11 @@ from solvers.lp import (
     velocity_bound,
 )
 from solvers.machine import AXES, Machine, drive_outputs
+from solvers.nlp import CONTEXT_SAMPLES as NLP_CONTEXT_SAMPLES
+from solvers.nlp import CONTEXT_STEP as NLP_CONTEXT_STEP
 from solvers.nlp import V_STEP_SHARE as NLP_V_STEP_SHARE
 from solvers.nlp import VERIFY_TOL as NLP_VERIFY_TOL
-from solvers.nlp import ChainPipeline, NlpLimits, NlpRefiner, NlpStats, chain_spans, rest_profile
+from solvers.nlp import ChainPipeline, Motion, NlpLimits, NlpRefiner, NlpStats, chain_spans, rest_profile
 from solvers.timing import (
     PieceProfile,
     PieceTiming,
@@ -192,11 +194,6 @@ SAMPLE_REPAIR_ROUNDS = 2
 #: 122 (a 2.2 mm path on 1.27 um knots) read 1.0124 x servo error at its second-last sample, the stop,
 #: through both repair rounds (1.0082 x before session 23's dfa0a7a moved the NLP's iterates by rounding).
 REPAIR_STEP_SHARE = 0.6
-#: An lp+nlp piece still over its limits after that round gets one more, with the steps at this share: bench seed
-#: 5844 (3.5 mm, 9 pieces between 8 corners, ~14 samples each) read 1.039 x servo error at 0.6, the differences
-#: across a rest mixing its acceleration step with the NLP's jerk at its limit right beside it (central jerk
-#: 1.05e7 against 6.1e6 analytic); 0.4, 0.3 and 0.2 pass it.  Only pieces that would otherwise fail take it.
-LAST_STEP_SHARE = 0.3
 #: Points verified per sample gap next to a sample found over a limit.
 REPAIR_SUBDIV = 8
 #: Samples computed per chunk (bounds memory in the reconstruction).
@@ -1066,7 +1063,7 @@ def _refine_piece(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lp_prof: PieceProfile, joins: list[int],
     nlp_lim: NlpLimits, refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats,
     on_chain: Callable[[float], None] | None = None, verify_s: FloatArray | None = None,
-    pipe: ChainPipeline | None = None,
+    pipe: ChainPipeline | None = None, lead_in: Motion | None = None,
 ) -> PieceProfile:
     """The NLP stage (spec §5-6) on one piece: its LP feed refined under the drive limits.
 
@@ -1074,7 +1071,8 @@ def _refine_piece(
     warm start carries over from one piece to the next: share it along the path in order);
     ``on_chain(s_done)``, if given, is called after each NLP chain with the piece-local arc length
     (mm) done; ``verify_s``: piece-local s verified besides the fine grid; ``pipe``: the chains
-    already handed out while the LP ran (``_chain_pipeline``; used if the LP kept its first knot plan)."""
+    already handed out while the LP ran (``_chain_pipeline``; used if the LP kept its first knot plan);
+    ``lead_in``: the previous piece's motion up to the corner the piece starts at (``_lead_in``)."""
     geometry, breaks = _local(toolpath, piece), _breaks(toolpath, piece)
     if pipe is not None and verify_s is None and pipe.n_int == lp_prof.n_int and pipe.d == lp_prof.d:
         refiner = pipe.refiner
@@ -1084,7 +1082,7 @@ def _refine_piece(
             pipe.close()  # (its chains were on other knots)
         refiner = _refiner(piece, machine, opt, lp_prof.n_int, nlp_lim, refiners, stats)
         p, mask, rise = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain, _workers(opt),
-                                       verify_s, _standing_ends(toolpath, piece))
+                                       verify_s, _standing_ends(toolpath, piece), lead_in)
     # the rest intervals the NLP solved (``solvers.nlp.REST_ENDS``) as q control points; a span reverted to
     # the LP's feed below takes the LP's rest interval next to it back too
     c, mask, g, h = rest_profile(lp_prof.c, p, mask, lp_prof.d, rise)
@@ -1201,6 +1199,7 @@ def _refiner(
 def _chain_pipeline(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, nlp_lim: NlpLimits,
     refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats, n_int: int | None,
+    lead_in: Motion | None = None,
 ) -> ChainPipeline:
     """NLP chains solved in opt.nlp_workers forked processes as the LP's windows make them final, on the
     piece's first knot plan, ``n_int`` intervals (None: its plan's; ``_refine_piece`` falls back to solving
@@ -1208,7 +1207,21 @@ def _chain_pipeline(
     plan = plan_piece(piece, machine, opt, n_int, toolpath)
     refiner = _refiner(piece, machine, opt, plan.n_int, nlp_lim, refiners, stats)
     return ChainPipeline(refiner, _local(toolpath, piece), plan.d, plan.n_int, _breaks(toolpath, piece),
-                         _workers(opt), _standing_ends(toolpath, piece))
+                         _workers(opt), _standing_ends(toolpath, piece), lead_in)
+
+
+def _lead_in(toolpath: Toolpath, piece: Piece, prof: PieceProfile, timing: PieceTiming, Ts: float) -> Motion:
+    """The axis motion of ``piece`` (final: ``prof``, ``timing``) over its last CONTEXT_SAMPLES sample periods,
+    on the NLP's context grid, t < 0 from its end: what the next piece's NLP sees before the corner between them
+    (``solvers.nlp._standing``).  A piece shorter than that reads as standing before its start."""
+    n = math.ceil(NLP_CONTEXT_SAMPLES / NLP_CONTEXT_STEP)
+    t = -(NLP_CONTEXT_STEP * Ts) * np.arange(n, 0, -1, dtype=np.float64)
+    s_local = np.clip(timing.s_at(np.clip(timing.duration + t, 0.0, timing.duration)), 0.0, piece.length)
+    _, _, v, a, _ = _kinematics(toolpath, piece, prof, s_local)
+    before = timing.duration + t < 0.0
+    v[before] = 0.0
+    a[before] = 0.0
+    return t, v, a
 
 
 def _may_fork_pool() -> bool:
@@ -1593,6 +1606,7 @@ def schedule_stream(
     carry = _Carry()  # what the re-check of the next samples needs from the released ones
     n_released = 0
     peaks: dict[str, float] = {}
+    lead_in: Motion | None = None  # the previous piece's motion up to the corner (lp+nlp: ``_lead_in``)
     for piece in toolpath.pieces:
         i = piece.index
         last = i == n_pieces - 1
@@ -1604,7 +1618,7 @@ def schedule_stream(
 
         first = rest_intervals(piece, machine, opt)
         # with NLP workers, the chains go to them while the LP still solves the later windows
-        pipe = (_chain_pipeline(toolpath, piece, machine, opt, nlp_lim, refiners, nlp_stats, first)
+        pipe = (_chain_pipeline(toolpath, piece, machine, opt, nlp_lim, refiners, nlp_stats, first, lead_in)
                 if nlp_stats is not None and nlp_lim is not None and _workers(opt) > 1 else None)
         try:
             t0 = time.perf_counter()
@@ -1622,7 +1636,7 @@ def schedule_stream(
 
                 t0 = time.perf_counter()
                 prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
-                                     on_chain, pipe=pipe)
+                                     on_chain, pipe=pipe, lead_in=lead_in)
                 t_nlp += time.perf_counter() - t0
         finally:
             if pipe is not None:
@@ -1660,17 +1674,15 @@ def schedule_stream(
             owner = np.clip(np.searchsorted(starts, s_bad, side="right") - 1, 0, n_pieces - 1)
             s_loc = s_bad[owner == i] - piece.s_start
             s_loc = s_loc[(s_loc > 0.0) & (s_loc < piece.length)]
-            # one round more under lp+nlp where the last one leaves the piece over its limits (``LAST_STEP_SHARE``)
-            last_resort = nlp and rounds == SAMPLE_REPAIR_ROUNDS and worst[2] > 1.0 + verify.FAIL_TOL
-            if not s_loc.size or (rounds >= SAMPLE_REPAIR_ROUNDS and not last_resort):
+            if not s_loc.size or rounds == SAMPLE_REPAIR_ROUNDS:
                 break
             # the piece again with those points verified (LP windows before the first changed one are
             # reused), then re-sampled
             rounds += 1
             verify_s = np.union1d(verify_s, s_loc)
             lim_r = lim
-            if nlp and rounds >= SAMPLE_REPAIR_ROUNDS:  # the steps at REPAIR_STEP_SHARE of the budget, or less
-                share = (REPAIR_STEP_SHARE if rounds == SAMPLE_REPAIR_ROUNDS else LAST_STEP_SHARE) / REST_SHARE
+            if nlp and rounds == SAMPLE_REPAIR_ROUNDS:  # the steps at REPAIR_STEP_SHARE of the budget
+                share = REPAIR_STEP_SHARE / REST_SHARE
                 lim_r = replace(lim, a_rest=lim.a_rest * share,
                                 a_step=None if lim.a_step is None else lim.a_step * share)
                 cache = {}  # (its windows were solved with the full share)
@@ -1679,7 +1691,7 @@ def schedule_stream(
             prof = lp_prof
             if nlp_stats is not None and nlp_lim is not None:
                 prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, {}, nlp_stats,
-                                     None, verify_s)
+                                     None, verify_s, lead_in=lead_in)
         stats["sample_repairs"] = max(stats["sample_repairs"], rounds)
         kind, axis, util, s_worst, t_worst = worst
         if util > 1.0 + verify.FAIL_TOL:
@@ -1693,6 +1705,7 @@ def schedule_stream(
         profiles.append(prof)
         if nlp:
             lp_motion_time += PieceTiming.build(lp_prof, inverse=False).duration
+            lead_in = _lead_in(toolpath, piece, prof, timing, Ts)
         k_lo = k_next
         t0_piece = t_end
         t_end, k_next = t_next, k_hi

@@ -895,9 +895,35 @@ def test_stage_two_does_not_dip_far_below_the_jerk_bound() -> None:
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_servo_error_across_rests_on_a_path_of_short_pieces() -> None:
     """Found (bench seed 5844, lp+nlp): 3.5 mm in 9 pieces between 8 corners, ~14 samples a piece.  The central
-    differences across a rest mix its acceleration step with the NLP's jerk at its limit right beside it (jerk
-    1.05e7 against 6.1e6 analytic) and read 1.039 x emax after both repair rounds, with the steps at
-    REPAIR_STEP_SHARE in the second.  Now a piece still over its limits gets one more round at LAST_STEP_SHARE."""
+    differences across a rest mix both pieces' acceleration steps with the NLP's jerk at its limit right beside
+    it (jerk 1.05e7 against 6.1e6 analytic): 1.10 x emax before the repairs, 1.039 x after both.  The NLP's
+    sampled check of a piece saw the machine standing before its corner; now it sees the previous piece's
+    motion (``pipeline._lead_in``): 0.990 x without a repair round."""
     out = harness.run(gen.case(5844, "bench"), "lp+nlp")
     assert out.ok, out.describe()
     assert out.utilisation["servo_error_x"] <= 1.0 + verify.FAIL_TOL
+    sch = schedule(gen.case(5844, "bench").toolpath(), gen.case(5844, "bench").machine, Options(method="lp+nlp"))
+    assert sch.summary["sample_repairs"] == 0
+
+
+def test_lead_in_is_the_previous_pieces_motion_up_to_its_end() -> None:
+    """``pipeline._lead_in``: the NLP's context grid (t < 0, CONTEXT_STEP Ts apart, CONTEXT_SAMPLES Ts long) over a
+    piece's last motion, read from its profile: at the corner itself the feed is 0 and the acceleration is the
+    piece's rest acceleration there (its analytic value at s = L)."""
+    from solvers import nlp
+    from solvers.timing import PieceTiming
+
+    corner = (5.0, 0.0, 0.0)
+    tp = Toolpath([primitives.line((0.0, 0.0, 0.0), corner), primitives.line(corner, (5.0, 4.0, 0.0))])
+    sch = schedule(tp, router(), Options(method="lp+nlp"))
+    piece, prof = tp.pieces[0], sch.profiles[0]
+    timing = PieceTiming.build(prof)
+    t, v, a = pipeline._lead_in(tp, piece, prof, timing, TS)
+    step = nlp.CONTEXT_STEP * TS
+    np.testing.assert_allclose(np.diff(t), step, rtol=1e-12)
+    assert t[-1] == pytest.approx(-step)
+    assert t[0] == pytest.approx(-step * np.ceil(nlp.CONTEXT_SAMPLES / nlp.CONTEXT_STEP))
+    _, _, _, a_end, _ = pipeline._kinematics(tp, piece, prof, np.array([piece.length]))
+    assert a[-1, 0] == pytest.approx(a_end[0, 0], rel=0.05)
+    assert v[-1, 0] == pytest.approx(-a_end[0, 0] * step, rel=0.05)  # (one context step before the rest)
+    assert a_end[0, 0] < 0.0 and np.all(v[:, 1] == 0.0)  # braking in x into the corner; y stands
