@@ -1478,6 +1478,7 @@ def precise_points(toolpath: Toolpath, limits: verify.Limits, Ts: float) -> bool
 def _piece_blocks(
     toolpath: Toolpath, piece: Piece, prof: PieceProfile, timing: PieceTiming, t0: float, k_lo: int, k_hi: int,
     block: int, carry: _Carry, last: bool, limits: verify.Limits, lim: LimitSet, Ts: float, workers: int = 1,
+    precise: bool = False,
 ) -> Iterator[tuple[TimeSamples, _Recheck, _Carry, bool]]:
     """The piece's own samples k_lo <= k < k_hi in blocks of ``block`` (a multiple of SAMPLE_CHUNK, so the
     chunks of ``_sample_piece`` and hence every value are those of the piece sampled at once), each
@@ -1489,7 +1490,6 @@ def _piece_blocks(
     whole piece.  The held samples' analytic flags (``_Recheck.held_over``) count only at the piece's final
     block; inside the piece those samples are re-checked in full with the next block."""
     starts = list(range(k_lo, k_hi, block)) or [k_lo]
-    precise = precise_points(toolpath, limits, Ts)
     for a in starts:
         b = min(k_hi, a + block)
         final = b >= k_hi
@@ -1593,6 +1593,7 @@ def schedule_stream(
             events(name, index)
 
     limits = _promised(lim, opt, machine)
+    precise = precise_points(toolpath, limits, opt.sample_period)  # (the samples' positions, once per schedule)
     drives = machine.drive_arrays() if machine.has_drives else None
     Ts = opt.sample_period
     starts = np.array([p.s_start for p in toolpath.pieces])
@@ -1659,7 +1660,7 @@ def schedule_stream(
             bad: list[FloatArray] = []
             worst: tuple[str, str, float, float, float] = ("", "", -np.inf, 0.0, 0.0)
             for item in _piece_blocks(toolpath, piece, prof, timing, t_end, k_next, k_hi, n_block, carry, last,
-                                      limits, lim, Ts, _workers(opt)):
+                                      limits, lim, Ts, _workers(opt), precise):
                 seq, chk, _, final = item
                 # (bench seed 1291: the jerk 1.29 x of a piece's last samples, found only once they were
                 # checked with the next piece, which could not repair them)
@@ -1712,7 +1713,7 @@ def schedule_stream(
         report(piece.s_end / total)
         # the piece held at once is released as checked; a longer one is sampled again, block by block
         blocks = kept if kept else _piece_blocks(toolpath, piece, prof, timing, t0_piece, k_lo, k_hi, n_block,
-                                                 carry, last, limits, lim, Ts, _workers(opt))
+                                                 carry, last, limits, lim, Ts, _workers(opt), precise)
         for seq, chk, carry_b, _ in blocks:
             n_rel = chk.n_released
             carry = carry_b

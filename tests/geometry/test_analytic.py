@@ -274,11 +274,6 @@ def test_exact_u_of_s_by_the_quintic_guess_is_the_newton_steps(seed: int, degree
     np.testing.assert_array_equal(tab.u_of_s(s, exact=False), replace(tab.table, quintic=None).inverse(s, False))
 
 
-def scale_p(seg: NurbsSegment) -> float:
-    """The largest control point coordinate (mm): what a point's rounding follows."""
-    return float(np.max(np.abs(seg.control_points)))
-
-
 @pytest.mark.parametrize(("seed", "degree", "n_interior"), RANDOM_CASES)
 def test_random_nurbs_derivative_identities(seed: int, degree: int, n_interior: int) -> None:
     """|d1| = 1, d1.d2 = 0, |d2| = |C' x C''| / |C'|^3, d1.d3 = -|d2|^2."""
@@ -300,7 +295,8 @@ def test_random_nurbs_derivative_identities(seed: int, degree: int, n_interior: 
     np.testing.assert_allclose(ev.position, D[0], rtol=0, atol=0)
     # precise points: C(u) moved along the tangent by u's arc-length residual, C by de Boor (``Toolpath.evaluate``)
     precise = tp.evaluate(s, precise=True).position
-    np.testing.assert_allclose(precise, D[0], rtol=0, atol=2.0 * QUINTIC_TOL + 8.0 * np.spacing(scale_p(seg)))
+    ulp = np.spacing(np.max(np.abs(seg.control_points)))  # (a point's rounding follows its control points)
+    np.testing.assert_allclose(precise, D[0], rtol=0, atol=2.0 * QUINTIC_TOL + 8.0 * ulp)
 
 
 # --------------------------------------------------------------------------- flower
