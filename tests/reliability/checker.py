@@ -86,6 +86,10 @@ DENSE_PER_SPAN = 32
 DENSE_CHORD_SHARE = 1e-3
 DENSE_MAX_ROUNDS = 8
 DENSE_MAX_POINTS = 2_000_000
+#: Dense chords per segment of the path's mean segment length, at least (``dense_polyline``).
+DENSE_PER_SEGMENT = 16
+#: Fewest dense chords of a spiral (``dense_polyline``).
+SPIRAL_MIN_POINTS = 4
 
 
 @dataclass(frozen=True)
@@ -129,6 +133,12 @@ class Nurbs:
         out = d[:, p, :3] / d[:, p, 3:4]
         return np.asarray(out, dtype=np.float64)
 
+    def c0_knots(self) -> FloatArray:
+        """Knots inside the domain where the curve is only C0 (multiplicity >= degree)."""
+        lo, hi = self.domain
+        vals, counts = np.unique(self.knots, return_counts=True)
+        return np.asarray(vals[(vals > lo) & (vals < hi) & (counts >= self.degree)], dtype=np.float64)
+
     def end_tangent(self, at_end: bool, u_at: float | None = None, left: bool = True) -> FloatArray:
         """Unit tangent (direction of travel) at a domain end or, with ``u_at``, one side of a knot."""
         lo, hi = self.domain
@@ -142,21 +152,70 @@ class Nurbs:
         return np.asarray(t / np.linalg.norm(t), dtype=np.float64)
 
 
+#: Gauss-Legendre nodes and weights on [0, 1] of the spiral's position integral: the tangent angle is a
+#: quadratic in s turning at most a few radians over a blend, where 24 nodes are exact to rounding.
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(24)
+_GL_X, _GL_W = 0.5 * (_GL_X + 1.0), 0.5 * _GL_W
+
+
+@dataclass(frozen=True)
+class Spiral:
+    """Plain Euler-spiral data (a corner blend's clothoid): start point, the plane's orthonormal e1, e2 (3,),
+    tangent angle phi(s) = phi0 + kappa0 s + sharpness s^2 / 2 from e1 towards e2, s in [0, length] mm.
+
+    Evaluated by quadrature of the unit tangent, C(s) = start + int_0^s (cos phi e1 + sin phi e2), not by
+    the Fresnel integrals ``geometry.clothoid`` uses."""
+
+    start: FloatArray
+    e1: FloatArray
+    e2: FloatArray
+    phi0: float
+    kappa0: float
+    sharpness: float
+    length: float
+
+    @property
+    def domain(self) -> tuple[float, float]:
+        return 0.0, self.length
+
+    def spans(self) -> FloatArray:
+        return np.array([0.0, self.length])
+
+    def c0_knots(self) -> FloatArray:
+        return np.zeros(0)
+
+    def _phi(self, s: FloatArray) -> FloatArray:
+        return np.asarray(self.phi0 + s * (self.kappa0 + 0.5 * self.sharpness * s), dtype=np.float64)
+
+    def points(self, u: FloatArray) -> FloatArray:
+        s = np.clip(np.asarray(u, dtype=np.float64), 0.0, self.length)
+        phi = self._phi(s[:, None] * _GL_X[None, :])  # (K, nodes)
+        cx = s * (np.cos(phi) @ _GL_W)
+        cy = s * (np.sin(phi) @ _GL_W)
+        return np.asarray(self.start + cx[:, None] * self.e1 + cy[:, None] * self.e2, dtype=np.float64)
+
+    def end_tangent(self, at_end: bool, u_at: float | None = None, left: bool = True) -> FloatArray:
+        s = (self.length if at_end else 0.0) if u_at is None else u_at
+        phi = float(self._phi(np.array([s]))[0])
+        return np.asarray(math.cos(phi) * self.e1 + math.sin(phi) * self.e2, dtype=np.float64)
+
+
+#: A segment of the checked path.
+Segment = Nurbs | Spiral
+
+
 def _angle_deg(a: FloatArray, b: FloatArray) -> float:
     return float(np.degrees(np.arccos(np.clip(float(np.dot(a, b)), -1.0, 1.0))))
 
 
-def corners(path: Sequence[Nurbs]) -> list[tuple[FloatArray, float]]:
+def corners(path: Sequence[Segment]) -> list[tuple[FloatArray, float]]:
     """(position, angle in degrees) of every tangent break above SMOOTH_DEG: between segments and at C0 knots."""
     out: list[tuple[FloatArray, float]] = []
     for i, seg in enumerate(path):
-        lo, hi = seg.domain
-        vals, counts = np.unique(seg.knots, return_counts=True)
-        for v, c in zip(vals, counts, strict=True):
-            if lo < v < hi and c >= seg.degree:
-                ang = _angle_deg(seg.end_tangent(True, float(v), left=True), seg.end_tangent(True, float(v), False))
-                if ang > SMOOTH_DEG:
-                    out.append((seg.points(np.array([v]))[0], ang))
+        for v in seg.c0_knots():
+            ang = _angle_deg(seg.end_tangent(True, float(v), left=True), seg.end_tangent(True, float(v), False))
+            if ang > SMOOTH_DEG:
+                out.append((seg.points(np.array([v]))[0], ang))
         if i + 1 < len(path):
             nxt = path[i + 1]
             ang = _angle_deg(seg.end_tangent(True), nxt.end_tangent(False))
@@ -174,8 +233,9 @@ class Dense:
     u: FloatArray
 
 
-def dense_polyline(path: Sequence[Nurbs]) -> Dense:
-    """Sample every segment until no chord is longer than DENSE_CHORD_SHARE x the path length."""
+def dense_polyline(path: Sequence[Segment]) -> Dense:
+    """Sample every segment until no chord is longer than DENSE_CHORD_SHARE x the path length, nor than the mean
+    segment length / DENSE_PER_SEGMENT."""
     per_seg: list[FloatArray] = []
     for seg in path:
         br = seg.spans()
@@ -184,7 +244,17 @@ def dense_polyline(path: Sequence[Nurbs]) -> Dense:
         per_seg.append(u)
     total = sum(float(np.sum(np.linalg.norm(np.diff(s.points(u), axis=0), axis=1)))
                 for s, u in zip(path, per_seg, strict=True))
-    h = DENSE_CHORD_SHARE * total
+    # ... and to a share of the mean segment: on a program of hundreds of moves a sample on a long line lay farther
+    # from its own line's dense points than from NEAREST_BRACKETS points of a neighbouring move (bench cam seed 5,
+    # 383 segments over ~5 m, 5 mm chords), and went to the per-point search
+    h = min(DENSE_CHORD_SHARE, 1.0 / (DENSE_PER_SEGMENT * len(path))) * total
+    # a spiral (a corner blend's) far shorter than the chords gets fewer points: a program's blends of a few um
+    # held 33 points each within a few um, and those clusters took every nearest-point slot of the samples on the
+    # long lines next to them, which then went to the per-point search (bench cam seed 5: 195 s of checking)
+    for k, seg in enumerate(path):
+        if isinstance(seg, Spiral):
+            n = int(np.clip(math.ceil(DENSE_PER_SPAN * seg.length / h), SPIRAL_MIN_POINTS, DENSE_PER_SPAN))
+            per_seg[k] = np.linspace(0.0, seg.length, n + 1)
     for k, seg in enumerate(path):
         u = per_seg[k]
         for _ in range(DENSE_MAX_ROUNDS):
@@ -200,12 +270,13 @@ def dense_polyline(path: Sequence[Nurbs]) -> Dense:
     return Dense(pts, segi, np.concatenate(per_seg))
 
 
-def path_distance(path: Sequence[Nurbs], x: FloatArray, dense: Dense | None = None) -> FloatArray:
+def path_distance(path: Sequence[Segment], x: FloatArray, dense: Dense | None = None,
+                  tol_mm: float = PATH_TOL_MM) -> FloatArray:
     """Distance (mm) of each point x (K, 3) from the path (union of the segments).
 
     Every figure is the distance to a point of the curve, so an upper bound of the true distance: a
     cheap search that already finds a foot within SETTLED_MM settles the point; the others get the
-    full search (and then, if still over PATH_TOL_MM, the search of every bracket in reach)."""
+    full search (and then, if still over ``tol_mm``, the search of every bracket in reach)."""
     dense = dense or dense_polyline(path)
     tree = cKDTree(dense.pts)
     d0, j0 = tree.query(x, k=NEAREST_BRACKETS)
@@ -230,7 +301,7 @@ def path_distance(path: Sequence[Nurbs], x: FloatArray, dense: Dense | None = No
     # A bracket need not be unimodal (bench seed 2527: a tight bend inside one holds two local minima of
     # the distance, and the golden search settled on the one 66 um off), so each is first scanned at
     # SCAN_POINTS and the search runs around the best of them.
-    for i in np.flatnonzero(best > PATH_TOL_MM):
+    for i in np.flatnonzero(best > tol_mm):
         cand = np.asarray(tree.query_ball_point(x[i], float(d0[i, 0]) + chord), dtype=np.int64)
         for si in np.unique(dense.seg[cand]):
             seg = path[int(si)]
@@ -242,7 +313,7 @@ def path_distance(path: Sequence[Nurbs], x: FloatArray, dense: Dense | None = No
     return best
 
 
-def _scan(seg: Nurbs, a: FloatArray, b: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+def _scan(seg: Segment, a: FloatArray, b: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Brackets [a, b] (m,) narrowed to the two scan steps around the nearest of SCAN_POINTS curve points
     of each (to x (3,))."""
     t = np.linspace(0.0, 1.0, SCAN_POINTS)
@@ -263,7 +334,8 @@ def _bracket(dense: Dense, si: int, jj: NDArray[np.int64]) -> tuple[FloatArray, 
     return a, b
 
 
-def _golden(seg: Nurbs, a: FloatArray, b: FloatArray, x: FloatArray, iterations: int) -> tuple[FloatArray, FloatArray]:
+def _golden(seg: Segment, a: FloatArray, b: FloatArray, x: FloatArray, iterations: int,
+            ) -> tuple[FloatArray, FloatArray]:
     """Golden-section search of |C(u) - x| over [a, b] (the bracket shrinks by 0.618 per step)."""
     g = (math.sqrt(5.0) - 1.0) / 2.0
     for _ in range(iterations):
@@ -276,7 +348,7 @@ def _golden(seg: Nurbs, a: FloatArray, b: FloatArray, x: FloatArray, iterations:
 
 
 def _nearest_brackets(
-    path: Sequence[Nurbs], dense: Dense, x: FloatArray, j0: NDArray[np.int64], best: FloatArray,
+    path: Sequence[Segment], dense: Dense, x: FloatArray, j0: NDArray[np.int64], best: FloatArray,
     iterations: int, newton: int,
 ) -> None:
     """Lower ``best`` (K,) to the distance found in the brackets of the dense points j0 (K, m): golden
@@ -306,7 +378,7 @@ def _nearest_brackets(
             best[m] = np.minimum(best[m], d)
 
 
-def _dist(seg: Nurbs, u: FloatArray, x: FloatArray) -> FloatArray:
+def _dist(seg: Segment, u: FloatArray, x: FloatArray) -> FloatArray:
     return np.asarray(np.linalg.norm(seg.points(u) - x, axis=1), dtype=np.float64)
 
 
@@ -350,12 +422,96 @@ class Report:
         return not self.violations
 
 
+#: Points per programmed move whose nearest bounds each sample's distance from the program (``program_distances``).
+PROGRAM_PROBES = 33
+
+
+@dataclass(frozen=True)
+class Line:
+    """A programmed straight move from a to b (3,), mm."""
+
+    a: FloatArray
+    b: FloatArray
+
+    def distance(self, x: FloatArray) -> FloatArray:
+        """Exact distance (K,) of points x (K, 3) from the segment."""
+        d = self.b - self.a
+        t = np.clip((x - self.a) @ d / float(d @ d), 0.0, 1.0)
+        return np.asarray(np.linalg.norm(x - self.a - t[:, None] * d, axis=1), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Arc:
+    """A programmed circular move: centre (3,), orthonormal e1 (towards the start) and e2 (the direction of travel
+    at the start), radius, sweep >= 0 rad: C(t) = centre + radius (cos t e1 + sin t e2), t in [0, sweep]."""
+
+    centre: FloatArray
+    e1: FloatArray
+    e2: FloatArray
+    radius: float
+    sweep: float
+
+    def point(self, t: float) -> FloatArray:
+        return np.asarray(self.centre + self.radius * (math.cos(t) * self.e1 + math.sin(t) * self.e2),
+                          dtype=np.float64)
+
+    def distance(self, x: FloatArray) -> FloatArray:
+        """Exact distance (K,) of points x (K, 3) from the arc: to the circle where the point's angle in the arc's
+        plane lies within the sweep, else to the nearer end."""
+        p = x - self.centre
+        u, v = p @ self.e1, p @ self.e2
+        h2 = np.maximum(np.einsum("ij,ij->i", p, p) - u * u - v * v, 0.0)
+        ang = np.mod(np.arctan2(v, u), 2.0 * math.pi)
+        on = ang <= self.sweep
+        d_circle = np.sqrt(h2 + (np.hypot(u, v) - self.radius) ** 2)
+        d_ends = np.minimum(np.linalg.norm(x - self.point(0.0), axis=1),
+                            np.linalg.norm(x - self.point(self.sweep), axis=1))
+        return np.asarray(np.where(on, d_circle, d_ends), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Program:
+    """A programmed path of lines and arcs (``moves``) that the scheduled one may leave by up to ``tolerance_mm``
+    (corner blends), with each move's programmed feed limit in mm/s (None: none, e.g. a rapid)."""
+
+    moves: Sequence[Line | Arc]
+    tolerance_mm: float
+    feed: Sequence[float | None]
+
+
+def program_distances(prog: Program, x: FloatArray) -> FloatArray:
+    """Exact distance (K, moves) of each point from each move; inf where a move's bounding sphere is farther than the
+    largest distance that matters (the nearest move's distance + the tolerance + PATH_TOL_MM, at most that of the
+    moves' ends), so far moves cost nothing."""
+    t = np.linspace(0.0, 1.0, PROGRAM_PROBES)
+    probes = np.concatenate([m.a + t[:, None] * (m.b - m.a) if isinstance(m, Line)
+                             else np.array([m.point(float(a)) for a in t * m.sweep]) for m in prog.moves])
+    # an upper bound of every point's nearest distance: the nearest of some points on the moves
+    bound = cKDTree(probes).query(x)[0]
+    reach = bound + prog.tolerance_mm + PATH_TOL_MM
+    tree = cKDTree(x)
+    out = np.full((x.shape[0], len(prog.moves)), np.inf)
+    for i, m in enumerate(prog.moves):
+        if isinstance(m, Line):
+            c, r = 0.5 * (m.a + m.b), 0.5 * float(np.linalg.norm(m.b - m.a))
+        else:
+            c, r = m.centre, m.radius
+        idx = np.asarray(tree.query_ball_point(c, r + float(np.max(reach))), dtype=np.int64)
+        if idx.size:
+            out[idx, i] = m.distance(x[idx])
+    return out
+
+
 def check(
-    path: Sequence[Nurbs], lim: Limits, Ts: float, t: FloatArray, feed: FloatArray, position: FloatArray,
-    kinematic: bool, drive: bool, axis_velocity: bool = False,
+    path: Sequence[Segment], lim: Limits, Ts: float, t: FloatArray, feed: FloatArray, position: FloatArray,
+    kinematic: bool, drive: bool, axis_velocity: bool = False, program: Program | None = None,
 ) -> Report:
     """Check one sampled schedule; ``kinematic``: v, a, j limits; ``drive``: u, e (and v if ``axis_velocity``:
-    lp+nlp holds the LP's vmax only with ``Options.nlp_axis_velocity``; by default speed is limited through u, e)."""
+    lp+nlp holds the LP's vmax only with ``Options.nlp_axis_velocity``; by default speed is limited through u, e).
+
+    With ``program`` (a G-code program whose corners ``path`` blends), also: every sample within the program's
+    tolerance (+ PATH_TOL_MM) of the programmed path, and the speed between samples and the reported feed
+    under each programmed feed (``_check_program``)."""
     rep = Report()
     bad = rep.violations
     arrays = {"t": t, "feed": feed, "position": position}
@@ -457,4 +613,32 @@ def check(
         if not slowest <= v_rest:
             bad.append(f"no stop at the {ang:.2f} degree corner at {pos.tolist()} (slowest nearby {slowest:.3g})")
     rep.utilisation["corner_speed"] = worst_corner
+    if program is not None:
+        _check_program(rep, program, position, feed, speed[REST_PAD : REST_PAD + K - 1])
     return rep
+
+
+def _check_program(rep: Report, prog: Program, position: FloatArray, feed: FloatArray, chord: FloatArray) -> None:
+    """``check``'s program part (chord: |dp| / Ts (K - 1,)): the distance of every sample to the programmed path
+    (exact, to its lines and arcs), and its feeds: each sample's limit is the highest F of the moves within its
+    nearest move's distance + the tolerance + PATH_TOL_MM (a sample in a corner blend may take either move's F,
+    the scheduler holds the lower; elsewhere its own move's), and the speed between two samples is held to the
+    higher of theirs."""
+    bad = rep.violations
+    D = program_distances(prog, position)
+    dmin = np.min(D, axis=1)
+    tol = prog.tolerance_mm + PATH_TOL_MM
+    worst = float(np.max(dmin))
+    rep.utilisation["program_deviation"] = worst / tol
+    if worst > tol:
+        bad.append(f"sample {int(np.argmax(dmin))} is {worst:.3g} mm off the programmed path (tolerance {tol:.3g})")
+    F_move = np.array([math.inf if f is None else float(f) for f in prog.feed])
+    if not np.isfinite(F_move).any():
+        return
+    near = D <= (dmin + tol)[:, None]
+    F = np.max(np.where(near, F_move[None, :], -math.inf), axis=1)
+    pair = np.maximum(F[:-1], F[1:])
+    util = max(float(np.max(chord / pair)), float(np.max(feed / F)))
+    rep.utilisation["program_feed"] = util
+    if util > LIMIT_FACTOR:
+        bad.append(f"feed at {util:.4f} x the programmed feed")

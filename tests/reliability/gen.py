@@ -34,16 +34,19 @@ numbers.
 
 from __future__ import annotations
 
+import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from geometry import examples, primitives
+from geometry import examples, gcode, primitives
+from geometry.clothoid import ClothoidSegment
 from geometry.nurbs import NurbsSegment
 from geometry.toolpath import Toolpath
 from solvers.machine import AXES, ROUTER_DRIVES, Axis, AxisLimits, DriveModel, Machine, derive_limits
-from tests.reliability.checker import Limits, Nurbs, corners
+from tests.reliability.checker import Arc, Limits, Line, Nurbs, Program, Segment, Spiral, corners
 
 FloatArray = np.ndarray
 
@@ -67,20 +70,48 @@ LIMIT_JITTER_DEC = 0.7
 #: Router's requested axis speed (mm/s) before jitter.
 BASE_VMAX = 150.0
 
+#: CAM profiles (``cam_case``): G-code programs of lines, XY arcs and rapids, corners blended or not.
+CAM_PROFILES = ("cam", "cam-bench")
+for _p, _q in zip(CAM_PROFILES, ("test", "bench"), strict=True):
+    LENGTHS[_p], RATIOS[_p], TAUS[_p] = LENGTHS[_q], RATIOS[_q], TAUS[_q]
+#: Moves per program (uniform).
+CAM_MOVES = {"cam": (2, 30), "cam-bench": (2, 300)}
+#: A vertex's turn (degrees) by class, with each class's probability: collinear, under the corner
+#: tolerance (passed at speed), moderate, sharp.
+CAM_TURNS = (((0.0, 0.0), 0.1), ((0.01, 0.45), 0.3), ((1.0, 90.0), 0.4), ((90.0, 175.0), 0.2))
+#: Share of moves that are XY arcs (G02/G03) and rapids (G00).
+CAM_ARC_SHARE = 0.15
+CAM_RAPID_SHARE = 0.08
+#: Share of programs with corner blends, and the blend tolerance's range as a share of the mean leg.
+CAM_BLEND_SHARE = 0.5
+CAM_BLEND_RANGE = (1e-4, 0.3)
+#: Programmed feeds: a share of the machine's smallest axis vmax (log-uniform); each cutting move
+#: changes F with this probability.
+CAM_FEED_RANGE = (0.05, 1.5)
+CAM_FEED_CHANGE = 0.3
+#: Decimals of the program's coordinates (1e-9 mm).
+CAM_DECIMALS = 9
+
 
 @dataclass
 class Case:
     seed: int
     profile: str
-    segments: list[Nurbs]
+    segments: Sequence[Segment]
     machine: Machine  # with drives (both methods)
     lp_machine: Machine  # the LP run's machine (the same, or drive-less with independent limits)
     length: float
     tags: dict[str, object] = field(default_factory=dict)
 
+    gcode: str | None = None  # a CAM case's program (its toolpath: parsed and blended as the service does)
+    program: Program | None = None  # ... and the programmed path and feeds for the checker
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the program's position before its first move
+
     def toolpath(self) -> Toolpath:
+        if self.gcode is not None and self.program is not None:
+            return gcode.parse(self.gcode, start=self.start).toolpath(blend_mm=self.program.tolerance_mm)
         segs = [NurbsSegment.create(s.degree, s.knots, s.ctrl, s.weights, name=f"segments[{i}]")
-                for i, s in enumerate(self.segments)]
+                for i, s in enumerate(self.segments) if isinstance(s, Nurbs)]
         return Toolpath(segs)
 
 
@@ -288,6 +319,8 @@ def _machine(rng: np.random.Generator, length: float, profile: str) -> tuple[Mac
 
 def case(seed: int, profile: str = "test") -> Case:
     """The random case of ``seed`` (deterministic)."""
+    if profile in CAM_PROFILES:
+        return cam_case(seed, profile)
     rng = np.random.default_rng([seed, 5])
     segs, tags = _path(rng, profile)
     length = _loguniform(rng, *LENGTHS[profile])
@@ -300,3 +333,170 @@ def case(seed: int, profile: str = "test") -> Case:
     tags.update(mt)
     tags["corners"] = len(corners(segs))
     return Case(seed, profile, segs, m, lp_m, length, tags)
+
+
+# --------------------------------------------------------------------------- CAM programs
+
+
+def _turned(rng: np.random.Generator, d: FloatArray, deg: float, planar: bool) -> FloatArray:
+    """``d`` turned by ``deg`` degrees about a random axis normal to it (about z if ``planar``)."""
+    if planar:
+        axis = np.array([0.0, 0.0, 1.0 if rng.random() < 0.5 else -1.0])
+    else:
+        axis = _unit(np.cross(d, _direction(rng, 3)))
+    n = np.cross(axis, d)
+    a = math.radians(deg)
+    return _unit(math.cos(a) * d + math.sin(a) * n)
+
+
+def _turn_deg(rng: np.random.Generator) -> float:
+    k = int(rng.choice(len(CAM_TURNS), p=[w for _, w in CAM_TURNS]))
+    lo, hi = CAM_TURNS[k][0]
+    return float(rng.uniform(lo, hi))
+
+
+def _moves(rng: np.random.Generator, n: int, dims: int) -> tuple[list[dict[str, object]], dict[str, int]]:
+    """``n`` moves of a unit-scale program from the origin: dicts of kind ("G00", "G01", "G02", "G03"), end,
+    and for arcs the centre; each leaves the previous end along the previous direction turned by
+    ``_turn_deg`` (a rapid's direction is free)."""
+    pos = np.zeros(3)
+    d = _direction(rng, dims)
+    out: list[dict[str, object]] = []
+    counts = {"G00": 0, "G01": 0, "G02": 0, "G03": 0}
+    for i in range(n):
+        r = rng.random()
+        kind = "G00" if i and r < CAM_RAPID_SHARE else ("ARC" if r < CAM_RAPID_SHARE + CAM_ARC_SHARE else "G01")
+        if kind == "G00":
+            d = _direction(rng, dims)
+        else:
+            d = _turned(rng, d, _turn_deg(rng), dims == 2)
+        leg = _loguniform(rng, 0.2, 5.0)
+        if kind == "ARC":
+            t = np.array([d[0], d[1], 0.0])
+            if np.linalg.norm(t) < 0.1:  # leaving nearly along z: a line instead
+                kind = "G01"
+            else:
+                t = _unit(t)
+                ccw = rng.random() < 0.5
+                normal = np.array([-t[1], t[0], 0.0]) * (1.0 if ccw else -1.0)
+                radius = leg * _loguniform(rng, 0.2, 2.0)
+                centre = pos + radius * normal
+                sweep = math.radians(float(rng.uniform(10.0, 300.0))) * (1.0 if ccw else -1.0)
+                rel = pos - centre
+                c, s_ = math.cos(sweep), math.sin(sweep)
+                end = centre + np.array([c * rel[0] - s_ * rel[1], s_ * rel[0] + c * rel[1], 0.0])
+                kind = "G03" if ccw else "G02"
+                out.append({"kind": kind, "end": end, "centre": centre})
+                counts[kind] += 1
+                e = end - centre
+                d = _unit(np.array([-e[1], e[0], 0.0]) * (1.0 if ccw else -1.0))
+                pos = end
+                continue
+        end = pos + leg * d
+        out.append({"kind": kind, "end": end})
+        counts[kind] += 1
+        pos = end
+    return out, counts
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.{CAM_DECIMALS}f}"
+
+
+def _program_text(moves: list[dict[str, object]], start: FloatArray, feeds: list[float | None],
+                  ) -> tuple[str, list[Line | Arc]]:
+    """The G-code (absolute mm, G17, arcs by I J) of ``moves`` already scaled and moved, and the programmed
+    moves from the same rounded numbers (arcs: centre, start radius and sweep from the I J and end words)."""
+    lines = ["G21 G90 G17"]
+    segs: list[Line | Arc] = []
+    pos = np.array([float(_fmt(v)) for v in start])
+    last_f: float | None = None
+    for m, f in zip(moves, feeds, strict=True):
+        kind = str(m["kind"])
+        end = np.array([float(_fmt(v)) for v in np.asarray(m["end"])])
+        words = [kind, f"X{_fmt(end[0])}", f"Y{_fmt(end[1])}", f"Z{_fmt(end[2])}"]
+        if kind in ("G02", "G03"):
+            ij = np.asarray(m["centre"]) - pos
+            ij = np.array([float(_fmt(ij[0])), float(_fmt(ij[1])), 0.0])
+            words += [f"I{_fmt(ij[0])}", f"J{_fmt(ij[1])}"]
+            centre = pos + ij
+            r = float(np.linalg.norm(pos - centre))
+            e1 = (pos - centre) / r
+            e2 = np.cross([0.0, 0.0, 1.0 if kind == "G03" else -1.0], e1)
+            rel = end - centre
+            sweep = math.atan2(float(rel @ e2), float(rel @ e1)) % (2.0 * math.pi)
+            segs.append(Arc(centre, e1, e2, r, sweep))
+        else:
+            segs.append(Line(pos, end))
+        if f is not None and f != last_f:
+            words.append(f"F{f * 60.0:.6f}")
+            last_f = f
+        lines.append(" ".join(words))
+        pos = end
+    return "\n".join(lines) + "\n", segs
+
+
+def _checked_segments(tp: Toolpath) -> list[Segment]:
+    """The toolpath's segments (its corner blends included) as the checker's plain data."""
+    out: list[Segment] = []
+    for seg in tp.segments:
+        if isinstance(seg, ClothoidSegment):
+            out.append(Spiral(np.array(seg.start), np.array(seg.e1), np.array(seg.e2), seg.phi0, seg.kappa0,
+                              seg.sharpness, seg.length))
+        elif isinstance(seg, NurbsSegment):
+            out.append(_data(seg))
+        else:
+            raise TypeError(f"no checker data for {type(seg).__name__}")
+    return out
+
+
+def cam_case(seed: int, profile: str = "cam") -> Case:
+    """A random G-code program (deterministic in ``seed``): 2-D or 3-D chains of lines, XY arcs (G02/G03
+    by I J) and rapids (G00), each vertex turning by a random class of angle (``CAM_TURNS``: collinear,
+    under the corner tolerance, moderate, sharp), F words changing along the way (a share of the
+    machine's smallest vmax), corners blended at a random tolerance in half of them (``CAM_BLEND_SHARE``).
+    The machine is drawn as in ``case``, sized to the mean leg (not the whole path), so the legs are
+    RATIOS[profile] stopping distances long.
+
+    The checker's path is the toolpath the product builds from the program (the blends' clothoids
+    included); the programmed moves and feeds go in ``Case.program``, so the samples are also checked
+    against the program itself (within the blend tolerance) and its F words."""
+    rng = np.random.default_rng([seed, 7])
+    dims = int(rng.choice([2, 3]))
+    n = int(rng.integers(CAM_MOVES[profile][0], CAM_MOVES[profile][1] + 1))
+    moves, counts = _moves(rng, n, dims)
+    ends = [np.zeros(3)] + [np.asarray(m["end"]) for m in moves]
+    unit_len = float(sum(np.linalg.norm(b - a) for a, b in itertools.pairwise(ends)))
+    length = _loguniform(rng, *LENGTHS[profile])
+    scale = length / unit_len
+    offset = rng.uniform(-500.0, 500.0, size=3)
+    if dims == 2:
+        offset[2] = 0.0
+    moves = [{k: (np.asarray(v) * scale + offset if k in ("end", "centre") else v) for k, v in m.items()}
+             for m in moves]
+    m, lp_m, mt = _machine(rng, length / n, profile)
+    vref = min(a.limits.vmax for a in m.axes)
+    feeds: list[float | None] = []
+    f: float | None = None
+    for mv in moves:
+        if mv["kind"] == "G00":
+            feeds.append(None)
+            continue
+        if f is None or rng.random() < CAM_FEED_CHANGE:
+            f = vref * _loguniform(rng, *CAM_FEED_RANGE)
+        feeds.append(f)
+    blend = 0.0
+    if rng.random() < CAM_BLEND_SHARE:
+        blend = float(_fmt(length / n * _loguniform(rng, *CAM_BLEND_RANGE)))
+    text, prog_segs = _program_text(moves, offset, feeds)
+    start = (float(_fmt(offset[0])), float(_fmt(offset[1])), float(_fmt(offset[2])))
+    # the rounded F words, as the program states them
+    feeds_r = [None if x is None else float(f"{x * 60.0:.6f}") / 60.0 for x in feeds]
+    prog = Program(prog_segs, blend, feeds_r)
+    c = Case(seed, profile, [], m, lp_m, length, {"dims": dims, "moves": n, "blend_mm": blend, **counts, **mt},
+             gcode=text, program=prog, start=start)
+    tp = c.toolpath()
+    c.segments = _checked_segments(tp)
+    c.tags["corners"] = len(corners(c.segments))
+    c.tags["unblended"] = len(tp.unblended)
+    return c

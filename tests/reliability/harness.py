@@ -52,7 +52,7 @@ def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None 
     if before_check is not None:
         before_check(int(smp.t.size))
     rep = checker.check(case.segments, gen.limits_of(m), TS, smp.t, smp.feed, smp.position,
-                        kinematic=method == "lp", drive=method == "lp+nlp")
+                        kinematic=method == "lp", drive=method == "lp+nlp", program=case.program)
     fallbacks = sch.diagnostics.get("nlp_fallbacks", [])
     return Outcome(case.seed, method, rep.ok, rep.violations, rep.utilisation, None, int(smp.t.size), len(fallbacks),
                    [f["status"] for f in fallbacks])

@@ -145,3 +145,62 @@ def test_vectorised_search_settles_samples_whose_feet_lie_outside_the_two_neares
     checker._nearest_brackets(case.segments, dense, x[off], j0[off], sub, checker.GOLDEN_ITERATIONS, 0)
     assert off.sum() > 1000  # (the case still exercises the full search)
     assert np.all(sub <= checker.PATH_TOL_MM), int(np.sum(sub > checker.PATH_TOL_MM))
+
+
+# --------------------------------------------------------------------------- CAM programs: spirals, program checks
+
+
+def test_spiral_quadrature_matches_a_circle_and_the_fresnel_form() -> None:
+    """The checker's spiral (quadrature of its tangent) against two independent truths: zero sharpness is a
+    circle of radius 1 / kappa0; non-zero, geometry.clothoid's Fresnel-integral evaluation."""
+    from geometry.clothoid import ClothoidSegment
+
+    e1, e2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.6, 0.8])
+    arc = checker.Spiral(np.array([1.0, 2.0, 3.0]), e1, e2, 0.3, 0.5, 0.0, 5.0)
+    s = np.linspace(0.0, 5.0, 201)
+    centre = arc.start + 2.0 * (-np.sin(0.3) * e1 + np.cos(0.3) * e2)  # radius 1 / 0.5 to the left
+    np.testing.assert_allclose(np.linalg.norm(arc.points(s) - centre, axis=1), 2.0, rtol=0, atol=1e-12)
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        L = float(10.0 ** rng.uniform(-3, 1))
+        k0 = float(rng.uniform(-1, 1)) / L
+        c = float(rng.choice([-1, 1]) * rng.uniform(0.2, 3.0)) / L**2
+        ref = ClothoidSegment.create(rng.normal(size=3), e1, e2, float(rng.uniform(-3, 3)), k0, c, L)
+        sp = checker.Spiral(ref.start, e1, e2, ref.phi0, k0, c, L)
+        u = np.linspace(0.0, L, 33)
+        np.testing.assert_allclose(sp.points(u), ref.points(u), rtol=0, atol=1e-12 * max(1.0, L))
+        np.testing.assert_allclose(sp.end_tangent(True), ref.derivatives(np.array([L]))[1, 0], atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def cam_run() -> tuple[gen.Case, checker.Limits, object]:
+    """A blended random program (cam seed 3: 21 moves, 0.91 mm blends) scheduled under lp."""
+    case = gen.cam_case(3, "cam")
+    assert case.program is not None and case.program.tolerance_mm > 0
+    assert any(isinstance(s, checker.Spiral) for s in case.segments)
+    sch = schedule(case.toolpath(), case.lp_machine, Options(method="lp", sample_period=TS))
+    return case, gen.limits_of(case.lp_machine), sch.samples
+
+
+def test_accepts_a_blended_program_and_holds_it_to_its_tolerance_and_feeds(cam_run: tuple) -> None:  # type: ignore[type-arg]
+    case, lim, smp = cam_run
+    rep = checker.check(case.segments, lim, TS, smp.t, smp.feed, smp.position, kinematic=True, drive=False,
+                        program=case.program)
+    assert rep.ok, rep.violations
+    # the blends leave the program (by up to their tolerance) and the F words bind somewhere
+    assert 0.3 < rep.utilisation["program_deviation"] <= 1.0
+    assert rep.utilisation["program_feed"] > 0.9
+    # a tighter tolerance than the blends': samples off the programmed path
+    tight = checker.Program(case.program.moves, 0.5 * case.program.tolerance_mm, case.program.feed)
+    rep = checker.check(case.segments, lim, TS, smp.t, smp.feed, smp.position, kinematic=True, drive=False,
+                        program=tight)
+    assert any("off the programmed path" in v for v in rep.violations), rep.violations
+
+
+def test_rejects_a_feed_over_a_programmed_f(cam_run: tuple) -> None:  # type: ignore[type-arg]
+    case, lim, smp = cam_run
+    F = [None if f is None else 0.95 * f for f in case.program.feed]
+    lower = checker.Program(case.program.moves, case.program.tolerance_mm, F)
+    rep = checker.check(case.segments, lim, TS, smp.t, smp.feed, smp.position, kinematic=True, drive=False,
+                        program=lower)
+    assert any("programmed feed" in v for v in rep.violations), rep.violations

@@ -23,10 +23,12 @@ from __future__ import annotations
 
 import pytest
 
-from tests.reliability import gen, harness
+from tests.reliability import checker, gen, harness
 
 #: Seeds 0 .. RANDOM_CASES - 1 run in ``make test`` (issue: at least 200).
 RANDOM_CASES = 200
+#: Random G-code programs (``gen.cam_case``, profile "cam") run in ``make test``.
+CAM_CASES = 30
 
 KNOWN_FAILURES: dict[int, dict[str, str]] = {}
 
@@ -47,6 +49,31 @@ def test_random_case(seed: int, method: str) -> None:
     case = gen.case(seed, "test")
     out = harness.run(case, method)
     assert out.ok, f"{out.describe()} tags={case.tags}"
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize("method", harness.METHODS)
+@pytest.mark.parametrize("seed", range(CAM_CASES))
+def test_random_program(seed: int, method: str) -> None:
+    """A random G-code program (``gen.cam_case``): lines, arcs, rapids, F words, corners blended in half of
+    them; checked as above plus the distance to the programmed path and its F words."""
+    case = gen.cam_case(seed, "cam")
+    out = harness.run(case, method)
+    assert out.ok, f"{out.describe()} tags={case.tags}"
+
+
+def test_program_generator_is_deterministic_and_varied() -> None:
+    a, b = gen.cam_case(5, "cam"), gen.cam_case(5, "cam")
+    assert a.gcode == b.gcode
+    cases = [gen.cam_case(s, "cam") for s in range(CAM_CASES)]
+    assert {c.tags["dims"] for c in cases} == {2, 3}
+    for kind in ("G00", "G01", "G02", "G03"):
+        assert sum(int(c.tags[kind]) for c in cases) > 0, kind  # type: ignore[call-overload]
+    blended = [c for c in cases if float(c.tags["blend_mm"]) > 0]  # type: ignore[arg-type]
+    assert 0 < len(blended) < len(cases)
+    assert any(isinstance(s, checker.Spiral) for c in blended for s in c.segments)
+    assert any(int(c.tags["unblended"]) > 0 for c in blended)  # type: ignore[call-overload]
+    assert any(int(c.tags["corners"]) > 0 for c in cases)  # type: ignore[call-overload]
 
 
 def test_generator_is_deterministic_and_varied() -> None:
