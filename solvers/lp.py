@@ -557,6 +557,14 @@ def tangent_jump(right: PathSamples, left: PathSamples, eps: float) -> FloatArra
     return np.asarray(np.abs(right.d1 - left.d1 - eps * (right.d2 + left.d2)), dtype=np.float64)
 
 
+def curvature_jump(right: PathSamples, left: PathSamples, eps: float) -> FloatArray:
+    """|jump of x_ss| per axis (K, 3) at breaks from the geometry eps mm either side, less its smooth part
+    eps (x_sss(+) + x_sss(-)), as ``tangent_jump``: a G2 junction inside a corner blend's clothoids (x_sss up to
+    ~1e7 /mm^2 on a blend of 1 um) read 5-20 /mm at eps = 1 nm, whose step caps and coupled rows held the LP's
+    feed at its floor across the knot interval around it (random program cam 20: a 412 s crawl over 0.3 mm)."""
+    return np.asarray(np.abs(right.d2 - left.d2 - eps * (right.d3 + left.d3)), dtype=np.float64)
+
+
 Coupling = tuple[NDArray[np.bool_], sp.csr_matrix, FloatArray]
 
 
@@ -1538,7 +1546,7 @@ class WindowLP:
             br = self.breaks[(self.breaks > lo + BREAK_EPS_MM) & (self.breaks < hi - BREAK_EPS_MM)]
             if br.size:
                 right, left = self._known_geometry(br + BREAK_EPS_MM), self._known_geometry(br - BREAK_EPS_MM)
-                jump, jump1 = np.abs(right.d2 - left.d2), tangent_jump(right, left, BREAK_EPS_MM)
+                jump, jump1 = curvature_jump(right, left, BREAK_EPS_MM), tangent_jump(right, left, BREAK_EPS_MM)
             else:
                 jump = jump1 = np.zeros((0, 3))
             self._step_cache = (br, np.asarray(jump, dtype=np.float64), np.asarray(jump1, dtype=np.float64))

@@ -86,7 +86,7 @@ from scipy.ndimage import maximum_filter1d
 from geometry.toolpath import PathSamples
 from solvers import bspline, ccompile, kinematics
 from solvers.ipm import DenseIpm, IpmResult
-from solvers.lp import SIGN_EPS, V_KERNEL_A, V_KERNEL_JC, axis_moves, step_cap, tangent_jump
+from solvers.lp import SIGN_EPS, V_KERNEL_A, V_KERNEL_JC, axis_moves, curvature_jump, step_cap, tangent_jump
 from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
@@ -1862,7 +1862,7 @@ class NlpRefiner:
         right, left = geometry(br + BREAK_EPS_MM), geometry(br - BREAK_EPS_MM)
         cap_f = np.full(br.size, np.inf)
         if lim.a_step is not None:
-            cap_f = np.sqrt(step_cap(lim.a_step, np.abs(right.d2 - left.d2)))
+            cap_f = np.sqrt(step_cap(lim.a_step, curvature_jump(right, left, BREAK_EPS_MM)))
         if lim.v_step is not None:
             cap_f = np.minimum(cap_f, step_cap(lim.v_step, tangent_jump(right, left, BREAK_EPS_MM)))
         keep = np.isfinite(cap_f)

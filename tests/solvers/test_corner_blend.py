@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from geometry import gcode, primitives
 from geometry.clothoid import blend_polyline
 from geometry.primitives import polyline
 from geometry.toolpath import Toolpath
@@ -23,6 +24,9 @@ ZIGZAG = np.array([[10.0 * i, 5.0 * (i % 2), 0.0] for i in range(9)])
 #: LP's rest shapes, which make a stop cheaper: 2.526 s / 1.998 s = 1.26, session 27).
 BLEND_TOL_MM = 0.1
 MIN_SPEEDUP = 1.2
+#: Random program cam 20 blended at 0.46 um vs stopping at each corner: at most this many times as long (412 s /
+#: 1.34 s = 308 before ``lp.curvature_jump``, 6.3 s / 1.34 s = 4.7 with it).
+CRAWL_FACTOR = 10.0
 
 
 def test_blended_zigzag_is_faster_and_within_limits() -> None:
@@ -72,3 +76,40 @@ def test_dense_g01_spiral_blended_within_limits_and_on_the_path() -> None:
         near = aa[None] + t[..., None] * d[None]
         best = np.minimum(best, np.linalg.norm(run[:, None, :] - near, axis=2).min(axis=1))
     assert best.max() <= 0.02 * (1 + 1e-6)
+
+
+def test_curvature_jump_reads_no_jump_inside_a_blend_and_one_over_r_at_an_arc() -> None:
+    """``lp.curvature_jump`` at the junctions of a 0.2 um line-line blend (G2: no jump, though x_sss reaches
+    1.4e6 /mm^2 there, so the plain difference of x_ss at +-1 nm reads 1.85 /mm; the residual, from x_ssss,
+    3.2e-3), and where a line meets a tangent arc of radius R (a C1 junction: the jump is 1 / R, analytic)."""
+    from solvers.lp import BREAK_EPS_MM, curvature_jump
+
+    pts = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [15.0, 8.660254037844386, 0.0]])
+    tp = Toolpath(blend_polyline(pts, 2e-4))
+    br = tp.offsets[1:-1]
+    assert br.size == 3  # line | spiral | spiral | line
+    right, left = tp.evaluate(br + BREAK_EPS_MM), tp.evaluate(br - BREAK_EPS_MM)
+    plain = np.max(np.abs(right.d2 - left.d2))
+    assert plain > 1.0  # the smooth part of x_ss over 2 nm
+    assert np.max(np.linalg.norm(curvature_jump(right, left, BREAK_EPS_MM), axis=1)) < 1e-2 * plain
+    R = 4.0
+    arc = Toolpath([primitives.line([-5.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
+                    primitives.arc([0.0, 0.0, 0.0], [R, R, 0.0], centre=[0.0, R, 0.0], direction="ccw")])
+    b = arc.offsets[1:2]
+    jump = curvature_jump(arc.evaluate(b + BREAK_EPS_MM), arc.evaluate(b - BREAK_EPS_MM), BREAK_EPS_MM)
+    np.testing.assert_allclose(np.linalg.norm(jump, axis=1), 1.0 / R, rtol=1e-6)
+
+
+def test_tiny_blends_do_not_crawl() -> None:
+    """Random program cam 20 (23 moves, corners blended at 0.46 um; its blends' clothoids are 0.6-2 um long):
+    the curvature jumps read at their G2 junctions capped the LP's feed and held it at its floor across a
+    0.14 mm knot interval, 412 s of motion for a 72 mm path that takes 1.34 s stopping at every corner.  Now
+    6.3 s (its blends still cost: they are far narrower than the knots; see the README's limits)."""
+    from tests.reliability import gen, harness
+
+    case = gen.cam_case(20, "cam")
+    stops = gcode.parse(case.gcode or "", start=case.start).toolpath()
+    t_stop = schedule(stops, case.lp_machine, Options(method="lp")).summary["motion_time"]
+    out = harness.run(case, "lp")
+    assert out.ok, out.describe()
+    assert out.samples * 1e-3 < CRAWL_FACTOR * t_stop
