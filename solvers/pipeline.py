@@ -174,6 +174,12 @@ FLOOR_REFINE_PATIENCE = 1
 #: ``Options.knot_spacing`` is kept: the 45-loop flower at 4.63 mm went from 22 to 67 LP windows,
 #: 4 % less motion for ~3 x the compute)
 FLOOR_REFINE_MAX_INTERVALS = 1024
+#: ... also past KNOT_REFINEMENTS doublings (the stalls' limit, after which only a stuck piece went on).  Session
+#: 38, method lp, bench seeds 0-299 (A/B, one process each): 0 failures either way; motion geometric mean 0.929
+#: (100 of 300 shorter, none longer: seed 71 0.20 x, 158 0.30 x, 298 0.36 x), CPU of the checked runs 1.43 x
+#: (the most, seed 130's 19.1 s, unchanged; small cases up to 12 x: 0.2 -> 2.9 s); random program cam 20
+#: (sub-micron corner blends) 6.34 -> 2.51 s.  The flower's samples bit-identical (no floored piece).
+FLOOR_REFINE_PAST_PLAN = True
 #: Method lp with jerk adds the rest shapes to q in each piece's first and last knot interval
 #: (``lp.WindowSpec.rest_shapes``, ``_solve_windows``).
 LP_REST_SHAPES = True
@@ -565,9 +571,10 @@ def solve_piece(
     floor (the feed is kept off 0 there only by the floor: the same coarse knots, solved without a
     stall) the knots are refined too, and the fastest profile that moves is kept (test seed 14:
     1.96 s on the default knots, 0.68 s on twice as many), on the default knot spacing, up to
-    FLOOR_REFINE_MAX_INTERVALS, and with method lp only: under lp+nlp the NLP works on the LP's
-    knots, and refining them (test seed 14: 0.275 -> 0.222 s) made the NLP up to 3.6 x slower
-    (bench seed 24) and bench seed 145's sampled servo error 1.013 x (a typed 422).
+    FLOOR_REFINE_MAX_INTERVALS (past KNOT_REFINEMENTS doublings too: ``FLOOR_REFINE_PAST_PLAN``), while
+    each refinement pays (FLOOR_REFINE_GAIN, FLOOR_REFINE_PATIENCE), and with method lp only: under
+    lp+nlp the NLP works on the LP's knots, and refining them (test seed 14: 0.275 -> 0.222 s) made the
+    NLP up to 3.6 x slower (bench seed 24) and bench seed 145's sampled servo error 1.013 x (a typed 422).
     """
     first: tuple[float, PieceProfile, list[int]] | None = None
     if first_n_int is not None:
@@ -652,7 +659,8 @@ def _refined(
                 break
         # after KNOT_REFINEMENTS doublings (the last with the rest floor) only a piece still stuck goes on,
         # with the rest floor, while its knots stay at most STUCK_REFINE_MAX_INTERVALS
-        if attempt >= KNOT_REFINEMENTS and (not is_stuck or 2 * plan.n_int > STUCK_REFINE_MAX_INTERVALS):
+        if (attempt >= KNOT_REFINEMENTS and (not is_stuck or 2 * plan.n_int > STUCK_REFINE_MAX_INTERVALS)
+                and not (FLOOR_REFINE_PAST_PLAN and floored and floor_refine and not is_stuck)):
             break
         n_int = 2 * plan.n_int
         attempt += 1

@@ -963,3 +963,19 @@ def test_velocity_steps_found_only_at_a_tangent_break() -> None:
     t_b, got = steps[0]
     np.testing.assert_allclose(got, dv, rtol=0, atol=1e-9)
     assert t[2] <= t_b <= t[3]
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_floored_piece_refines_past_the_plans_doublings_while_it_pays(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Bench seed 71 (lp): a piece whose LP holds control points at their q floor stopped refining after
+    KNOT_REFINEMENTS doublings of its plan, still floored and still paying (974 samples); refined on while each
+    doubling shortens it (``pipeline.FLOOR_REFINE_PAST_PLAN``), it takes 199.  Both pass the checker; the one
+    refined further must be at most half as long (measured 0.20 x)."""
+    import solvers.pipeline
+
+    case = gen.case(71, "bench")
+    on = harness.run(case, "lp")
+    monkeypatch.setattr(solvers.pipeline, "FLOOR_REFINE_PAST_PLAN", False)
+    off = harness.run(case, "lp")
+    assert on.ok and off.ok, (on.describe(), off.describe())
+    assert on.samples <= 0.5 * off.samples
