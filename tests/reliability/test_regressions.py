@@ -549,9 +549,6 @@ def test_refined_span_slower_than_the_lp_keeps_the_lp_feed(monkeypatch: pytest.M
         return p, mask, rise
 
     monkeypatch.setattr(NlpRefiner, "refine", slowing)
-    # (the middle chain's LP feed is at the NLP's feed bound with no step-capped break since session 38's
-    # ``lp.curvature_jump``, so the NLP would keep it unsolved: solved here, as the guard is what is tested)
-    monkeypatch.setattr(NlpRefiner, "_lp_at_bound", lambda *args, **kwargs: False)
     case = gen.case(6, "bench")
     sch = schedule(case.toolpath(), case.machine, Options(method="lp+nlp", sample_period=harness.TS))
     assert slowed
