@@ -1942,8 +1942,8 @@ class NlpRefiner:
         if ctx is not None:
             t, v, acc = ctx.joined(t, v, acc)
             t_fine = t[ctx.left_size : ctx.left_size + fine.size]
-        steps = _velocity_steps(fine, t_fine, v[ctx.left_size : ctx.left_size + fine.size] if ctx else v,
-                                acc[ctx.left_size : ctx.left_size + fine.size] if ctx else acc)
+        own = slice(0, fine.size) if ctx is None else slice(ctx.left_size, ctx.left_size + fine.size)
+        steps = _velocity_steps(fine, t_fine, v[own], acc[own])
         M = SAMPLED_SUBDIV
         h = Ts / M
         n_u = int((t[-1] - t[0]) / h) + 1
@@ -1954,6 +1954,11 @@ class NlpRefiner:
         box = np.where(np.abs(k) == M, 0.5, 1.0) / (2 * M)
         hat = (M - np.abs(k)) / M**2
         valid = slice(2 * M, n_u - 2 * M)
+        # each velocity step's impulse dv delta(t - t_b) under the hat: dv (Ts - |t - t_b|) / Ts^2 on its +-Ts
+        impulses: list[tuple[int, int, FloatArray, FloatArray]] = []
+        for t_b, dv in steps:
+            lo, hi = np.searchsorted(tu, (t_b - Ts, t_b + Ts))
+            impulses.append((lo, hi, (Ts - np.abs(tu[lo:hi] - t_b)) / Ts**2, dv))
         e_s = np.zeros((n_u, 3))
         u_s = np.zeros((n_u, 3))
         for i in range(3):
@@ -1963,9 +1968,8 @@ class NlpRefiner:
                 continue
             vm = np.convolve(np.interp(tu, t, v[:, i]), box, mode="same")
             am = np.convolve(np.interp(tu, t, acc[:, i]), hat, mode="same")
-            for t_b, dv in steps:  # a velocity step's impulse dv delta(t - t_b) under the hat
-                lo, hi = np.searchsorted(tu, (t_b - Ts, t_b + Ts))
-                am[lo:hi] += dv[i] * (Ts - np.abs(tu[lo:hi] - t_b)) / Ts**2
+            for lo, hi, w, dv in impulses:
+                am[lo:hi] += dv[i] * w
             jm = np.zeros(n_u)
             jm[M:-M] = (am[2 * M :] - am[: -2 * M]) / (2.0 * Ts)
             e = lim.Kv[i] * vm + lim.Ka[i] * am + lim.Kj[i] * jm

@@ -658,7 +658,8 @@ def _refined(
             if not floored and not behind:
                 break
         # after KNOT_REFINEMENTS doublings (the last with the rest floor) only a piece still stuck goes on,
-        # with the rest floor, while its knots stay at most STUCK_REFINE_MAX_INTERVALS
+        # with the rest floor, while its knots stay at most STUCK_REFINE_MAX_INTERVALS, or one still held at
+        # its floor whose refinements pay (FLOOR_REFINE_PAST_PLAN; up to FLOOR_REFINE_MAX_INTERVALS)
         if (attempt >= KNOT_REFINEMENTS and (not is_stuck or 2 * plan.n_int > STUCK_REFINE_MAX_INTERVALS)
                 and not (FLOOR_REFINE_PAST_PLAN and floored and floor_refine and not is_stuck)):
             break
