@@ -480,15 +480,13 @@ class Program:
 
 
 def program_distances(prog: Program, x: FloatArray) -> FloatArray:
-    """Exact distance (K, moves) of each point from each move; inf where a move's bounding sphere is farther than the
-    largest distance that matters (the nearest move's distance + the tolerance + PATH_TOL_MM, at most that of the
-    moves' ends), so far moves cost nothing."""
+    """Exact distance (K, moves) of each point from each move; inf where a move's bounding sphere is farther from the
+    point than the largest distance that matters (an upper bound of the point's nearest distance, from
+    PROGRAM_PROBES points on each move, + the tolerance + PATH_TOL_MM), so far moves cost nothing."""
     t = np.linspace(0.0, 1.0, PROGRAM_PROBES)
     probes = np.concatenate([m.a + t[:, None] * (m.b - m.a) if isinstance(m, Line)
                              else np.array([m.point(float(a)) for a in t * m.sweep]) for m in prog.moves])
-    # an upper bound of every point's nearest distance: the nearest of some points on the moves
-    bound = cKDTree(probes).query(x)[0]
-    reach = bound + prog.tolerance_mm + PATH_TOL_MM
+    reach = float(np.max(cKDTree(probes).query(x)[0])) + prog.tolerance_mm + PATH_TOL_MM
     tree = cKDTree(x)
     out = np.full((x.shape[0], len(prog.moves)), np.inf)
     for i, m in enumerate(prog.moves):
@@ -496,7 +494,7 @@ def program_distances(prog: Program, x: FloatArray) -> FloatArray:
             c, r = 0.5 * (m.a + m.b), 0.5 * float(np.linalg.norm(m.b - m.a))
         else:
             c, r = m.centre, m.radius
-        idx = np.asarray(tree.query_ball_point(c, r + float(np.max(reach))), dtype=np.int64)
+        idx = np.asarray(tree.query_ball_point(c, r + reach), dtype=np.int64)
         if idx.size:
             out[idx, i] = m.distance(x[idx])
     return out
@@ -625,18 +623,22 @@ def _check_program(rep: Report, prog: Program, position: FloatArray, feed: Float
     the scheduler holds the lower; elsewhere its own move's), and the speed between two samples is held to the
     higher of theirs."""
     bad = rep.violations
-    D = program_distances(prog, position)
-    dmin = np.min(D, axis=1)
     tol = prog.tolerance_mm + PATH_TOL_MM
+    F_move = np.array([math.inf if f is None else float(f) for f in prog.feed])
+    K = position.shape[0]
+    dmin, F = np.empty(K), np.empty(K)
+    # DISTANCE_CHUNK samples at a time: the distances are (samples, moves), 5 GB for 2 M samples of 300 moves at once
+    for lo in range(0, K, DISTANCE_CHUNK):
+        D = program_distances(prog, position[lo : lo + DISTANCE_CHUNK])
+        dmin[lo : lo + D.shape[0]] = np.min(D, axis=1)
+        near = D <= (dmin[lo : lo + D.shape[0]] + tol)[:, None]
+        F[lo : lo + D.shape[0]] = np.max(np.where(near, F_move[None, :], -math.inf), axis=1)
     worst = float(np.max(dmin))
     rep.utilisation["program_deviation"] = worst / tol
     if worst > tol:
         bad.append(f"sample {int(np.argmax(dmin))} is {worst:.3g} mm off the programmed path (tolerance {tol:.3g})")
-    F_move = np.array([math.inf if f is None else float(f) for f in prog.feed])
     if not np.isfinite(F_move).any():
         return
-    near = D <= (dmin + tol)[:, None]
-    F = np.max(np.where(near, F_move[None, :], -math.inf), axis=1)
     pair = np.maximum(F[:-1], F[1:])
     util = max(float(np.max(chord / pair)), float(np.max(feed / F)))
     rep.utilisation["program_feed"] = util
