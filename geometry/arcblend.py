@@ -92,6 +92,12 @@ COPLANAR_TOL: Final = 1e-9
 ARC_FIT_TOL: Final = 1e-9
 #: Two segments are blended only where they meet within this distance (mm).
 JOINT_TOL_MM: Final = 1e-6
+#: Smallest blend tolerance (mm) ``blend_path`` accepts other than 0: the path fidelity (every sample within
+#: 1 um of the curve).  A narrower blend moves the path by less than the fidelity allows anyway and its
+#: clothoids (a few nm to um long, curvature up to 10^6 /mm) only hold the feed down: random programs blended
+#: at 4.5 nm and 34 nm stalled the LP ("feed stalls") and ran 129,079 s of lp+nlp motion where the LP alone
+#: took 4,547 s (cam-bench seeds 20 and 14, session 38).
+MIN_BLEND_TOLERANCE_MM: Final = 1e-3
 #: Largest closure residual |F| accepted, relative to the spiral length L.
 CLOSURE_TOL: Final = 1e-10
 #: Aim of the secant on rho(L) and the band accepted below 1.
@@ -545,6 +551,9 @@ def blend_path(
     as the key, so cutting moves at different F form one run): ``BlendedPath.origin`` and
     ``after`` tell which input segments each output segment lies between.
 
+    ``tolerance_mm`` is 0 (no blends: the segments come back as they are) or at least
+    MIN_BLEND_TOLERANCE_MM; anything else is a GeometryError.
+
     Returns:
         The segments, the index of the input segment each came from (a blend: the one before its
         corner; ``after``: the one after it) and the corners with an arc that could not be
@@ -552,6 +561,10 @@ def blend_path(
     """
     if not (isinstance(tolerance_mm, (int, float)) and math.isfinite(tolerance_mm) and tolerance_mm >= 0.0):
         raise GeometryError("corner_tolerance_mm", tolerance_mm, "must be a finite number >= 0")
+    if 0.0 < tolerance_mm < MIN_BLEND_TOLERANCE_MM:
+        raise GeometryError("corner_tolerance_mm", tolerance_mm, f"must be 0 (stop at corners) or >= "
+                            f"{MIN_BLEND_TOLERANCE_MM:g} mm (MIN_BLEND_TOLERANCE_MM: a narrower blend is within the "
+                            "1 um path fidelity and only holds the feed down)")
     n = len(segments)
     nm = list(names) if names is not None else [seg.name for seg in segments]
     # plain lines (two control points) need no Line object unless their run has an arc: a dense program has 10^5

@@ -268,7 +268,7 @@ def _routes(app: FastAPI) -> None:
         method: Annotated[Literal["lp", "lp+nlp"], Query()] = "lp+nlp",
         sample_period: Annotated[float, Query(ge=1e-5, le=0.1, description="s")] = 0.001,
         corner_tolerance_deg: Annotated[float, Query(ge=0, le=180)] = 0.5,
-        corner_blend_mm: Annotated[float, Query(ge=0, le=100, description="mm; 0 stops at corners")] = 0.0,
+        corner_blend_mm: Annotated[float, Query(ge=0, le=100, description="mm; 0 stops, else >= 0.001")] = 0.0,
     ) -> Response:
         """Schedule a G-code program uploaded as `text/x-gcode` (machine preset and options as query parameters).
         Answers as `POST /v1/schedule` (JSON, CSV, or NDJSON streamed piece by piece with a final summary line)."""

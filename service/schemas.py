@@ -19,8 +19,11 @@ from pydantic import (
     Strict,
     StrictInt,
     Tag,
+    field_validator,
     model_validator,
 )
+
+from geometry.arcblend import MIN_BLEND_TOLERANCE_MM
 
 #: A finite JSON number (integers accepted, booleans and strings not).
 Number = Annotated[float, Strict(), AllowInfNan(False)]
@@ -123,8 +126,17 @@ class ToolpathIn(BaseModel):
         "or consecutive JSON line / arc / polyline segments and NURBS that are exact lines or arcs) with G2 "
         "clothoid pairs within this distance (mm) of the original corner, so the schedule runs through them; "
         "corners that cannot be blended (not coplanar, no fit) stay rest points and are listed in "
-        "diagnostics.unblended_corners; 0 stops at each corner",
+        "diagnostics.unblended_corners; 0 stops at each corner; other than 0 at least 0.001 (the path "
+        "fidelity: a narrower blend only holds the feed down)",
     )
+
+    @field_validator("corner_blend_mm")
+    @classmethod
+    def _blend_within_fidelity(cls, v: float) -> float:
+        if 0.0 < v < MIN_BLEND_TOLERANCE_MM:
+            raise ValueError(f"must be 0 (stop at corners) or >= {MIN_BLEND_TOLERANCE_MM:g} mm: a narrower blend "
+                             "is within the 1 um path fidelity and only holds the feed down")
+        return v
 
     @model_validator(mode="after")
     def _one_source(self) -> ToolpathIn:

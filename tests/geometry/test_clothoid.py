@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
+from geometry import primitives
+from geometry.arcblend import MIN_BLEND_TOLERANCE_MM, blend_path
 from geometry.clothoid import (
     ClothoidSegment,
     blend_corner,
@@ -289,6 +291,17 @@ def test_blend_tolerance_validation(tol: float) -> None:
     with pytest.raises(GeometryError) as info:
         blend_polyline([[0, 0], [1, 0], [1, 1]], tol)
     assert info.value.field == "corner_tolerance_mm"
+
+
+@pytest.mark.parametrize("tol", [1e-9, 4.6e-4, 0.000999])
+def test_blend_path_refuses_tolerances_under_the_path_fidelity(tol: float) -> None:
+    """``blend_path`` (the G-code and JSON routes' blending) takes 0 or at least MIN_BLEND_TOLERANCE_MM."""
+    segs = [primitives.line([0, 0, 0], [1, 0, 0]), primitives.line([1, 0, 0], [1, 1, 0])]
+    with pytest.raises(GeometryError) as info:
+        blend_path(segs, tol)
+    assert info.value.field == "corner_tolerance_mm" and "0.001" in info.value.rule
+    assert len(blend_path(segs, MIN_BLEND_TOLERANCE_MM).segments) == 4  # line, two spirals, line
+    assert len(blend_path(segs, 0.0).segments) == 2
 
 
 def test_blend_rejects_repeated_points() -> None:

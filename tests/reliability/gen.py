@@ -42,6 +42,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from geometry import examples, gcode, primitives
+from geometry.arcblend import MIN_BLEND_TOLERANCE_MM
 from geometry.clothoid import ClothoidSegment
 from geometry.nurbs import NurbsSegment
 from geometry.toolpath import Toolpath
@@ -82,7 +83,8 @@ CAM_TURNS = (((0.0, 0.0), 0.1), ((0.01, 0.45), 0.3), ((1.0, 90.0), 0.4), ((90.0,
 #: Share of moves that are XY arcs (G02/G03) and rapids (G00).
 CAM_ARC_SHARE = 0.15
 CAM_RAPID_SHARE = 0.08
-#: Share of programs with corner blends, and the blend tolerance's range as a share of the mean leg.
+#: Share of programs with corner blends, and the blend tolerance's range as a share of the mean leg (at least
+#: the product's ``arcblend.MIN_BLEND_TOLERANCE_MM``, 1 um, the path fidelity).
 CAM_BLEND_SHARE = 0.5
 CAM_BLEND_RANGE = (1e-4, 0.3)
 #: Programmed feeds: a share of the machine's smallest axis vmax (log-uniform); each cutting move
@@ -450,7 +452,7 @@ def _checked_segments(tp: Toolpath) -> list[Segment]:
     return out
 
 
-def cam_case(seed: int, profile: str = "cam") -> Case:
+def cam_case(seed: int, profile: str = "cam", min_blend_mm: float = MIN_BLEND_TOLERANCE_MM) -> Case:
     """A random G-code program (deterministic in ``seed``): 2-D or 3-D chains of lines, XY arcs (G02/G03
     by I J) and rapids (G00), each vertex turning by a random class of angle (``CAM_TURNS``: collinear,
     under the corner tolerance, moderate, sharp), F words changing along the way (a share of the
@@ -460,7 +462,10 @@ def cam_case(seed: int, profile: str = "cam") -> Case:
 
     The checker's path is the toolpath the product builds from the program (the blends' clothoids
     included); the programmed moves and feeds go in ``Case.program``, so the samples are also checked
-    against the program itself (within the blend tolerance) and its F words."""
+    against the program itself (within the blend tolerance) and its F words.
+
+    A drawn blend tolerance under ``min_blend_mm`` is raised to it (the product refuses blends under
+    MIN_BLEND_TOLERANCE_MM); a test of the solver on narrower blends passes 0 and lifts the product's rule."""
     rng = np.random.default_rng([seed, 7])
     dims = int(rng.choice([2, 3]))
     n = int(rng.integers(CAM_MOVES[profile][0], CAM_MOVES[profile][1] + 1))
@@ -487,7 +492,7 @@ def cam_case(seed: int, profile: str = "cam") -> Case:
         feeds.append(f)
     blend = 0.0
     if rng.random() < CAM_BLEND_SHARE:
-        blend = float(_fmt(length / n * _loguniform(rng, *CAM_BLEND_RANGE)))
+        blend = float(_fmt(max(min_blend_mm, length / n * _loguniform(rng, *CAM_BLEND_RANGE))))
     text, prog_segs = _program_text(moves, offset, feeds)
     start = (float(_fmt(offset[0])), float(_fmt(offset[1])), float(_fmt(offset[2])))
     # the rounded F words, as the program states them
