@@ -92,6 +92,10 @@ DENSE_PER_SEGMENT = 16
 SPIRAL_MIN_POINTS = 4
 
 
+#: A derivative shorter than this share of the control points' size is a cusp: the tangent from points instead.
+TANGENT_ZERO = 1e-12
+
+
 @dataclass(frozen=True)
 class Nurbs:
     """Plain NURBS data: degree p, knots (n + p + 1,), control points (n, 3), weights (n,)."""
@@ -114,24 +118,36 @@ class Nurbs:
 
     def points(self, u: FloatArray) -> FloatArray:
         """C(u), (K, 3), by de Boor's algorithm on homogeneous control points."""
-        p = self.degree
-        U = self.knots
+        d = _de_boor(self.degree, self.knots, self._homogeneous(), self.domain, np.asarray(u, dtype=np.float64))
+        return np.asarray(d[:, :3] / d[:, 3:4], dtype=np.float64)
+
+    def _homogeneous(self) -> FloatArray:
+        return np.column_stack([self.ctrl * self.weights[:, None], self.weights])
+
+    def tangent(self, u: float, left: bool) -> FloatArray:
+        """Unit tangent at u from the derivative curve (the spans ending at u if ``left``), not differences of
+        points: a segment of a few nm (the rest of a leg between two blends) far from the origin has its points
+        at u and u + h equal to the last bits.  Rational: C' w = A' - w' C, A and w the homogeneous curve's
+        parts; A' and w' from the hodograph, degree p - 1, control points p (Pw[i+1] - Pw[i]) /
+        (U[i+p+1] - U[i+1]) on the knots without their first and last."""
+        p, U, Pw = self.degree, self.knots, self._homogeneous()
+        den = U[p + 1 : p + Pw.shape[0]] - U[1 : Pw.shape[0]]
+        Q = p * np.diff(Pw, axis=0) / np.where(den > 0.0, den, np.inf)[:, None]
+        uu = np.array([u], dtype=np.float64)
+        A = _de_boor(p, U, Pw, self.domain, uu, left)[0]
+        dA = _de_boor(p - 1, U[1:-1], Q, self.domain, uu, left)[0]
+        t = dA[:3] - dA[3] * A[:3] / A[3]
+        norm = float(np.linalg.norm(t))
+        if not norm > TANGENT_ZERO * float(np.max(np.abs(self.ctrl))):  # a cusp or coincident control points
+            return self._tangent_by_points(u, left)
+        return np.asarray(t / norm, dtype=np.float64)
+
+    def _tangent_by_points(self, u: float, left: bool) -> FloatArray:
         lo, hi = self.domain
-        u = np.clip(np.asarray(u, dtype=np.float64), lo, hi)
-        k = np.searchsorted(U, u, side="right") - 1
-        last = int(np.searchsorted(U, hi, side="left")) - 1  # last non-empty span
-        k = np.clip(k, p, last)
-        Pw = np.column_stack([self.ctrl * self.weights[:, None], self.weights])
-        idx = k[:, None] - p + np.arange(p + 1)[None, :]
-        d = Pw[idx]  # (K, p+1, 4)
-        for r in range(1, p + 1):
-            for j in range(p, r - 1, -1):
-                i = k - p + j
-                den = U[i + p + 1 - r] - U[i]
-                alpha = ((u - U[i]) / den)[:, None]
-                d[:, j] = (1.0 - alpha) * d[:, j - 1] + alpha * d[:, j]
-        out = d[:, p, :3] / d[:, p, 3:4]
-        return np.asarray(out, dtype=np.float64)
+        h = 1e-7 * (hi - lo)
+        P = self.points(np.array([u - h, u] if left else [u, u + h]))
+        t = P[1] - P[0]
+        return np.asarray(t / np.linalg.norm(t), dtype=np.float64)
 
     def c0_knots(self) -> FloatArray:
         """Knots inside the domain where the curve is only C0 (multiplicity >= degree)."""
@@ -142,14 +158,30 @@ class Nurbs:
     def end_tangent(self, at_end: bool, u_at: float | None = None, left: bool = True) -> FloatArray:
         """Unit tangent (direction of travel) at a domain end or, with ``u_at``, one side of a knot."""
         lo, hi = self.domain
-        h = 1e-7 * (hi - lo)
         if u_at is None:
-            u0, u1 = (hi - h, hi) if at_end else (lo, lo + h)
-        else:
-            u0, u1 = (u_at - h, u_at) if left else (u_at, u_at + h)
-        P = self.points(np.array([u0, u1]))
-        t = P[1] - P[0]
-        return np.asarray(t / np.linalg.norm(t), dtype=np.float64)
+            return self.tangent(hi if at_end else lo, at_end)
+        return self.tangent(u_at, left)
+
+
+def _de_boor(p: int, U: FloatArray, Pw: FloatArray, domain: tuple[float, float], u: FloatArray,
+             left: bool = False) -> FloatArray:
+    """The B-spline of degree p, knots U, control points Pw (n, dim) at u (K,) clipped to ``domain``, (K, dim),
+    by de Boor's algorithm; at a knot, on the span ending there if ``left`` (else the one starting there)."""
+    lo, hi = domain
+    u = np.clip(u, lo, hi)
+    k = np.searchsorted(U, u, side="left" if left else "right") - 1
+    first = int(np.searchsorted(U, lo, side="right")) - 1  # first non-empty span
+    last = int(np.searchsorted(U, hi, side="left")) - 1  # last non-empty span
+    k = np.clip(k, first, last)
+    idx = k[:, None] - p + np.arange(p + 1)[None, :]
+    d = Pw[idx]  # (K, p+1, dim)
+    for r in range(1, p + 1):
+        for j in range(p, r - 1, -1):
+            i = k - p + j
+            den = U[i + p + 1 - r] - U[i]
+            alpha = ((u - U[i]) / den)[:, None]
+            d[:, j] = (1.0 - alpha) * d[:, j - 1] + alpha * d[:, j]
+    return np.asarray(d[:, p], dtype=np.float64)
 
 
 #: Gauss-Legendre nodes and weights on [0, 1] of the spiral's position integral: the tangent angle is a

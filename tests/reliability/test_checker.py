@@ -35,6 +35,30 @@ def test_de_boor_matches_the_circle_and_distance_is_exact() -> None:
     np.testing.assert_allclose(checker.path_distance([n], x), np.abs(r - RADIUS), rtol=0, atol=1e-12)
 
 
+def test_tangents_are_exact_on_a_circle_at_a_c0_knot_and_on_a_nanometre_line() -> None:
+    """Tangents from the hodograph: the rational circle's at its ends and quarter points (analytic: the
+    radius turned 90 degrees), both sides of a C0 knot (a polyline's legs), and a 35 nm line 500 mm from the
+    origin (the rest of a leg between two 1 um blends, cam-bench seed 16), whose points differenced at
+    1e-7 of its domain are equal to the last bits: that read as a 1.87 degree corner nobody stopped at."""
+    n = _nurbs(ex.circle(RADIUS))
+    lo, hi = n.domain
+    for u in np.linspace(lo, hi, 5):
+        p = n.points(np.array([u]))[0]
+        want = np.array([-p[1], p[0], 0.0]) / RADIUS  # counter-clockwise
+        for left in (True, False):
+            np.testing.assert_allclose(n.tangent(float(u), left), want, rtol=0, atol=1e-12)
+    poly = _nurbs(primitives.polyline([[0, 0, 0], [3, 0, 0], [3, 4, 0]]))
+    (k,) = poly.c0_knots()
+    np.testing.assert_allclose(poly.end_tangent(True, float(k), left=True), [1, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(poly.end_tangent(True, float(k), left=False), [0, 1, 0], atol=1e-15)
+    a = np.array([300.3501896, 436.9865264, 0.0])
+    d = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0)
+    tiny = _nurbs(primitives.line(a, a + 35e-6 * d))
+    for at_end in (False, True):
+        np.testing.assert_allclose(tiny.end_tangent(at_end), d, rtol=0, atol=1e-8)
+    assert checker.corners([tiny, _nurbs(primitives.line(a + 35e-6 * d, a + 1.0 * d))]) == []
+
+
 @pytest.fixture(scope="module")
 def corner_run() -> tuple[list[checker.Nurbs], checker.Limits, object]:
     segs = [primitives.line([0, 0, 0], [20, 0, 0]), primitives.line([20, 0, 0], [20, 15, 5])]
