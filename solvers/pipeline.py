@@ -180,6 +180,11 @@ FLOOR_REFINE_MAX_INTERVALS = 1024
 #: (the most, seed 130's 19.1 s, unchanged; small cases up to 12 x: 0.2 -> 2.9 s); random program cam 20
 #: (sub-micron corner blends) 6.34 -> 2.51 s.  The flower's samples bit-identical (no floored piece).
 FLOOR_REFINE_PAST_PLAN = True
+#: With method lp+nlp a floored piece is refined up to this many knot intervals only: the NLP works on the LP's
+#: knots and its cost grows with them (bench seed 23, a 3 mm path refined to 1,024 intervals: 17.6 s of NLP for
+#: 0.24 s of motion, 0.41 s on the plan's 16).  Where the NLP then falls back on the refined knots, the piece's
+#: plan knots are refined by the NLP too and the faster kept (``_nlp_on_plan_knots``).
+NLP_FLOOR_REFINE_MAX_INTERVALS = 64
 #: Method lp with jerk adds the rest shapes to q in each piece's first and last knot interval
 #: (``lp.WindowSpec.rest_shapes``, ``_solve_windows``).
 LP_REST_SHAPES = True
@@ -545,6 +550,7 @@ def solve_piece(
     cache: WindowCache | None = None,
     on_lp: Callable[[FloatArray, list[int]], None] | None = None,
     first_n_int: int | None = None,
+    plain: list[tuple[PieceProfile, list[int]]] | None = None,
 ) -> tuple[PieceProfile, list[int]]:
     """Walk LP windows over one piece and assemble its control points.
 
@@ -572,9 +578,10 @@ def solve_piece(
     stall) the knots are refined too, and the fastest profile that moves is kept (test seed 14:
     1.96 s on the default knots, 0.68 s on twice as many), on the default knot spacing, up to
     FLOOR_REFINE_MAX_INTERVALS (past KNOT_REFINEMENTS doublings too: ``FLOOR_REFINE_PAST_PLAN``), while
-    each refinement pays (FLOOR_REFINE_GAIN, FLOOR_REFINE_PATIENCE), and with method lp only: under
-    lp+nlp the NLP works on the LP's knots, and refining them (test seed 14: 0.275 -> 0.222 s) made the
-    NLP up to 3.6 x slower (bench seed 24) and bench seed 145's sampled servo error 1.013 x (a typed 422).
+    each refinement pays (FLOOR_REFINE_GAIN, FLOOR_REFINE_PATIENCE).  With method lp+nlp only up to
+    NLP_FLOOR_REFINE_MAX_INTERVALS: the NLP works on the LP's knots (refined without a cap they made the
+    NLP up to 3.6 x slower on bench seed 24 and 70 x on bench seed 23); ``plain`` then
+    gets the plan's knots' profile, which the NLP refines instead where it falls back on the finer knots.
     """
     first: tuple[float, PieceProfile, list[int]] | None = None
     if first_n_int is not None:
@@ -595,12 +602,17 @@ def solve_piece(
         stats["rest_plan_fallbacks"] = stats.get("rest_plan_fallbacks", 0) + 1
         # (progress and the chains handed out were the first plan's: the pipeline sees the knots change)
         on_window = on_lp = None
-    return _refined(toolpath, piece, machine, opt, lim, stats, on_window, verify, cache, on_lp, first)
+    return _refined(toolpath, piece, machine, opt, lim, stats, on_window, verify, cache, on_lp, first, plain)
 
 
 def _floor_refines(opt: Options) -> bool:
     """Whether pieces whose LP holds control points at their floor are refined (``solve_piece``)."""
-    return opt.method == "lp" and opt.knot_spacing is None
+    return opt.knot_spacing is None
+
+
+def _floor_refine_cap(opt: Options) -> int:
+    """The most knot intervals a floored piece is refined to."""
+    return FLOOR_REFINE_MAX_INTERVALS if opt.method == "lp" else NLP_FLOOR_REFINE_MAX_INTERVALS
 
 
 def _refined(
@@ -609,20 +621,23 @@ def _refined(
     cache: WindowCache | None,
     on_lp: Callable[[FloatArray, list[int]], None] | None,
     first: tuple[float, PieceProfile, list[int]] | None = None,
+    plain: list[tuple[PieceProfile, list[int]]] | None = None,
 ) -> tuple[PieceProfile, list[int]]:
     """``solve_piece``'s knot refinements, from the piece's plan's knots; ``first``, if given, is a candidate
     already solved (duration, profile, joins), kept if faster than what the refinements end with (it does not
     stop them: taken as their yardstick, it cut refinements short that went on to faster profiles, bench
     seeds 23, 80, 86, 111 lp +63-75 %; and a plan on fewer knots than it and no faster does not stop them
-    either, bench seed 97)."""
+    either, bench seed 97).  ``plain``, if given, gets the plan's knots' profile and joins where a refinement
+    for a floor was kept instead of it (``_nlp_on_plan_knots``)."""
     n_int: int | None = None
     best: tuple[float, PieceProfile, list[int]] | None = None
     prof: PieceProfile | None = None
     joins: list[int] = []
+    plan0: tuple[PieceProfile, list[int]] | None = None  # the plan's knots' profile (for ``plain``)
     attempt = misses = 0
     while True:
         plan = plan_piece(piece, machine, opt, n_int, toolpath)
-        floor_refine = _floor_refines(opt) and 2 * plan.n_int <= FLOOR_REFINE_MAX_INTERVALS
+        floor_refine = _floor_refines(opt) and 2 * plan.n_int <= _floor_refine_cap(opt)
         floored: list[int] = []
         try:
             prof, joins = _solve_windows(
@@ -635,6 +650,8 @@ def _refined(
                 raise
             break
         is_stuck = stuck(prof)
+        if attempt == 0 and not is_stuck:
+            plan0 = (prof, joins)
         if not is_stuck:
             if not floored and best is None and first is None:
                 break
@@ -666,16 +683,19 @@ def _refined(
         n_int = 2 * plan.n_int
         attempt += 1
         stats["knot_refinements"] = stats.get("knot_refinements", 0) + 1
+    result = (prof, joins)
     if first is not None:
         if best is None and prof is not None and not stuck(prof):
             best = (PieceTiming.build(prof, inverse=False).duration, prof, joins)
         if best is None or first[0] < best[0]:
-            return first[1], first[2]
+            best = first
     if best is not None:
-        return best[1], best[2]
-    if prof is None:  # (unreachable: without ``first`` the first solve's failure is raised)
+        result = (best[1], best[2])
+    if result[0] is None:  # (unreachable: without ``first`` the first solve's failure is raised)
         raise SolverFailure("no knot plan of the piece could be solved")
-    return prof, joins
+    if plain is not None and plan0 is not None and plan0[0] is not result[0]:
+        plain.append(plan0)
+    return result[0], result[1]
 
 
 #: A piece whose LP plan (method lp) has at least this many windows is solved as two chains of windows
@@ -1066,6 +1086,26 @@ def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
     ks = toolpath.knot_s  # sorted and unique: knots inside segments and the junctions between them
     lo, hi = np.searchsorted(ks, piece.s_start, side="right"), np.searchsorted(ks, piece.s_end, side="left")
     return np.asarray(ks[lo:hi] - piece.s_start, dtype=np.float64)
+
+
+def _nlp_on_plan_knots(
+    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, refined: tuple[PieceProfile, PieceProfile],
+    plan: tuple[PieceProfile, list[int]], nlp_lim: NlpLimits,
+    refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats, n_failed: int, lead_in: Motion | None,
+) -> tuple[PieceProfile, PieceProfile]:
+    """The NLP on the piece's plan knots (``plan``: the LP's profile there and its joins) where it fell back on
+    a piece the LP refined for a floor (``refined``: that LP profile and the NLP's); returns the (LP, NLP)
+    profiles of the faster, and keeps only its fallbacks in ``stats.failures`` (those from ``n_failed`` on).
+
+    Bench seeds 153 and 154 (session 39): the NLP fell back ("unverified") on the refined knots and kept their
+    LP feed, 0.286 and 0.399 s, where on the plan's knots it refined a floored LP feed to 0.156 and 0.184 s."""
+    mine = stats.failures[n_failed:]
+    del stats.failures[n_failed:]
+    prof = _refine_piece(toolpath, piece, machine, opt, plan[0], plan[1], nlp_lim, refiners, stats, lead_in=lead_in)
+    if PieceTiming.build(prof, inverse=False).duration < PieceTiming.build(refined[1], inverse=False).duration:
+        return plan[0], prof
+    stats.failures[n_failed:] = mine
+    return refined
 
 
 def _refine_piece(
@@ -1630,11 +1670,12 @@ def schedule_stream(
         # with NLP workers, the chains go to them while the LP still solves the later windows
         pipe = (_chain_pipeline(toolpath, piece, machine, opt, nlp_lim, refiners, nlp_stats, first, lead_in)
                 if nlp_stats is not None and nlp_lim is not None and _workers(opt) > 1 else None)
+        plain: list[tuple[PieceProfile, list[int]]] = []
         try:
             t0 = time.perf_counter()
             fallbacks = stats.get("rest_plan_fallbacks", 0)
             lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache,
-                                         pipe.lp_progress if pipe is not None else None, first)
+                                         pipe.lp_progress if pipe is not None else None, first, plain)
             t_lp += time.perf_counter() - t0
             # repairs start from the knots the first solve started from
             if stats.get("rest_plan_fallbacks", 0) != fallbacks:
@@ -1645,8 +1686,12 @@ def schedule_stream(
                     report((s0 + lp_share * length + (1.0 - lp_share) * s_done) / total)
 
                 t0 = time.perf_counter()
+                n_failed = len(nlp_stats.failures)
                 prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
                                      on_chain, pipe=pipe, lead_in=lead_in)
+                if plain and len(nlp_stats.failures) > n_failed:
+                    lp_prof, prof = _nlp_on_plan_knots(toolpath, piece, machine, opt, (lp_prof, prof), plain[0],
+                                                       nlp_lim, refiners, nlp_stats, n_failed, lead_in)
                 t_nlp += time.perf_counter() - t0
         finally:
             if pipe is not None:
