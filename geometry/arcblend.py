@@ -98,6 +98,9 @@ JOINT_TOL_MM: Final = 1e-6
 #: at 4.5 nm and 34 nm stalled the LP ("feed stalls") and ran 129,079 s of lp+nlp motion where the LP alone
 #: took 4,547 s (cam-bench seeds 20 and 14, session 38).
 MIN_BLEND_TOLERANCE_MM: Final = 1e-3
+#: The rule a blend tolerance under MIN_BLEND_TOLERANCE_MM breaks (``blend_path``, and the service's schema).
+BLEND_TOLERANCE_RULE: Final = (f"must be 0 (stop at corners) or >= {MIN_BLEND_TOLERANCE_MM:g} mm: a narrower blend is "
+                               "within the 1 um path fidelity and only holds the feed down")
 #: Largest closure residual |F| accepted, relative to the spiral length L.
 CLOSURE_TOL: Final = 1e-10
 #: Aim of the secant on rho(L) and the band accepted below 1.
@@ -562,9 +565,7 @@ def blend_path(
     if not (isinstance(tolerance_mm, (int, float)) and math.isfinite(tolerance_mm) and tolerance_mm >= 0.0):
         raise GeometryError("corner_tolerance_mm", tolerance_mm, "must be a finite number >= 0")
     if 0.0 < tolerance_mm < MIN_BLEND_TOLERANCE_MM:
-        raise GeometryError("corner_tolerance_mm", tolerance_mm, f"must be 0 (stop at corners) or >= "
-                            f"{MIN_BLEND_TOLERANCE_MM:g} mm (MIN_BLEND_TOLERANCE_MM: a narrower blend is within the "
-                            "1 um path fidelity and only holds the feed down)")
+        raise GeometryError("corner_tolerance_mm", tolerance_mm, BLEND_TOLERANCE_RULE)
     n = len(segments)
     nm = list(names) if names is not None else [seg.name for seg in segments]
     # plain lines (two control points) need no Line object unless their run has an arc: a dense program has 10^5

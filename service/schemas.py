@@ -23,7 +23,7 @@ from pydantic import (
     model_validator,
 )
 
-from geometry.arcblend import MIN_BLEND_TOLERANCE_MM
+from geometry.arcblend import BLEND_TOLERANCE_RULE, MIN_BLEND_TOLERANCE_MM
 
 #: A finite JSON number (integers accepted, booleans and strings not).
 Number = Annotated[float, Strict(), AllowInfNan(False)]
@@ -134,8 +134,7 @@ class ToolpathIn(BaseModel):
     @classmethod
     def _blend_within_fidelity(cls, v: float) -> float:
         if 0.0 < v < MIN_BLEND_TOLERANCE_MM:
-            raise ValueError(f"must be 0 (stop at corners) or >= {MIN_BLEND_TOLERANCE_MM:g} mm: a narrower blend "
-                             "is within the 1 um path fidelity and only holds the feed down")
+            raise ValueError(BLEND_TOLERANCE_RULE)
         return v
 
     @model_validator(mode="after")

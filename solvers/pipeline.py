@@ -1675,7 +1675,8 @@ def schedule_stream(
             t0 = time.perf_counter()
             fallbacks = stats.get("rest_plan_fallbacks", 0)
             lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache,
-                                         pipe.lp_progress if pipe is not None else None, first, plain)
+                                         pipe.lp_progress if pipe is not None else None, first,
+                                         plain if nlp_stats is not None else None)
             t_lp += time.perf_counter() - t0
             # repairs start from the knots the first solve started from
             if stats.get("rest_plan_fallbacks", 0) != fallbacks:

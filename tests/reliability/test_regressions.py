@@ -24,6 +24,11 @@ from tests.reliability import checker, gen, harness
 TS = 1e-3
 
 
+def _lp_only_floor_refines(opt: Options) -> bool:
+    """``pipeline._floor_refines`` before session 39: lp+nlp kept a floored piece's plan knots."""
+    return opt.method == "lp" and opt.knot_spacing is None
+
+
 def _check(segs: list[NurbsSegment], m: Machine, method: str) -> checker.Report:
     sch = schedule(Toolpath(segs), m, Options(method=method, sample_period=TS))
     smp = sch.samples
@@ -497,7 +502,7 @@ def test_curvature_jump_next_to_the_lp_state_of_an_nlp_window(monkeypatch: pytes
     import solvers.pipeline
 
     monkeypatch.setattr(geometry.nurbs, "SHARP_TURN_RADIUS_MM", 0.0)
-    monkeypatch.setattr(solvers.pipeline, "_floor_refines", lambda opt: opt.method == "lp" and opt.knot_spacing is None)
+    monkeypatch.setattr(solvers.pipeline, "_floor_refines", _lp_only_floor_refines)
     out = harness.run(gen.case(2053, "bench"), "lp+nlp")
     assert out.ok, out.describe()
     assert out.nlp_fallback_statuses == ["slower than lp"]
@@ -912,7 +917,7 @@ def test_servo_error_across_rests_on_a_path_of_short_pieces(monkeypatch: pytest.
     out = harness.run(case, "lp+nlp")
     assert out.ok, out.describe()
     assert out.utilisation["servo_error_x"] <= 1.0 + verify.FAIL_TOL
-    monkeypatch.setattr(solvers.pipeline, "_floor_refines", lambda opt: opt.method == "lp" and opt.knot_spacing is None)
+    monkeypatch.setattr(solvers.pipeline, "_floor_refines", _lp_only_floor_refines)
     out = harness.run(case, "lp+nlp")
     assert out.ok, out.describe()
     sch = schedule(case.toolpath(), case.machine, Options(method="lp+nlp"))
@@ -1005,7 +1010,7 @@ def test_lp_nlp_refines_floored_pieces_up_to_its_cap(monkeypatch: pytest.MonkeyP
     sch = schedule(tp, case.machine, Options(method="lp+nlp"))
     assert sch.summary["control_points"] <= solvers.pipeline.NLP_FLOOR_REFINE_MAX_INTERVALS + 2
     on = harness.run(case, "lp+nlp")
-    monkeypatch.setattr(solvers.pipeline, "_floor_refines", lambda opt: opt.method == "lp" and opt.knot_spacing is None)
+    monkeypatch.setattr(solvers.pipeline, "_floor_refines", _lp_only_floor_refines)
     off = harness.run(case, "lp+nlp")
     assert on.ok and off.ok, (on.describe(), off.describe())
     assert on.samples == sch.samples.t.size and on.samples <= 0.8 * off.samples
