@@ -23,7 +23,7 @@ from geometry import GeometryError, NurbsSegment, Toolpath, arcblend, gcode, pri
 from service.errors import too_large
 from service.schemas import ArcIn, LineIn, MachineIn, NurbsIn, PolylineIn, ScheduleRequest
 from solvers.machine import AXES, Axis, AxisLimits, DriveModel, Machine, derive_limits, preset
-from solvers.pipeline import Options, Schedule, TimeSamples, plan_piece
+from solvers.pipeline import Options, Schedule, TimeSamples, motion_time_floor, plan_piece
 from solvers.timing import PieceProfile
 
 FloatArray = NDArray[np.float64]
@@ -149,15 +149,12 @@ def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) 
             field="options.knot_spacing", value=opts.knot_spacing,
             rule=f"path length / knot spacing must be <= {budget.max_intervals}",
         )
-    vmax, _, _ = machine.limit_arrays()
-    top = float(np.linalg.norm(vmax))
-    if machine.feed_max is not None:
-        top = min(top, machine.feed_max)
-    samples = tp.length / top / opts.sample_period
+    floor = motion_time_floor(tp, machine, opts)
+    samples = floor / opts.sample_period
     if samples > budget.max_samples:
         raise too_large(
-            f"at least {samples:.0f} samples (path {tp.length:.6g} mm at <= {top:.6g} mm/s every "
-            f"{opts.sample_period} s) exceed the {budget.max_samples} allowed in {budget.where}",
+            f"at least {samples:.0f} samples (path {tp.length:.6g} mm in at least {floor:.6g} s at its feed limits, "
+            f"every {opts.sample_period} s) exceed the {budget.max_samples} allowed in {budget.where}",
             field="options.sample_period", value=opts.sample_period,
             rule=f"motion time / sample period must be <= {budget.max_samples}",
         )

@@ -64,7 +64,7 @@ from solvers.lp import (
     v_step_limit,
     velocity_bound,
 )
-from solvers.machine import AXES, Machine, drive_outputs
+from solvers.machine import AXES, Machine, drive_outputs, drive_speed_bound
 from solvers.nlp import CONTEXT_SAMPLES as NLP_CONTEXT_SAMPLES
 from solvers.nlp import CONTEXT_STEP as NLP_CONTEXT_STEP
 from solvers.nlp import V_STEP_SHARE as NLP_V_STEP_SHARE
@@ -1390,6 +1390,53 @@ def _feed_cap(lim: LimitSet, toolpath: Toolpath, s: FloatArray) -> FloatArray | 
     return cap
 
 
+#: ``motion_time_floor`` is this share of the path's time at its feed caps: the schedule's feed may pass a
+#: cap by a hair between its checkpoints (the sampled feed reads up to 1.002 x an F word in the random cases).
+MOTION_FLOOR_SHARE = 0.99
+
+
+def _motion_time_floor(toolpath: Toolpath, lim: LimitSet, vmax: FloatArray | None) -> float:
+    r"""A lower bound of the motion time (s), known before any solve: MOTION_FLOOR_SHARE of the path's time
+    with every sub-segment at its feed cap,
+
+        T >= share * sum_k L_k / min(F_k, Fmax, ||vmax||_2),
+
+    with L_k (mm) the k-th sub-segment's length, F_k its programmed feed limit (mm/s, inf where none), Fmax
+    the machine's tangential feed limit and vmax (3,) the speed bound of each axis (a feed f along a unit
+    tangent moves the axes at f x_s, so f^2 = sum v_i^2 <= ||vmax||^2; left out unless every axis has a
+    finite one).  Rests, accelerations and curvature only add to the time; 0 when nothing caps the feed."""
+    off = toolpath.offsets
+    length = np.diff(off)
+    cap = _feed_cap(lim, toolpath, 0.5 * (off[:-1] + off[1:]))
+    bound = np.inf
+    if vmax is not None and bool(np.all(np.isfinite(vmax))):
+        bound = float(np.linalg.norm(vmax))
+    caps = np.minimum(np.inf if cap is None else cap, bound)
+    return MOTION_FLOOR_SHARE * float(np.sum(length / caps))
+
+
+def motion_time_floor(toolpath: Toolpath, machine: Machine, options: Options | None = None) -> float:
+    """A lower bound (s) of the motion time ``schedule(toolpath, machine, options)`` returns, from the feed
+    caps alone (``_motion_time_floor``): lp's axis vmax; lp+nlp's speed under the control signal
+    (``machine.drive_speed_bound``) and the axis vmax it promises.  ``schedule`` refuses up front what this
+    takes over ``Options.max_samples``, and so does the service's budget."""
+    opt = options or Options()
+    lim = LimitSet.from_machine(machine, opt.sample_period, opt.jerk,
+                                rest_from_drive=opt.method == "lp+nlp" and machine.has_drives,
+                                kinematic=opt.nlp_kinematic)
+    return _motion_time_floor(toolpath, lim, _speed_bound(lim, opt, machine))
+
+
+def _speed_bound(lim: LimitSet, opt: Options, machine: Machine) -> FloatArray | None:
+    """Per-axis speed no schedule of ``opt.method`` passes (3,): lp, the LP's vmax; lp+nlp, the promised
+    vmax (if any) and the control signal's bound."""
+    vmax = _promised(lim, opt, machine).vmax
+    if opt.method == "lp" or not machine.has_drives:
+        return vmax
+    u_bound = drive_speed_bound(machine.drive_arrays())
+    return u_bound if vmax is None else np.minimum(vmax, u_bound)
+
+
 def _kinematics(
     toolpath: Toolpath, piece: Piece, prof: PieceProfile, s_local: FloatArray, precise: bool = False
 ) -> tuple[PathSamples, FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -1642,6 +1689,17 @@ def schedule_stream(
             events(name, index)
 
     limits = _promised(lim, opt, machine)
+    if opt.max_samples is not None:
+        # refused up front when even the feed caps alone take the samples over the cap (cam-bench seed 35:
+        # F words of 0.02-0.4 mm/s over 2,718 mm, 22,164 s; lp+nlp used to spend minutes on the pieces first)
+        t_floor = _motion_time_floor(toolpath, lim, _speed_bound(lim, opt, machine))
+        k_floor = math.floor(t_floor / opt.sample_period) + 1
+        if k_floor > opt.max_samples:
+            raise OutputTooLargeError(
+                f"the schedule needs at least {k_floor} time samples (the path takes at least {t_floor:.6g} s "
+                f"at its feed limits, every {opt.sample_period:g} s), over the {opt.max_samples} allowed",
+                field="options.max_samples", value=opt.max_samples,
+            )
     precise = precise_points(toolpath, limits, opt.sample_period)  # (the samples' positions, once per schedule)
     drives = machine.drive_arrays() if machine.has_drives else None
     Ts = opt.sample_period

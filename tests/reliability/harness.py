@@ -6,7 +6,7 @@ import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from solvers.pipeline import Options, schedule
+from solvers.pipeline import Options, motion_time_floor, schedule
 from tests.reliability import checker, gen
 
 TS = 1e-3
@@ -42,9 +42,10 @@ def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None 
 
     ``before_check(samples)``, if given, is called between the two (the bench's time budgets)."""
     m = case.lp_machine if method == "lp" else case.machine
+    opt = Options(method=method, sample_period=TS, max_samples=MAX_SAMPLES)
     try:
         tp = case.toolpath()
-        sch = schedule(tp, m, Options(method=method, sample_period=TS, max_samples=MAX_SAMPLES))
+        sch = schedule(tp, m, opt)
     except Exception as exc:
         tb = traceback.format_exception_only(type(exc), exc)[-1].strip()
         return Outcome(case.seed, method, False, error=f"{tb}")
@@ -53,6 +54,11 @@ def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None 
         before_check(int(smp.t.size))
     rep = checker.check(case.segments, gen.limits_of(m), TS, smp.t, smp.feed, smp.position,
                         kinematic=method == "lp", drive=method == "lp+nlp", program=case.program)
+    # the bound the schedule refuses by up front must be one: never over the motion it returns
+    floor = motion_time_floor(tp, m, opt)
+    motion = sch.summary["motion_time"]
+    if not floor <= motion:
+        rep.violations.append(f"motion_time_floor {floor:.9g} s over the motion time {motion:.9g} s")
     fallbacks = sch.diagnostics.get("nlp_fallbacks", [])
-    return Outcome(case.seed, method, rep.ok, rep.violations, rep.utilisation, None, int(smp.t.size), len(fallbacks),
-                   [f["status"] for f in fallbacks])
+    return Outcome(case.seed, method, rep.ok, rep.violations, rep.utilisation, None,
+                   int(smp.t.size), len(fallbacks), [f["status"] for f in fallbacks])

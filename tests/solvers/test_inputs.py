@@ -143,3 +143,55 @@ def test_a_deep_but_well_conditioned_dip_is_timed_not_refused() -> None:
     c[19] = c[20] = 0.0217 * 1e-13  # a dip within the stretch, ill conditioned: still refused
     with pytest.raises(ScheduleError):
         PieceTiming.build(PieceProfile(s_start=0.0, length=float(n), d=1.0, c=c))
+
+
+def test_a_schedule_over_the_output_cap_at_its_feed_caps_is_refused_before_any_solve() -> None:
+    """cam-bench seed 35: F words of 0.02-0.4 mm/s over a 2,718 mm program take at least 22,164 s, over
+    the cap, and lp+nlp spent minutes on the pieces before the refusal came.  ``motion_time_floor`` (the
+    path at its feed caps: F, Fmax and the axes' speeds) now refuses it before the first LP window (no
+    progress reported); a cap just over the floor's samples still schedules, and the motion is not under
+    the floor."""
+    from geometry import primitives
+    from geometry.toolpath import Toolpath
+    from solvers.errors import OutputTooLargeError
+    from solvers.pipeline import MOTION_FLOOR_SHARE, motion_time_floor, schedule
+
+    f = 2.0  # mm/s on a 30 mm line and a 40 mm one: 35 s at the F words alone
+    tp = Toolpath([primitives.line([0, 0, 0], [30, 0, 0]), primitives.line([30, 0, 0], [30, 40, 0])],
+                  feed_limits=[f, f])
+    for method in ("lp", "lp+nlp"):
+        opt = Options(method=method)
+        floor = motion_time_floor(tp, router(), opt)
+        assert floor == pytest.approx(MOTION_FLOOR_SHARE * 70.0 / f, rel=1e-12)
+        seen: list[float] = []
+        with pytest.raises(OutputTooLargeError) as err:
+            schedule(tp, router(), replace(opt, max_samples=30_000), progress=seen.append)
+        assert err.value.field == "options.max_samples" and "at its feed limits" in str(err.value)
+        assert seen == []  # refused before the first window
+        sch = schedule(tp, router(), replace(opt, max_samples=40_000))
+        assert floor <= sch.summary["motion_time"] <= 70.0 / f + 1.0
+
+
+def test_motion_time_floor_bounds_the_axes_speeds() -> None:
+    """Without F words the feed is bounded by the axes' speeds (f^2 = sum v_i^2): lp's vmax; lp+nlp's peak
+    speed under the control signal, (umax + |c| - d) / b per axis, which the router's 200 mm diagonal line at
+    lp+nlp must not pass (a peak of |v| has a = 0, so u = b v + c + d there)."""
+    from geometry import primitives
+    from geometry.toolpath import Toolpath
+    from solvers.machine import drive_speed_bound
+    from solvers.pipeline import MOTION_FLOOR_SHARE, motion_time_floor, schedule
+
+    m = router()
+    tp = Toolpath([primitives.line([0, 0, 0], [200, 200, 100])])
+    vmax = np.array([a.limits.vmax for a in m.axes])
+    assert motion_time_floor(tp, m, Options(method="lp")) == pytest.approx(
+        MOTION_FLOOR_SHARE * 300.0 / float(np.linalg.norm(vmax)), rel=1e-12)
+    dr = m.drive_arrays()
+    v_u = drive_speed_bound(dr)
+    assert v_u == pytest.approx((dr["umax"] + np.abs(dr["c"]) - dr["d"]) / dr["b"], rel=1e-15)
+    assert np.all(v_u > vmax)  # the NLP may pass the LP's vmax
+    assert motion_time_floor(tp, m, Options(method="lp+nlp")) == pytest.approx(
+        MOTION_FLOOR_SHARE * 300.0 / float(np.linalg.norm(v_u)), rel=1e-12)
+    sch = schedule(tp, m, Options(method="lp+nlp"))
+    assert np.all(np.abs(sch.samples.velocity).max(axis=0) <= v_u)
+    assert sch.summary["motion_time"] >= motion_time_floor(tp, m, Options(method="lp+nlp"))
