@@ -9,8 +9,9 @@ Each seed is one case from ``tests.reliability.gen.case(seed, profile)``; each c
 ``<out>.jsonl`` so an interrupted run resumes where it stopped; the summary (counts, failures,
 worst utilisation per constraint) is written to ``<out>`` (default bench/results/random_cases.json).
 Cases run in a worker process, bounded in memory (RLIMIT_AS) and time (RLIMIT_CPU: CASE_TIMEOUT_S of
-CPU to schedule, then CHECK_TIMEOUT_S + CHECK_S_PER_SAMPLE a sample for the check; and CASE_WALL_S of
-wall time, after which the worker is killed); hitting any counts as a failure, and the worker is replaced.
+CPU to schedule, plus CASE_S_PER_MOTION_S per second of the motion-time floor, then CHECK_TIMEOUT_S +
+CHECK_S_PER_SAMPLE a sample for the check; and CASE_WALL_S of wall time, after which the worker is
+killed); hitting any counts as a failure, and the worker is replaced.
 """
 
 from __future__ import annotations
@@ -43,6 +44,11 @@ MEMORY_LIMIT_BYTES = 8 * 2**30
 #: wall time depends on the load (bench seed 30 lp+nlp: 22 s alone, over 120 s at nice 19 under a
 #: load of 4), its CPU time does not.
 CASE_TIMEOUT_S = 120
+#: ... plus this many CPU seconds per second of the case's motion-time floor
+#: (``solvers.pipeline.motion_time_floor``, known before the schedule): the issue's target for long paths is a
+#: compute time of 1 % of the motion.  cam-bench seed 39 lp: 0.8 um knots (a 0.22 mm/s machine), 1.15 M
+#: knot intervals over 926 mm, 10,841 s of motion scheduled in 152 s (1.4 %) and counted as a time-out at 120 s.
+CASE_S_PER_MOTION_S = 0.01
 #: ... and in wall seconds, for a case that hangs without using CPU.
 CASE_WALL_S = 1800
 #: The independent check of the samples has its own CPU budget, set when the schedule is done: this
@@ -53,10 +59,15 @@ CHECK_TIMEOUT_S = 60
 CHECK_S_PER_SAMPLE = 1e-4
 
 
+def _cpu_used(since: float = 0.0) -> float:
+    """CPU seconds this process has used (since ``since``, an earlier reading)."""
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return ru.ru_utime + ru.ru_stime - since
+
+
 def _cpu_limit(cpu_s: float) -> None:
     """SIGXCPU (which kills) once this process has used cpu_s more seconds of CPU."""
-    ru = resource.getrusage(resource.RUSAGE_SELF)
-    soft = math.ceil(ru.ru_utime + ru.ru_stime + cpu_s)
+    soft = math.ceil(_cpu_used() + cpu_s)
     resource.setrlimit(resource.RLIMIT_CPU, (soft, resource.RLIM_INFINITY))
 
 
@@ -70,16 +81,22 @@ def _serve(conn: Connection, profile: str) -> None:
             seed, method, cpu_s = conn.recv()
         except EOFError:
             return
+        start = _cpu_used()
         _cpu_limit(cpu_s)
         try:
             c = cases.get(seed) or gen.case(seed, profile)
             cases = {seed: c}
 
+            def before_schedule(floor: float, cpu_s: float = cpu_s, start: float = start) -> None:
+                budget = cpu_s + CASE_S_PER_MOTION_S * floor
+                _cpu_limit(budget - _cpu_used(start))
+                conn.send(("budget", budget))
+
             def before_check(samples: int) -> None:
                 _cpu_limit(CHECK_TIMEOUT_S + CHECK_S_PER_SAMPLE * samples)
                 conn.send(("checking", samples))
 
-            o = harness.run(c, method, before_check)
+            o = harness.run(c, method, before_check, before_schedule)
             row = {"ok": o.ok, "error": o.error, "violations": o.violations, "utilisation": o.utilisation,
                    "samples": o.samples, "nlp_fallbacks": o.nlp_fallbacks}
         except BaseException as exc:  # whatever happens is the case's outcome
@@ -124,6 +141,9 @@ class Worker:
                 msg = self.conn.recv()
                 if isinstance(msg, tuple) and msg[0] == "checking":
                     checking = int(msg[1])
+                    continue
+                if isinstance(msg, tuple) and msg[0] == "budget":
+                    cpu_s = float(msg[1])
                     continue
                 row: dict[str, Any] = msg
                 return row

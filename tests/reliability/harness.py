@@ -37,14 +37,19 @@ class Outcome:
         return f"seed {self.seed} method {self.method}: {what}"
 
 
-def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None = None) -> Outcome:
+def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None = None,
+        before_schedule: Callable[[float], None] | None = None) -> Outcome:
     """Schedule ``case`` with ``method`` and check the samples: lp -> v, a, j; lp+nlp -> u, e, v.
 
-    ``before_check(samples)``, if given, is called between the two (the bench's time budgets)."""
+    ``before_schedule(floor)``, if given, is called with ``motion_time_floor`` (s) before the schedule, and
+    ``before_check(samples)`` between the schedule and the check (the bench's time budgets)."""
     m = case.lp_machine if method == "lp" else case.machine
     opt = Options(method=method, sample_period=TS, max_samples=MAX_SAMPLES)
     try:
         tp = case.toolpath()
+        floor = motion_time_floor(tp, m, opt)
+        if before_schedule is not None:
+            before_schedule(floor)
         sch = schedule(tp, m, opt)
     except Exception as exc:
         tb = traceback.format_exception_only(type(exc), exc)[-1].strip()
@@ -55,7 +60,6 @@ def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None 
     rep = checker.check(case.segments, gen.limits_of(m), TS, smp.t, smp.feed, smp.position,
                         kinematic=method == "lp", drive=method == "lp+nlp", program=case.program)
     # the bound the schedule refuses by up front must be one: never over the motion it returns
-    floor = motion_time_floor(tp, m, opt)
     motion = sch.summary["motion_time"]
     if not floor <= motion:
         rep.violations.append(f"motion_time_floor {floor:.9g} s over the motion time {motion:.9g} s")
