@@ -66,6 +66,19 @@ def test_gcode_errors_name_line_and_column(client: TestClient) -> None:
     assert_problem(client.post("/v1/schedule", json=both), 422)
 
 
+def test_a_program_whose_f_words_alone_pass_the_budget_is_413_up_front(client: TestClient) -> None:
+    """F1 (mm/min) over 1 m takes 60,000 s at the F word alone: over the fixture's 50 000 samples before any
+    solve (``motion_time_floor``; the old estimate, the length over the axes' vmax, read 4,577 samples and let it
+    through to the solver).  The same program at F6000 is under the budget."""
+    slow = "G21 G90 G01 F1\nX1000\n"
+    r = client.post("/v1/schedule/gcode?method=lp", content=slow, headers={"content-type": "text/x-gcode"})
+    b = assert_problem(r, 413, "options.sample_period")
+    assert "at its feed limits" in b["detail"] and b["jobs"] == "/v1/jobs"
+    r = client.post("/v1/schedule/gcode?method=lp", content=slow.replace("F1", "F6000"),
+                    headers={"content-type": "text/x-gcode"})
+    assert r.status_code == 200, r.text
+
+
 #: A pocketing-style zig-zag of G01 moves at one feed: 8 legs turning 53 degrees.
 ZIGZAG = "G21 G90 G01 F6000\n" + "\n".join(f"X{10 * i} Y{5 * (i % 2)}" for i in range(1, 9)) + "\n"
 
