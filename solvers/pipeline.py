@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.toolpath import PathSamples, Piece, Toolpath
-from solvers import kinematics, verify
+from solvers import blas, kinematics, verify
 from solvers.errors import (
     InfeasibleError,
     InvalidMachineError,
@@ -1650,7 +1650,24 @@ def schedule_stream(
     piece.  None: each piece at once (``schedule``, which keeps every sample anyway).  A piece's time table
     is held one segment of ``timing.TABLE_SEGMENT_INTERVALS`` knot intervals at a time (``PieceTiming``), so
     what a corner-free piece holds grows only with its control points (a few floats per knot interval).
+
+    BLAS: the whole computation runs with every loaded OpenBLAS on one thread (``solvers.blas``), restored when
+    the generator ends or is closed (the consumer's code between blocks runs with one thread too).
     """
+    restore = blas.one_thread()
+    try:
+        yield from _schedule_stream(toolpath, machine, options, progress, events, block_samples)
+    finally:
+        restore()
+
+
+def _schedule_stream(
+    toolpath: Toolpath, machine: Machine, options: Options | None = None,
+    progress: Callable[[float], None] | None = None,
+    events: Callable[[str, int], None] | None = None,
+    block_samples: int | None = STREAM_BLOCK_SAMPLES,
+) -> Iterator[SampleBlock | ScheduleEnd]:
+    """``schedule_stream`` without its BLAS setting."""
     opt = options or Options()
     block = None if block_samples is None else max(1, math.ceil(block_samples / SAMPLE_CHUNK)) * SAMPLE_CHUNK
     t_start = time.perf_counter()
