@@ -181,10 +181,14 @@ FLOOR_REFINE_MAX_INTERVALS = 1024
 #: (sub-micron corner blends) 6.34 -> 2.51 s.  The flower's samples bit-identical (no floored piece).
 FLOOR_REFINE_PAST_PLAN = True
 #: With method lp+nlp a floored piece is refined up to this many knot intervals only: the NLP works on the LP's
-#: knots and its cost grows with them (bench seed 23, a 3 mm path refined to 1,024 intervals: 17.6 s of NLP for
-#: 0.24 s of motion, 0.41 s on the plan's 16).  Where the NLP then falls back on the refined knots, the piece's
-#: plan knots are refined by the NLP too and the faster kept (``_nlp_on_plan_knots``).
-NLP_FLOOR_REFINE_MAX_INTERVALS = 64
+#: knots, and its windows cover the stopping distance whatever the knots, so its dense steps grow as the knots
+#: shrink.  Session 40 (one BLAS thread, ``solvers.blas``), bench seeds 0-299 lp+nlp against 64: 256 motion
+#: geometric mean 0.965, CPU 1.30 x; 512 0.954, 1.51 x (seed 44 1.8 -> 13.9 s); 1,024 (276 seeds) 0.950,
+#: 2.48 x (seed 157 1.7 -> 83 s); none longer, no failure.  The router zig-zag blended at 5 / 10 um
+#: (60 degree turns) needs 280 intervals: 2.76 -> 1.79 s, 2.27 -> 1.61 s (stopping: 1.77 s).  Where the NLP
+#: falls back on the refined knots, the piece's plan knots are refined by the NLP too and the faster kept
+#: (``_nlp_on_plan_knots``).
+NLP_FLOOR_REFINE_MAX_INTERVALS = 512
 #: Method lp with jerk adds the rest shapes to q in each piece's first and last knot interval
 #: (``lp.WindowSpec.rest_shapes``, ``_solve_windows``).
 LP_REST_SHAPES = True
@@ -579,8 +583,8 @@ def solve_piece(
     1.96 s on the default knots, 0.68 s on twice as many), on the default knot spacing, up to
     FLOOR_REFINE_MAX_INTERVALS (past KNOT_REFINEMENTS doublings too: ``FLOOR_REFINE_PAST_PLAN``), while
     each refinement pays (FLOOR_REFINE_GAIN, FLOOR_REFINE_PATIENCE).  With method lp+nlp only up to
-    NLP_FLOOR_REFINE_MAX_INTERVALS: the NLP works on the LP's knots (refined without a cap they made the
-    NLP up to 3.6 x slower on bench seed 24 and 70 x on bench seed 23); ``plain`` then
+    NLP_FLOOR_REFINE_MAX_INTERVALS: the NLP works on the LP's knots, and its cost grows fast as they
+    shrink; ``plain`` then
     gets the plan's knots' profile, which the NLP refines instead where it falls back on the finer knots.
     """
     first: tuple[float, PieceProfile, list[int]] | None = None
