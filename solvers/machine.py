@@ -172,12 +172,13 @@ def drive_outputs(
 
 def drive_speed_bound(drives: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
     """Per-axis speed (mm/s, (3,)) that no motion from rest can pass under |u| <= umax: at the peak of |v| the
-    acceleration is 0, so u = b v + c + d sign(v) there, and |v| <= (umax + |c| - d) / b (inf where b = 0).
+    acceleration is 0, so u = b v + c + d sign(v) there, and |v| <= (umax + |c| - d) / b (inf where b = 0, or
+    where that is not positive: a drive that cannot move, which ``derive_limits`` refuses, bounds nothing here).
     The servo error bounds nothing of the kind (a falling acceleration's jerk offsets Kv v at the peak)."""
     b = drives["b"]
-    with np.errstate(divide="ignore"):
-        return np.where(b > 0.0, (drives["umax"] + np.abs(drives["c"]) - drives["d"]) / np.where(b > 0.0, b, 1.0),
-                        np.inf)
+    volts = drives["umax"] + np.abs(drives["c"]) - drives["d"]
+    ok = (b > 0.0) & (volts > 0.0)
+    return np.where(ok, volts / np.where(ok, b, 1.0), np.inf)
 
 
 def _positive(v: float, fld: str) -> None:

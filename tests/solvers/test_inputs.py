@@ -190,6 +190,9 @@ def test_motion_time_floor_bounds_the_axes_speeds() -> None:
     v_u = drive_speed_bound(dr)
     assert v_u == pytest.approx((dr["umax"] + np.abs(dr["c"]) - dr["d"]) / dr["b"], rel=1e-15)
     assert np.all(v_u > vmax)  # the NLP may pass the LP's vmax
+    # a drive with no voltage left for speed (or no viscous term) bounds nothing: inf, never 0 or negative
+    stuck = {**dr, "d": dr["umax"] + np.abs(dr["c"]) + 1.0, "b": np.array([0.0, 1.0, 1.0])}
+    assert np.all(drive_speed_bound(stuck) == np.inf)
     assert motion_time_floor(tp, m, Options(method="lp+nlp")) == pytest.approx(
         MOTION_FLOOR_SHARE * 300.0 / float(np.linalg.norm(v_u)), rel=1e-12)
     sch = schedule(tp, m, Options(method="lp+nlp"))
