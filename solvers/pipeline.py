@@ -184,7 +184,9 @@ FLOOR_REFINE_PAST_PLAN = True
 #: knots, and its windows cover the stopping distance whatever the knots, so its dense steps grow as the knots
 #: shrink.  Session 40 (one BLAS thread, ``solvers.blas``), bench seeds 0-299 lp+nlp against 64: 256 motion
 #: geometric mean 0.965, CPU 1.30 x; 512 0.954, 1.51 x (seed 44 1.8 -> 13.9 s); 1,024 (276 seeds) 0.950,
-#: 2.48 x (seed 157 1.7 -> 83 s); none longer, no failure.  The router zig-zag blended at 5 / 10 um
+#: 2.48 x (seed 157 1.7 -> 83 s); none longer, no failure.  Seeds 300-599 at 512 against session 39's 64: 0.955,
+#: 113 shorter but 5 longer (428 1.70 x, 566 1.31 x, 548 1.06 x: the knots whose LP is fastest are not those
+#: whose NLP is; 64 happened to be better there).  The router zig-zag blended at 5 / 10 um
 #: (60 degree turns) needs 280 intervals: 2.76 -> 1.79 s, 2.27 -> 1.61 s (stopping: 1.77 s).  Where the NLP
 #: falls back on the refined knots, the piece's plan knots are refined by the NLP too and the faster kept
 #: (``_nlp_on_plan_knots``).
