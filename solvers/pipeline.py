@@ -185,8 +185,9 @@ FLOOR_REFINE_PAST_PLAN = True
 #: shrink.  Session 40 (one BLAS thread, ``solvers.blas``), bench seeds 0-299 lp+nlp against 64: 256 motion
 #: geometric mean 0.965, CPU 1.30 x; 512 0.954, 1.51 x (seed 44 1.8 -> 13.9 s); 1,024 (276 seeds) 0.950,
 #: 2.48 x (seed 157 1.7 -> 83 s); none longer, no failure.  Seeds 300-599 at 512 against session 39's 64: 0.955,
-#: 113 shorter but 5 longer (428 1.70 x, 566 1.31 x, 548 1.06 x: the knots whose LP is fastest are not those
-#: whose NLP is; 64 happened to be better there).  The router zig-zag blended at 5 / 10 um
+#: 113 shorter but 5 longer (428 1.70 x, 566 1.31 x, 548 1.06 x: the NLP fell back on the refined knots, and the
+#: plan's knots were all that ``_nlp_on_plan_knots`` tried); with it walking the coarser levels: 0.951, 116
+#: shorter, 1 longer (575 1.007 x).  The router zig-zag blended at 5 / 10 um
 #: (60 degree turns) needs 280 intervals: 2.76 -> 1.79 s, 2.27 -> 1.61 s (stopping: 1.77 s).  Where the NLP
 #: falls back on the refined knots, the piece's plan knots are refined by the NLP too and the faster kept
 #: (``_nlp_on_plan_knots``).
@@ -586,8 +587,8 @@ def solve_piece(
     FLOOR_REFINE_MAX_INTERVALS (past KNOT_REFINEMENTS doublings too: ``FLOOR_REFINE_PAST_PLAN``), while
     each refinement pays (FLOOR_REFINE_GAIN, FLOOR_REFINE_PATIENCE).  With method lp+nlp only up to
     NLP_FLOOR_REFINE_MAX_INTERVALS: the NLP works on the LP's knots, and its cost grows fast as they
-    shrink; ``plain`` then
-    gets the plan's knots' profile, which the NLP refines instead where it falls back on the finer knots.
+    shrink; ``plain`` then gets the profiles of the levels solved on fewer knots than the one kept, finest
+    first, which the NLP refines instead where it falls back on the finer knots (``_nlp_on_plan_knots``).
     """
     first: tuple[float, PieceProfile, list[int]] | None = None
     if first_n_int is not None:
@@ -633,13 +634,13 @@ def _refined(
     already solved (duration, profile, joins), kept if faster than what the refinements end with (it does not
     stop them: taken as their yardstick, it cut refinements short that went on to faster profiles, bench
     seeds 23, 80, 86, 111 lp +63-75 %; and a plan on fewer knots than it and no faster does not stop them
-    either, bench seed 97).  ``plain``, if given, gets the plan's knots' profile and joins where a refinement
-    for a floor was kept instead of it (``_nlp_on_plan_knots``)."""
+    either, bench seed 97).  ``plain``, if given, gets the profiles and joins of the levels solved on fewer knots
+    than the one kept, finest first (``_nlp_on_plan_knots``)."""
     n_int: int | None = None
     best: tuple[float, PieceProfile, list[int]] | None = None
     prof: PieceProfile | None = None
     joins: list[int] = []
-    plan0: tuple[PieceProfile, list[int]] | None = None  # the plan's knots' profile (for ``plain``)
+    levels: list[tuple[float, PieceProfile, list[int]]] = []  # every level solved and not stuck (for ``plain``)
     attempt = misses = 0
     while True:
         plan = plan_piece(piece, machine, opt, n_int, toolpath)
@@ -656,12 +657,11 @@ def _refined(
                 raise
             break
         is_stuck = stuck(prof)
-        if attempt == 0 and not is_stuck:
-            plan0 = (prof, joins)
         if not is_stuck:
             if not floored and best is None and first is None:
                 break
             duration = PieceTiming.build(prof, inverse=False).duration
+            levels.append((duration, prof, joins))
             # A plan coarser than ``first``'s and no faster than it ends nothing (neither as clean nor as "finer
             # knots no longer pay"): it says nothing about knots finer than first's.  Bench seed 97 lp, a 110.6 mm
             # piece first solved on 64 intervals (2.02 s, a control point at its floor): 16 / 32 intervals, 3.85 /
@@ -699,8 +699,17 @@ def _refined(
         result = (best[1], best[2])
     if result[0] is None:  # (unreachable: without ``first`` the first solve's failure is raised)
         raise SolverFailure("no knot plan of the piece could be solved")
-    if plain is not None and plan0 is not None and plan0[0] is not result[0]:
-        plain.append(plan0)
+    if plain is not None and result[0] is not None:
+        # the levels coarser than the one kept, finest first, one per knot count (the faster LP of equal counts)
+        if first is not None:
+            levels.append(first)
+        kept_n = result[0].n_int
+        by_n: dict[int, tuple[float, PieceProfile, list[int]]] = {}
+        for lv in levels:
+            n = lv[1].n_int
+            if n < kept_n and (n not in by_n or lv[0] < by_n[n][0]):
+                by_n[n] = lv
+        plain.extend((by_n[n][1], by_n[n][2]) for n in sorted(by_n, reverse=True))
     return result[0], result[1]
 
 
@@ -1096,22 +1105,32 @@ def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
 
 def _nlp_on_plan_knots(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, refined: tuple[PieceProfile, PieceProfile],
-    plan: tuple[PieceProfile, list[int]], nlp_lim: NlpLimits,
+    coarser: list[tuple[PieceProfile, list[int]]], nlp_lim: NlpLimits,
     refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats, n_failed: int, lead_in: Motion | None,
 ) -> tuple[PieceProfile, PieceProfile]:
-    """The NLP on the piece's plan knots (``plan``: the LP's profile there and its joins) where it fell back on
-    a piece the LP refined for a floor (``refined``: that LP profile and the NLP's); returns the (LP, NLP)
-    profiles of the faster, and keeps only its fallbacks in ``stats.failures`` (those from ``n_failed`` on).
+    """The NLP on coarser knots where it fell back on a piece the LP refined for a floor (``refined``: that LP
+    profile and the NLP's): ``coarser`` holds the LP's profiles and joins of the levels it solved on fewer
+    knots, finest first, and they are tried in that order until the NLP holds on one without a fallback;
+    returns the (LP, NLP) profiles of the fastest of those run, and keeps only its fallbacks in
+    ``stats.failures`` (those from ``n_failed`` on).
 
     Bench seeds 153 and 154 (session 39): the NLP fell back ("unverified") on the refined knots and kept their
-    LP feed, 0.286 and 0.399 s, where on the plan's knots it refined a floored LP feed to 0.156 and 0.184 s."""
-    mine = stats.failures[n_failed:]
+    LP feed, 0.286 and 0.399 s, where on the plan's knots it refined a floored LP feed to 0.156 and 0.184 s.
+    Bench seeds 428 and 566 (session 40, cap 512): it fell back on 256 intervals, where 128 gives 0.082 and
+    0.145 s against the plan knots' 0.188 and 0.218 s."""
+    best = (PieceTiming.build(refined[1], inverse=False).duration, refined, stats.failures[n_failed:])
     del stats.failures[n_failed:]
-    prof = _refine_piece(toolpath, piece, machine, opt, plan[0], plan[1], nlp_lim, refiners, stats, lead_in=lead_in)
-    if PieceTiming.build(prof, inverse=False).duration < PieceTiming.build(refined[1], inverse=False).duration:
-        return plan[0], prof
-    stats.failures[n_failed:] = mine
-    return refined
+    for lp_prof, joins in coarser:
+        prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, stats, lead_in=lead_in)
+        duration = PieceTiming.build(prof, inverse=False).duration
+        mine = stats.failures[n_failed:]
+        del stats.failures[n_failed:]
+        if duration < best[0]:
+            best = (duration, (lp_prof, prof), mine)
+        if not mine:
+            break
+    stats.failures[n_failed:] = best[2]
+    return best[1]
 
 
 def _refine_piece(
@@ -1772,7 +1791,7 @@ def _schedule_stream(
                 prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
                                      on_chain, pipe=pipe, lead_in=lead_in)
                 if plain and len(nlp_stats.failures) > n_failed:
-                    lp_prof, prof = _nlp_on_plan_knots(toolpath, piece, machine, opt, (lp_prof, prof), plain[0],
+                    lp_prof, prof = _nlp_on_plan_knots(toolpath, piece, machine, opt, (lp_prof, prof), plain,
                                                        nlp_lim, refiners, nlp_stats, n_failed, lead_in)
                 t_nlp += time.perf_counter() - t0
         finally:
