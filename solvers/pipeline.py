@@ -189,8 +189,8 @@ FLOOR_REFINE_PAST_PLAN = True
 #: plan's knots were all that ``_nlp_on_plan_knots`` tried); with it walking the coarser levels: 0.951, 116
 #: shorter, 1 longer (575 1.007 x).  The router zig-zag blended at 5 / 10 um
 #: (60 degree turns) needs 280 intervals: 2.76 -> 1.79 s, 2.27 -> 1.61 s (stopping: 1.77 s).  Where the NLP
-#: falls back on the refined knots, the piece's plan knots are refined by the NLP too and the faster kept
-#: (``_nlp_on_plan_knots``).
+#: falls back on the refined knots, the coarser levels the LP solved (down to the plan's knots) are refined by
+#: the NLP too, finest first until one holds, and the fastest kept (``_nlp_on_plan_knots``).
 NLP_FLOOR_REFINE_MAX_INTERVALS = 512
 #: Method lp with jerk adds the rest shapes to q in each piece's first and last knot interval
 #: (``lp.WindowSpec.rest_shapes``, ``_solve_windows``).
