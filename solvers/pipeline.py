@@ -1446,16 +1446,21 @@ def motion_time_floor(toolpath: Toolpath, machine: Machine, options: Options | N
     (``machine.drive_speed_bound``) and the axis vmax it promises.  ``schedule`` refuses up front what this
     takes over ``Options.max_samples``, and so does the service's budget."""
     opt = options or Options()
-    lim = LimitSet.from_machine(machine, opt.sample_period, opt.jerk,
-                                rest_from_drive=opt.method == "lp+nlp" and machine.has_drives,
-                                kinematic=opt.nlp_kinematic)
-    return _motion_time_floor(toolpath, lim, _speed_bound(lim, opt, machine))
+    lim = _limit_set(machine, opt)
+    return _motion_time_floor(toolpath, lim, _speed_bound(_promised(lim, opt, machine).vmax, opt, machine))
 
 
-def _speed_bound(lim: LimitSet, opt: Options, machine: Machine) -> FloatArray | None:
-    """Per-axis speed no schedule of ``opt.method`` passes (3,): lp, the LP's vmax; lp+nlp, the promised
-    vmax (if any) and the control signal's bound."""
-    vmax = _promised(lim, opt, machine).vmax
+def _limit_set(machine: Machine, opt: Options) -> LimitSet:
+    """The LP's limits of ``machine`` under ``opt`` (lp+nlp: rest and step limits from the drive model)."""
+    return LimitSet.from_machine(
+        machine, opt.sample_period, opt.jerk, rest_from_drive=opt.method == "lp+nlp" and machine.has_drives,
+        kinematic=opt.nlp_kinematic,
+    )
+
+
+def _speed_bound(vmax: FloatArray | None, opt: Options, machine: Machine) -> FloatArray | None:
+    """Per-axis speed no schedule of ``opt.method`` passes (3,), from the promised axis ``vmax``
+    (``_promised``): lp, that vmax; lp+nlp, it (if any) and the control signal's bound."""
     if opt.method == "lp" or not machine.has_drives:
         return vmax
     u_bound = drive_speed_bound(machine.drive_arrays())
@@ -1697,10 +1702,7 @@ def _schedule_stream(
     block = None if block_samples is None else max(1, math.ceil(block_samples / SAMPLE_CHUNK)) * SAMPLE_CHUNK
     t_start = time.perf_counter()
     paused = 0.0  # time spent suspended at a yield (the consumer's), not compute
-    lim = LimitSet.from_machine(
-        machine, opt.sample_period, opt.jerk, rest_from_drive=opt.method == "lp+nlp" and machine.has_drives,
-        kinematic=opt.nlp_kinematic,
-    )
+    lim = _limit_set(machine, opt)
     stats: dict[str, Any] = {
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
         "unverified": 0, "window_times": [], "sample_repairs": 0, "lp_chains": 0, "lp_seam_fallbacks": 0,
@@ -1734,7 +1736,7 @@ def _schedule_stream(
     if opt.max_samples is not None:
         # refused up front when even the feed caps alone take the samples over the cap (cam-bench seed 35:
         # F words of 0.02-0.4 mm/s over 2,718 mm, 22,164 s; lp+nlp used to spend minutes on the pieces first)
-        t_floor = _motion_time_floor(toolpath, lim, _speed_bound(lim, opt, machine))
+        t_floor = _motion_time_floor(toolpath, lim, _speed_bound(limits.vmax, opt, machine))
         k_floor = math.floor(t_floor / opt.sample_period) + 1
         if k_floor > opt.max_samples:
             raise OutputTooLargeError(
