@@ -186,11 +186,11 @@ FLOOR_REFINE_PAST_PLAN = True
 #: geometric mean 0.965, CPU 1.30 x; 512 0.954, 1.51 x (seed 44 1.8 -> 13.9 s); 1,024 (276 seeds) 0.950,
 #: 2.48 x (seed 157 1.7 -> 83 s); none longer, no failure.  Seeds 300-599 at 512 against session 39's 64: 0.955,
 #: 113 shorter but 5 longer (428 1.70 x, 566 1.31 x, 548 1.06 x: the NLP fell back on the refined knots, and the
-#: plan's knots were all that ``_nlp_on_plan_knots`` tried); with it walking the coarser levels: 0.951, 116
+#: plan's knots were all that ``_nlp_on_coarser_knots`` tried); with it walking the coarser levels: 0.951, 116
 #: shorter, 1 longer (575 1.007 x).  The router zig-zag blended at 5 / 10 um
 #: (60 degree turns) needs 280 intervals: 2.76 -> 1.79 s, 2.27 -> 1.61 s (stopping: 1.77 s).  Where the NLP
 #: falls back on the refined knots, the coarser levels the LP solved (down to the plan's knots) are refined by
-#: the NLP too, finest first until one holds, and the fastest kept (``_nlp_on_plan_knots``).
+#: the NLP too, finest first until one holds, and the fastest kept (``_nlp_on_coarser_knots``).
 NLP_FLOOR_REFINE_MAX_INTERVALS = 512
 #: Method lp with jerk adds the rest shapes to q in each piece's first and last knot interval
 #: (``lp.WindowSpec.rest_shapes``, ``_solve_windows``).
@@ -588,7 +588,7 @@ def solve_piece(
     each refinement pays (FLOOR_REFINE_GAIN, FLOOR_REFINE_PATIENCE).  With method lp+nlp only up to
     NLP_FLOOR_REFINE_MAX_INTERVALS: the NLP works on the LP's knots, and its cost grows fast as they
     shrink; ``plain`` then gets the profiles of the levels solved on fewer knots than the one kept, finest
-    first, which the NLP refines instead where it falls back on the finer knots (``_nlp_on_plan_knots``).
+    first, which the NLP refines instead where it falls back on the finer knots (``_nlp_on_coarser_knots``).
     """
     first: tuple[float, PieceProfile, list[int]] | None = None
     if first_n_int is not None:
@@ -635,7 +635,7 @@ def _refined(
     stop them: taken as their yardstick, it cut refinements short that went on to faster profiles, bench
     seeds 23, 80, 86, 111 lp +63-75 %; and a plan on fewer knots than it and no faster does not stop them
     either, bench seed 97).  ``plain``, if given, gets the profiles and joins of the levels solved on fewer knots
-    than the one kept, finest first (``_nlp_on_plan_knots``)."""
+    than the one kept, finest first (``_nlp_on_coarser_knots``)."""
     n_int: int | None = None
     best: tuple[float, PieceProfile, list[int]] | None = None
     prof: PieceProfile | None = None
@@ -1103,7 +1103,7 @@ def _breaks(toolpath: Toolpath, piece: Piece) -> FloatArray:
     return np.asarray(ks[lo:hi] - piece.s_start, dtype=np.float64)
 
 
-def _nlp_on_plan_knots(
+def _nlp_on_coarser_knots(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, refined: tuple[PieceProfile, PieceProfile],
     coarser: list[tuple[PieceProfile, list[int]]], nlp_lim: NlpLimits,
     refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats, n_failed: int, lead_in: Motion | None,
@@ -1793,7 +1793,7 @@ def _schedule_stream(
                 prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
                                      on_chain, pipe=pipe, lead_in=lead_in)
                 if plain and len(nlp_stats.failures) > n_failed:
-                    lp_prof, prof = _nlp_on_plan_knots(toolpath, piece, machine, opt, (lp_prof, prof), plain,
+                    lp_prof, prof = _nlp_on_coarser_knots(toolpath, piece, machine, opt, (lp_prof, prof), plain,
                                                        nlp_lim, refiners, nlp_stats, n_failed, lead_in)
                 t_nlp += time.perf_counter() - t0
         finally:

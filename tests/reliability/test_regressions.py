@@ -1021,7 +1021,7 @@ def test_lp_nlp_keeps_the_plan_knots_where_the_nlp_falls_back_on_refined_ones(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """Bench seed 154 (lp+nlp, one 4.2 m piece): refined for its LP's floor (16 -> 64 intervals), the NLP fell
     back ("unverified") and kept the LP's feed, 400 samples, where on the plan's knots it refines the floored
-    LP feed (9.03 s) to 184.  ``pipeline._nlp_on_plan_knots`` runs the NLP there too and keeps the faster,
+    LP feed (9.03 s) to 184.  ``pipeline._nlp_on_coarser_knots`` runs the NLP there too and keeps the faster,
     with its own (no) fallbacks in the diagnostics.  (The scenario is the cap of 64 it was found at: up to 512
     intervals the NLP holds on finer knots, 0.43 x as long.)"""
     import solvers.pipeline
@@ -1033,7 +1033,7 @@ def test_lp_nlp_keeps_the_plan_knots_where_the_nlp_falls_back_on_refined_ones(
     sch = schedule(tp, case.machine, Options(method="lp+nlp"))
     assert sch.diagnostics.get("nlp_fallbacks", []) == []
     on = harness.run(case, "lp+nlp")
-    monkeypatch.setattr(solvers.pipeline, "_nlp_on_plan_knots", lambda *a: a[4])  # keep the refined knots' run
+    monkeypatch.setattr(solvers.pipeline, "_nlp_on_coarser_knots", lambda *a: a[4])  # keep the refined knots' run
     off = harness.run(case, "lp+nlp")
     assert on.ok and off.ok, (on.describe(), off.describe())
     assert off.nlp_fallbacks >= 1 and on.samples <= 0.6 * off.samples
@@ -1043,18 +1043,18 @@ def test_lp_nlp_keeps_the_plan_knots_where_the_nlp_falls_back_on_refined_ones(
 def test_lp_nlp_tries_the_coarser_refinements_before_the_plan_knots(monkeypatch: pytest.MonkeyPatch) -> None:
     """Bench seed 428 (lp+nlp, one piece): refined for its LP's floor up to 256 intervals, the NLP fell back
     ("unverified") there and kept the LP's feed (160 samples); on the plan's knots the NLP gave 188, so that
-    LP feed stayed, where on 128 intervals the NLP holds at 83.  ``pipeline._nlp_on_plan_knots`` now walks
+    LP feed stayed, where on 128 intervals the NLP holds at 83.  ``pipeline._nlp_on_coarser_knots`` now walks
     the levels the LP solved on fewer knots, finest first, until the NLP holds on one."""
     import solvers.pipeline
 
     case = gen.case(428, "bench")
     on = harness.run(case, "lp+nlp")
-    real = solvers.pipeline._nlp_on_plan_knots
+    real = solvers.pipeline._nlp_on_coarser_knots
 
     def plan_only(*a: Any) -> Any:  # the session 39 rule: the plan's knots only (the coarsest level)
         return real(*a[:5], a[5][-1:], *a[6:])
 
-    monkeypatch.setattr(solvers.pipeline, "_nlp_on_plan_knots", plan_only)
+    monkeypatch.setattr(solvers.pipeline, "_nlp_on_coarser_knots", plan_only)
     off = harness.run(case, "lp+nlp")
     assert on.ok and off.ok, (on.describe(), off.describe())
     assert on.nlp_fallbacks == 0 and on.samples <= 0.6 * off.samples
