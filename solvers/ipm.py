@@ -58,6 +58,16 @@ finds no step, the plain centring direction (no corrector) is tried before the s
 
 Converged when  ||grad f - A^T z||_inf / s_d <= TOL_DUAL  (Ipopt's scaling s_d = max(100, ||z||_1 / m_i) /
 100),  max(-c) <= TOL_VIOL  and  max(w z) <= TOL_COMPL.
+
+Elastic start (``solve(elastic=True)``, ``solvers.nlp``'s third attempt at a window before Ipopt): a start far
+outside its rows fails above, since a violated row's slack sits at PUSH while its Newton step wants
+c + A dx < 0, so the fraction to the boundary caps every step (an NLP window whose hand-over reads 600 x emax
+in its x_sss envelope: steps of 1e-4 to 1e-9, then Line_Search_Failed or Factorization_Failed).  Each row
+violated at x0 gets r_i >= 0 (c_i + r_i >= 0, r_i = w_i - c_i at the start) and the objective rho sum r
+(an exact penalty for rho over the rows' multipliers, ELASTIC_RHO); r and its multiplier zeta are eliminated
+row by row (``_Step``), so M keeps its band.  Bench seed 44's n = 505 window (start theta 250): 80 iterations
+to Ipopt's objective (2.126964 vs 2.1269635), where the plain method failed after 58 and Ipopt needed 64
+with four restoration iterations.
 """
 
 from __future__ import annotations
@@ -118,6 +128,20 @@ WARM_Z_MIN = 1e-3
 #: rise factors, the last variables, read the first and last few control points, which RCM moves next to them.
 BAND_SHARE = 4
 BAND_MIN_N = 64
+#: Elastic start (``solve(elastic=True)``): each row violated at x0 (c_i < 0) gets an elastic variable r_i >= 0,
+#: c_i + r_i >= 0, and rho sum r_i joins the objective (an exact penalty once rho is over the rows' multipliers):
+#: the start is then interior, where the plain method's fraction to the boundary holds a violated row's slack
+#: at PUSH and lets the step move ~1e-4..1e-9 (windows whose hand-over reads up to 600 x a limit).
+#: rho = max(ELASTIC_RHO, ELASTIC_RHO_FACTOR x the largest starting multiplier); zeta (r's multiplier) starts at
+#: rho - z, at least ELASTIC_ZETA_MIN.  A solve succeeds only where every row holds without r (c >= -TOL_VIOL).
+ELASTIC_RHO = 1e3
+ELASTIC_RHO_FACTOR = 10.0
+ELASTIC_ZETA_MIN = 1.0
+#: An elastic solve still unfinished this many iterations after its centring target reached MU_MIN stops
+#: (status Elastic_Stalled): bench seed 44's two elastic solves converged 6 and 3 iterations after it; seed
+#: 276's three that did not ran out their 100 iterations at MU_MIN (4.5 s of its 20.6 s, for Ipopt to solve
+#: them after).
+ELASTIC_STALL_ITER = 10
 
 
 @dataclass(frozen=True)
@@ -240,15 +264,17 @@ class DenseIpm:
         return float(self._out_fg[0]), self._out_fg[1:]
 
     def solve(self, x0: FloatArray, p: FloatArray, lbx: FloatArray, ubx: FloatArray, lbg: FloatArray,
-              ubg: FloatArray, lam_g0: FloatArray | None = None, max_iter: int | None = None) -> IpmResult:
+              ubg: FloatArray, lam_g0: FloatArray | None = None, max_iter: int | None = None,
+              elastic: bool = False) -> IpmResult:
         """Solve from x0; lam_g0 (m0, Ipopt's convention) seeds the multipliers of the rows at a bound;
-        at most max_iter iterations (default MAX_ITER).  Floating-point overflow (slacks of a solve that is
+        at most max_iter iterations (default MAX_ITER); ``elastic``: the rows violated at x0 start elastic
+        (ELASTIC_RHO).  Floating-point overflow (slacks of a solve that is
         failing reach ~1e-300) ends the solve as Invalid_Number_Detected, without warnings."""
         with np.errstate(all="ignore"):
-            return self._solve(x0, p, lbx, ubx, lbg, ubg, lam_g0, max_iter)
+            return self._solve(x0, p, lbx, ubx, lbg, ubg, lam_g0, max_iter, elastic)
 
     def _solve(self, x0: FloatArray, p: FloatArray, lbx: FloatArray, ubx: FloatArray, lbg: FloatArray,
-               ubg: FloatArray, lam_g0: FloatArray | None, max_iter: int | None) -> IpmResult:
+               ubg: FloatArray, lam_g0: FloatArray | None, max_iter: int | None, elastic: bool) -> IpmResult:
         n, m, m0 = self.n, self.m, self.m0
         max_iter = MAX_ITER if max_iter is None else max_iter
         jr, jc = self._jr, self._jc
@@ -281,6 +307,15 @@ class DenseIpm:
             z = np.maximum(z, WARM_MU0 / w)
         else:
             z = np.ones(mi)
+        ela: _Elastic | None = None
+        if elastic:
+            el = np.flatnonzero(c < 0.0)
+            if el.size == 0:  # (the plain solve from x0 is the one)
+                return IpmResult(x, np.zeros(m0), np.zeros(n), 0, "No_Elastic_Rows")
+            rho = max(ELASTIC_RHO, ELASTIC_RHO_FACTOR * float(z.max()))
+            ela = _Elastic(el, w[el] - c[el], np.maximum(rho - z[el], ELASTIC_ZETA_MIN), rho)
+        at_floor = 0
+        ne = 0 if ela is None else ela.el.size
         theta_start = max(1.0, float(np.abs(c - w).sum()))
         theta_max = THETA_MAX_FACTOR * theta_start
         theta_min = THETA_MIN_FACTOR * theta_start
@@ -302,48 +337,77 @@ class DenseIpm:
             hv = o[k + self._nj :]
             c = sgn * gv[idx] + offs
             rp = c - w
+            rr = np.zeros(0)
+            if ela is not None:
+                rp[ela.el] += ela.r
+                rr = ela.rho - z[ela.el] - ela.zeta
             zg = -self._lam  # the rows' z summed over their two bounds, signed
             rd = gf - np.bincount(jc, jv * zg[jr], minlength=n)
             rd[fixed] = 0.0
-            mu = float(w @ z) / mi
+            mu = float(w @ z) / mi if ela is None else (float(w @ z) + float(ela.r @ ela.zeta)) / (mi + ne)
             s_d = max(100.0, float(z.sum()) / mi) / 100.0
             if (float(np.abs(rd).max()) / s_d <= TOL_DUAL and max(0.0, -float(c.min())) <= TOL_VIOL
-                    and float((w * z).max()) <= TOL_COMPL):
+                    and float((w * z).max()) <= TOL_COMPL
+                    and (ela is None or (float(np.abs(rr).max()) / s_d <= TOL_DUAL
+                                         and float((ela.r * ela.zeta).max()) <= TOL_COMPL))):
                 status = "Solve_Succeeded"
                 break
             if it == max_iter:
                 break
             # condensed system M = H + J^T diag(D_g) J, fixed variables' rows and columns identity
             D = z / w
+            if ela is not None:  # an elastic row's slack and r in series: 1 / (w / z + r / zeta)
+                D[ela.el] = 1.0 / (w[ela.el] / z[ela.el] + ela.r / ela.zeta)
             Dg = np.bincount(idx, D, minlength=m)
             failed = self._kkt.factor(Dg[self._pair_row] * jv[self._ia] * jv[self._ib], hv, fixed)
             if failed is not None:
                 status = failed
                 break
-            step = _Step(self, w, z, rp, gf, jv, D, idx, sgn, fixed)
-            _, dwa, dza, _ = step.direction(np.zeros(mi))
+            step = _Step(self, w, z, rp, gf, jv, D, idx, sgn, fixed, ela, rr)
+            _, dwa, dza, _, dra, dqa = step.direction(np.zeros(mi), np.zeros(ne))
             ap = _max_step(w, dwa, 0.995)
             ad = _max_step(z, dza, 0.995)
-            mu_aff = float((w + ap * dwa) @ (z + ad * dza)) / mi
+            if ela is None:
+                mu_aff = float((w + ap * dwa) @ (z + ad * dza)) / mi
+            else:
+                ap = min(ap, _max_step(ela.r, dra, 0.995))
+                ad = min(ad, _max_step(ela.zeta, dqa, 0.995))
+                mu_aff = (float((w + ap * dwa) @ (z + ad * dza))
+                          + float((ela.r + ap * dra) @ (ela.zeta + ad * dqa))) / (mi + ne)
             mu_t = max(min(1.0, mu_aff / mu) ** 3 * mu, MU_MIN)
+            if ela is not None and mu_t <= MU_MIN:
+                at_floor += 1
+                if at_floor > ELASTIC_STALL_ITER:
+                    status = "Elastic_Stalled"
+                    break
             tau = max(TAU_MIN, 1.0 - mu)
             accepted = None
-            for t in (mu_t - dwa * dza, np.full(mi, mu_t)):
-                dx, dw, dz, dc = step.direction(t)
+            for t, tq in ((mu_t - dwa * dza, mu_t - dra * dqa), (np.full(mi, mu_t), np.full(ne, mu_t))):
+                dx, dw, dz, dc, dr, dq = step.direction(t, tq)
                 ap = _max_step(w, dw, tau)
+                if ela is not None:
+                    ap = min(ap, _max_step(ela.r, dr, tau))
                 keep = lin_i & (c > 0)
                 if keep.any():
                     ap = min(ap, _max_step(c[keep], dc[keep], tau))
                 accepted = self._line_search(x, w, rp, fv, gf, dx, dw, ap, mu_t, idx, sgn, offs, theta_min,
-                                             theta_max)
+                                             theta_max, ela, dr)
                 if accepted is not None:
                     break
             if accepted is None:
                 status = "Line_Search_Failed"
                 break
-            x, w = accepted
-            z = z + _max_step(z, dz, tau) * dz
-            mu_n = float(w @ z) / mi
+            x, w, r_new = accepted
+            a_z = _max_step(z, dz, tau)
+            if ela is None:
+                z = z + a_z * dz
+                mu_n = float(w @ z) / mi
+            else:
+                a_z = min(a_z, _max_step(ela.zeta, dq, tau))
+                z = z + a_z * dz
+                zeta = ela.zeta + a_z * dq
+                mu_n = (float(w @ z) + float(r_new @ zeta)) / (mi + ne)
+                ela = _Elastic(ela.el, r_new, np.clip(zeta, mu_n / (1e10 * r_new), 1e10 * mu_n / r_new), ela.rho)
             z = np.clip(z, mu_n / (1e10 * w), 1e10 * mu_n / w)
         lam_all = _bincount(idx, -sgn * z, m)
         lam_g = lam_all[:m0].copy()
@@ -355,14 +419,26 @@ class DenseIpm:
 
     def _line_search(self, x: FloatArray, w: FloatArray, rp: FloatArray, fv: float, gf: FloatArray,
                      dx: FloatArray, dw: FloatArray, a: float, mu_t: float, idx: IntArray, sgn: FloatArray,
-                     offs: FloatArray, theta_min: float, theta_max: float) -> tuple[FloatArray, FloatArray] | None:
+                     offs: FloatArray, theta_min: float, theta_max: float, ela: _Elastic | None, dr: FloatArray,
+                     ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+        """(x, w, r) at the accepted step, or None; with ``ela`` the elastic rows read c + r and phi has
+        rho sum r - mu sum log r."""
         theta0 = float(np.abs(rp).sum())
         phi0 = fv - mu_t * float(np.log(w).sum())
         dphi = float(gf @ dx) - mu_t * float((dw / w).sum())
+        rn = np.zeros(0)
+        if ela is not None:
+            phi0 += ela.rho * float(ela.r.sum()) - mu_t * float(np.log(ela.r).sum())
+            dphi += ela.rho * float(dr.sum()) - mu_t * float((dr / ela.r).sum())
         while a >= ALPHA_MIN:
             xn = x + a * dx
             fn, gn = self._fg(xn)
             cn = sgn * gn[idx] + offs
+            if ela is not None:
+                rn = ela.r + a * dr
+                cn = cn.copy()
+                cn[ela.el] += rn
+                fn += ela.rho * float(rn.sum()) - mu_t * float(np.log(rn).sum())
             wn = np.maximum(w + a * dw, cn)
             theta = float(np.abs(cn - wn).sum())
             with np.errstate(invalid="ignore", divide="ignore"):
@@ -371,9 +447,9 @@ class DenseIpm:
                 switching = dphi < 0 and math.log(a) + 2.3 * math.log(-dphi) > 1.1 * math.log(max(theta0, 1e-300))
                 if switching and theta0 <= theta_min:
                     if phi <= phi0 + ARMIJO * a * dphi:
-                        return xn, wn
+                        return xn, wn, rn
                 elif theta <= (1 - GAMMA) * theta0 or phi <= phi0 - GAMMA * theta0:
-                    return xn, wn
+                    return xn, wn, rn
             a *= 0.5
         return None
 
@@ -522,18 +598,40 @@ def _max_step(v: FloatArray, dv: FloatArray, tau: float) -> float:
     return 1.0 if r >= -tau else -tau / r
 
 
+@dataclass(frozen=True)
+class _Elastic:
+    """The elastic rows of a solve (``ELASTIC_RHO``): their places el in the inequality list, r (> 0) and its
+    multiplier zeta (> 0), and the penalty rho."""
+
+    el: IntArray
+    r: FloatArray
+    zeta: FloatArray
+    rho: float
+
+
 class _Step:
-    """The Newton directions of one iteration (one factorisation, several right-hand sides)."""
+    r"""The Newton directions of one iteration (one factorisation, several right-hand sides).
+
+    An elastic row (c + r - w = 0, w z = t, r zeta = t_r, rho - z - zeta = rr) condenses as a plain row with
+    D = 1 / (w / z + r / zeta) and  dz = D (-rp - dc + s),  s = (t / z - w) - (t_r / zeta - r - r rr / zeta);
+    then  dzeta = rr - dz,  dr = (t_r - r zeta - r dzeta) / zeta,  dw = dc + dr + rp."""
 
     def __init__(self, ipm: DenseIpm, w: FloatArray, z: FloatArray, rp: FloatArray, gf: FloatArray,
-                 jv: FloatArray, D: FloatArray, idx: IntArray, sgn: FloatArray, fixed: NDArray[np.bool_]) -> None:
+                 jv: FloatArray, D: FloatArray, idx: IntArray, sgn: FloatArray, fixed: NDArray[np.bool_],
+                 ela: _Elastic | None, rr: FloatArray) -> None:
         self.ipm, self.w, self.z, self.rp, self.gf, self.jv, self.D = ipm, w, z, rp, gf, jv, D
-        self.idx, self.sgn, self.fixed = idx, sgn, fixed
+        self.idx, self.sgn, self.fixed, self.ela, self.rr = idx, sgn, fixed, ela, rr
 
-    def direction(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """(dx, dw, dz, dc) for the centring target t (one per inequality)."""
-        ipm, idx, sgn = self.ipm, self.idx, self.sgn
-        y = np.bincount(idx, sgn * (t / self.w - self.D * self.rp), minlength=ipm.m)
+    def direction(self, t: FloatArray, tr: FloatArray) -> tuple[FloatArray, ...]:
+        """(dx, dw, dz, dc, dr, dzeta) for the centring targets t (one per inequality) and tr (one per elastic
+        row; dr and dzeta are empty without them)."""
+        ipm, idx, sgn, ela = self.ipm, self.idx, self.sgn, self.ela
+        val = t / self.w - self.D * self.rp
+        if ela is not None:
+            el, r, q = ela.el, ela.r, ela.zeta
+            s_el = (t[el] / self.z[el] - self.w[el]) - (tr / q - r - r * self.rr / q)
+            val[el] = self.z[el] - self.D[el] * (self.rp[el] - s_el)
+        y = np.bincount(idx, sgn * val, minlength=ipm.m)
         rhs = -self.gf + np.bincount(ipm._jc, self.jv * y[ipm._jr], minlength=ipm.n)
         rhs[self.fixed] = 0.0
         dx = ipm._kkt.solve(rhs)
@@ -541,4 +639,11 @@ class _Step:
         dc = sgn * jdx[idx]
         dw = dc + self.rp
         dz = t / self.w - self.z - self.D * dw
-        return dx, dw, dz, dc
+        if ela is None:
+            return dx, dw, dz, dc, np.zeros(0), np.zeros(0)
+        dz_el = self.D[el] * (-self.rp[el] - dc[el] + s_el)
+        dq = self.rr - dz_el
+        dr = (tr - r * q - r * dq) / q
+        dz[el] = dz_el
+        dw[el] = dc[el] + dr + self.rp[el]
+        return dx, dw, dz, dc, dr, dq

@@ -287,27 +287,38 @@ IPOPT_SAFE_OPTIONS: dict[str, Any] = {**IPOPT_OPTIONS, "ipopt.tol": 1e-7, "ipopt
 #: Replayed windows (flower x10 and bench seeds 0-11, 156 solves at Ipopt's start points): all converged,
 #: objective within 1.1e-6 of Ipopt's or below it, 1.13 vs 2.90 s and 2.70 vs 9.41 s of CPU.
 DENSE_IPM = True
+#: A window the dense method does not finish from the hand-over (warm, then cold) is tried once more with the
+#: rows violated at the start elastic (``solvers.ipm``, ``solve(elastic=True)``) before Ipopt: such starts read
+#: up to 600 x a limit, and the plain method's steps shrink to 1e-4..1e-9 there.
+DENSE_ELASTIC = True
 
 
 def _dense_solve(ipm: DenseIpm | None, x: FloatArray, p: FloatArray, lbx: FloatArray, ubx: FloatArray,
                  lbg: FloatArray, ubg: FloatArray, lam_g: FloatArray) -> IpmResult | None:
-    """``ipm.solve`` from the given multipliers, and if that does not finish, from unit ones (``ipm.WARM_MU0``);
-    None without a dense solver.  An arithmetic error in it is a failed solve (Ipopt then solves the window
-    from the same start).  The result's iterations are both solves'."""
+    """``ipm.solve`` from the given multipliers, and if that does not finish, from unit ones (``ipm.WARM_MU0``),
+    and if that does not either, from unit ones with the rows violated at x elastic (``ipm.ELASTIC_RHO``); None
+    without a dense solver.  An arithmetic error in it is a failed solve (Ipopt then solves the window from the
+    same start).  The result's iterations are all the solves'."""
     if ipm is None:
         return None
 
-    def one(lam: FloatArray | None) -> IpmResult:
+    def one(lam: FloatArray | None, elastic: bool = False) -> IpmResult:
         try:
-            return ipm.solve(x, p, lbx, ubx, lbg, ubg, lam)
+            return ipm.solve(x, p, lbx, ubx, lbg, ubg, lam, elastic=elastic)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             return IpmResult(x, np.zeros(lbg.size), np.zeros(x.size), 0, f"{type(exc).__name__}: {exc}")
 
     res = one(lam_g if np.any(lam_g) else None)
-    if res.success or not np.any(lam_g):
+    if res.success:
         return res
-    cold = one(None)
-    return dataclasses.replace(cold, iterations=res.iterations + cold.iterations)
+    used = res.iterations
+    if np.any(lam_g):
+        res = one(None)
+        used += res.iterations
+    if not res.success and DENSE_ELASTIC:
+        res = one(None, elastic=True)
+        used += res.iterations
+    return dataclasses.replace(res, iterations=used)
 
 
 class NlpFailure(Exception):

@@ -1058,3 +1058,30 @@ def test_lp_nlp_tries_the_coarser_refinements_before_the_plan_knots(monkeypatch:
     off = harness.run(case, "lp+nlp")
     assert on.ok and off.ok, (on.describe(), off.describe())
     assert on.nlp_fallbacks == 0 and on.samples <= 0.6 * off.samples
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_a_window_far_outside_its_rows_is_solved_by_the_elastic_start(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Bench seed 44 (lp+nlp): a window on refined knots (n = 505) starts with its rows ~43 x over their
+    limits (theta 250 at the LP's hand-over).  The dense method failed there warm and cold, and Ipopt solved
+    it (64 iterations, four in restoration; 6.5 of the case's 10.4 s).  With the rows violated at the start
+    elastic (``nlp.DENSE_ELASTIC``) the dense method solves it: no solve goes to Ipopt, and the samples pass
+    the independent checker with the same motion time as with Ipopt."""
+    from solvers import nlp
+
+    made: list[nlp.NlpStats] = []
+
+    class Capture(nlp.NlpStats):
+        def __init__(self) -> None:
+            super().__init__()
+            made.append(self)
+
+    monkeypatch.setattr(pipeline, "NlpStats", Capture)
+    case = gen.case(44, "bench")
+    out = harness.run(case, "lp+nlp")
+    assert out.ok, out.describe()
+    assert made[-1].ipm_handed == made[-1].safe_retries == 0
+    monkeypatch.setattr(nlp, "DENSE_ELASTIC", False)
+    ipopt = harness.run(case, "lp+nlp")
+    assert made[-1].ipm_handed > 0
+    assert out.samples == ipopt.samples

@@ -316,3 +316,46 @@ def test_band_and_dense_solves_end_at_the_same_point(seed: int, n: int, rows_per
     assert band.status == dense.status
     if dense.success:
         assert np.abs(band.x - dense.x).max() <= X_TOL
+
+
+@settings(max_examples=HYPOTHESIS_EXAMPLES // 2, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(4, 40), rows_per_var=st.integers(1, 8),
+       start=st.floats(1.5, 4.0))
+def test_an_elastic_start_far_outside_the_rows_reaches_ipopts_optimum(seed: int, n: int, rows_per_var: int,
+                                                                     start: float) -> None:
+    """From x0 = start (rows a . x + b |x|^2 <= 1 read up to ~50), the rows violated there start elastic: the
+    solve ends at Ipopt's optimum with every row holding on its own (r gone), a KKT point of the problem."""
+    prob, args = _random_problem(seed, n, n * rows_per_var, convex=True)
+    x0 = np.full(n, start)
+    x0[0] = 0.0
+    args = {**args, "x0": x0}
+    g = ca.Function("g", [prob["x"], prob["p"]], [prob["g"]])
+    assert float(np.max(np.asarray(g(x0, args["p"])))) > 2.0  # (far outside: the rows' bound is 1)
+    res = DenseIpm(prob).solve(**args, elastic=True)
+    assert res.success, res.status
+    x_ref, f_ref = _ipopt(prob, args)
+    f = float(ca.Function("f", [prob["x"], prob["p"]], [prob["f"]])(res.x, args["p"]))
+    assert abs(f - f_ref) <= F_RTOL * max(1.0, abs(f_ref))
+    assert np.abs(res.x - x_ref).max() <= _x_tol(f, f_ref)
+    _kkt(prob, args, res)
+
+
+def test_an_elastic_solve_of_an_infeasible_problem_is_not_reported_solved() -> None:
+    """x0 + x1 >= 3 with x0, x1 <= 1: the elastic r cannot reach 0, and the solve says it failed."""
+    x = ca.SX.sym("x", 2)
+    p = ca.SX.sym("p", 1)
+    prob = {"x": x, "p": p, "f": ca.sumsqr(x), "g": ca.vertcat(x[0] + x[1])}
+    res = DenseIpm(prob).solve(np.zeros(2), np.zeros(1), np.full(2, -np.inf), np.ones(2), np.array([3.0]),
+                               np.array([np.inf]), elastic=True)
+    assert not res.success
+
+
+def test_an_elastic_solve_from_a_start_inside_the_rows_does_not_run() -> None:
+    """No row violated at x0: nothing would be elastic, so the solve would be the plain one (which the caller
+    has run); it returns at once, not solved, at x0."""
+    prob, args = _random_problem(3, 20, 100, convex=True)
+    ipm = DenseIpm(prob)
+    assert ipm.solve(**args).success
+    res = ipm.solve(**args, elastic=True)
+    assert (res.status, res.iterations, res.success) == ("No_Elastic_Rows", 0, False)
+    np.testing.assert_array_equal(res.x, args["x0"])

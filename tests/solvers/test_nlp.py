@@ -530,7 +530,8 @@ DENSE_MOTION_RTOL = 1e-3
 
 def test_dense_solves_not_finished_go_to_ipopt(monkeypatch: pytest.MonkeyPatch) -> None:
     """``DENSE_IPM``: every window solve starts in ``solvers.ipm`` (from the given multipliers, then from unit
-    ones: ``nlp._dense_solve``); a solve it does not finish goes to Ipopt's safe settings from the same point.
+    ones, then elastic: ``nlp._dense_solve``); a solve it does not finish goes to Ipopt's safe settings from the
+    same point.
     With the dense method capped at 2 iterations every solve is handed over and Ipopt solves them all;
     uncapped, the dense method solves every window itself.  Both within DENSE_MOTION_RTOL of Ipopt alone,
     no fallback, the drive limits held in the samples."""
@@ -547,9 +548,10 @@ def test_dense_solves_not_finished_go_to_ipopt(monkeypatch: pytest.MonkeyPatch) 
     st_ipopt, st_handed, st_dense = made[-3:]
     assert st_ipopt.ipm_iterations == st_ipopt.ipm_handed == 0
     # every solve handed over, each to the safe Ipopt once; 2 dense iterations from the given multipliers,
-    # 2 more from unit ones where there were multipliers
+    # 2 more from unit ones where there were multipliers, 2 more elastic where a row is violated at the start
+    # (``nlp.DENSE_ELASTIC``)
     assert st_handed.ipm_handed == st_handed.safe_retries > 0
-    assert 2 * st_handed.ipm_handed <= st_handed.ipm_iterations <= 4 * st_handed.ipm_handed
+    assert 2 * st_handed.ipm_handed <= st_handed.ipm_iterations <= 6 * st_handed.ipm_handed
     assert st_dense.ipm_handed == st_dense.safe_retries == 0
     assert st_dense.ipm_iterations == st_dense.iterations > 0
     t_ipopt = runs["ipopt"].summary["motion_time"]
