@@ -73,6 +73,7 @@ with four restoration iterations.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -516,14 +517,11 @@ class _DenseKkt:
         Ms = M * sc[:, None] * sc[None, :]
         if not np.all(np.isfinite(Ms)):
             return "Invalid_Number_Detected"
-        delta = 0.0
-        while delta <= DELTA_MAX:
-            c, info = _potrf(Ms + np.diag(delta * sc * sc) if delta else Ms, lower=0, clean=0)
-            if info == 0:
-                self._cf, self._sc = c, sc
-                return None
-            delta = 8.0 * delta if delta else DELTA0
-        return "Factorization_Failed"
+        c = _first_factor(lambda delta: _potrf(Ms + np.diag(delta * sc * sc) if delta else Ms, lower=0, clean=0))
+        if c is None:
+            return "Factorization_Failed"
+        self._cf, self._sc = c, sc
+        return None
 
     def solve(self, rhs: FloatArray) -> FloatArray:
         """M^-1 rhs with the last factorisation."""
@@ -570,18 +568,19 @@ class _BandKkt:
         abs_ = ab * sc[self._row] * sc[None, :]
         if not np.all(np.isfinite(abs_)):
             return "Invalid_Number_Detected"
-        delta = 0.0
-        while delta <= DELTA_MAX:
+
+        def attempt(delta: float) -> tuple[Any, int]:
             trial = abs_
             if delta:
                 trial = abs_.copy(order="F")
                 trial[kd] += delta * sc * sc
-            c, info = _pbtrf(trial, lower=0)
-            if info == 0:
-                self._cf, self._sc = c, sc
-                return None
-            delta = 8.0 * delta if delta else DELTA0
-        return "Factorization_Failed"
+            return cast(tuple[Any, int], _pbtrf(trial, lower=0))
+
+        c = _first_factor(attempt)
+        if c is None:
+            return "Factorization_Failed"
+        self._cf, self._sc = c, sc
+        return None
 
     def solve(self, rhs: FloatArray) -> FloatArray:
         """M^-1 rhs with the last factorisation."""
@@ -590,6 +589,18 @@ class _BandKkt:
         out = np.empty(self.n)
         out[self.perm] = xp
         return out
+
+
+def _first_factor(attempt: Callable[[float], tuple[Any, int]]) -> Any:
+    """The first factorisation attempt(delta) returns with info 0, for delta I added to the unscaled system
+    (0, then from DELTA0, x8, up to DELTA_MAX); None if none does."""
+    delta = 0.0
+    while delta <= DELTA_MAX:
+        c, info = attempt(delta)
+        if info == 0:
+            return c
+        delta = 8.0 * delta if delta else DELTA0
+    return None
 
 
 def _max_step(v: FloatArray, dv: FloatArray, tau: float) -> float:

@@ -1068,15 +1068,9 @@ def test_a_window_far_outside_its_rows_is_solved_by_the_elastic_start(monkeypatc
     elastic (``nlp.DENSE_ELASTIC``) the dense method solves it: no solve goes to Ipopt, and the samples pass
     the independent checker with the same motion time as with Ipopt."""
     from solvers import nlp
+    from tests.solvers.test_nlp import _capture_stats
 
-    made: list[nlp.NlpStats] = []
-
-    class Capture(nlp.NlpStats):
-        def __init__(self) -> None:
-            super().__init__()
-            made.append(self)
-
-    monkeypatch.setattr(pipeline, "NlpStats", Capture)
+    made = _capture_stats(monkeypatch)
     case = gen.case(44, "bench")
     out = harness.run(case, "lp+nlp")
     assert out.ok, out.describe()
