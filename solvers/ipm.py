@@ -437,7 +437,6 @@ class DenseIpm:
             cn = sgn * gn[idx] + offs
             if ela is not None:
                 rn = ela.r + a * dr
-                cn = cn.copy()
                 cn[ela.el] += rn
                 fn += ela.rho * float(rn.sum()) - mu_t * float(np.log(rn).sum())
             wn = np.maximum(w + a * dw, cn)

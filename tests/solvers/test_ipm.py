@@ -309,7 +309,7 @@ def test_a_small_or_wide_system_stays_dense() -> None:
 @given(seed=st.integers(0, 2**31 - 1), n=st.integers(4, 90), rows_per_var=st.integers(1, 6),
        convex=st.booleans())
 def test_band_and_dense_solves_end_at_the_same_point(seed: int, n: int, rows_per_var: int, convex: bool) -> None:
-    """The whole method with either factorisation: the same status, iterations and point (to X_TOL)."""
+    """The whole method with either factorisation: the same status and point (to X_TOL)."""
     prob, args = _random_problem(seed, n, n * rows_per_var, convex=convex)
     band = DenseIpm(prob, banded=True).solve(**args)
     dense = DenseIpm(prob, banded=False).solve(**args)
