@@ -129,7 +129,8 @@ def child(method: str, loops: int, knot: float | None) -> None:
                       "compute_time": el, "compute_cpu": cpu, "motion_time": s["motion_time"],
                       "lp_time": s["lp_time"], "nlp_time": s.get("nlp_time"), "nlp_windows": s.get("nlp_windows"),
                       "nlp_iterations": s.get("nlp_iterations"), "nlp_ipm_iterations": s.get("nlp_ipm_iterations"),
-                      "nlp_ipm_handed": s.get("nlp_ipm_handed"), "nlp_cut_rounds": s.get("nlp_cut_rounds"),
+                      "nlp_ipm_handed": s.get("nlp_ipm_handed"), "nlp_ipm_infeasible": s.get("nlp_ipm_infeasible"),
+                      "nlp_cut_rounds": s.get("nlp_cut_rounds"),
                       "nlp_failures": s.get("nlp_failures"), "load_average": os.getloadavg()[0],
                       "rss_before_mb": rss0, "peak_mb": proc_status_mb("VmHWM") if reset else None,
                       "samples": n, "sample_mb": 8.0 * n * 21 / 2**20}), flush=True)
@@ -183,7 +184,8 @@ def long_path(out: dict[str, Any], long_memory: bool) -> None:
             "lp_stage_time": s["lp_time"],
             "nlp_stage_time": s["nlp_time"], "lp_windows": s["windows"], "nlp_windows": s["nlp_windows"],
             "nlp_iterations": s["nlp_iterations"], "nlp_ipm_iterations": s["nlp_ipm_iterations"],
-            "nlp_ipm_handed": s["nlp_ipm_handed"], "nlp_cut_rounds": s["nlp_cut_rounds"],
+            "nlp_ipm_handed": s["nlp_ipm_handed"], "nlp_ipm_infeasible": s["nlp_ipm_infeasible"],
+            "nlp_cut_rounds": s["nlp_cut_rounds"],
             "fallbacks": nl.diagnostics["nlp_fallbacks"], "control_points": s["control_points"],
             "checkpoints": s["checkpoints"], "sample_repairs": s["sample_repairs"],
             "lp_window_ms": {"median": 1e3 * statistics.median(s["window_times"]),
@@ -206,11 +208,13 @@ def long_path(out: dict[str, Any], long_memory: bool) -> None:
                 f"{t_nl:.1f} s / {res['nlp_motion']:.1f} s (LP {res['lp_stage_time']:.1f} s, NLP "
                 f"{res['nlp_stage_time']:.1f} s; CPU {cpu:.1f} s)", "—", f"{ratio:.1f} %",
                 f"<= {RATIO_TARGET_PCT:g} %", verdict(ratio <= RATIO_TARGET_PCT)),
-            row(f"{tag}: windows, per-window times, NLP iterations (dense IPM's; solves handed to Ipopt), fallbacks",
+            row(f"{tag}: windows, per-window times, NLP iterations (dense IPM's; solves handed to Ipopt or found "
+                "infeasible by it), fallbacks",
                 f"{res['lp_windows']} LP windows (median {res['lp_window_ms']['median']:.0f} ms), "
                 f"{res['nlp_windows']} NLP windows (median {res['nlp_window_ms']['median']:.0f} ms, max "
                 f"{res['nlp_window_ms']['max']:.0f} ms), {res['nlp_iterations']} it ({res['nlp_ipm_iterations']} "
-                f"dense; {res['nlp_ipm_handed']} solves handed to Ipopt), "
+                f"dense; {res['nlp_ipm_handed']} solves handed to Ipopt, {res['nlp_ipm_infeasible']} found "
+                f"infeasible), "
                 f"{res['nlp_cut_rounds']} tightening rounds, {len(res['fallbacks'])} fallbacks",
                 "—", "—", "—", "info"),
             row(f"{tag}: sampled |u|/umax, |e|/emax", f"u {res['fd_util']['u']:.4f}, e {res['fd_util']['e']:.4f}",

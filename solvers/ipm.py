@@ -67,14 +67,16 @@ violated at x0 gets r_i >= 0 (c_i + r_i >= 0, r_i = w_i - c_i at the start) and 
 (an exact penalty for rho over the rows' multipliers, ELASTIC_RHO); r and its multiplier zeta are eliminated
 row by row (``_Step``), so M keeps its band.  Bench seed 44's n = 505 window (start theta 250): 80 iterations
 to Ipopt's objective (2.126964 vs 2.1269635), where the plain method failed after 58 and Ipopt needed 64
-with four restoration iterations.
+with four restoration iterations.  Where the elastic problem is solved with r left over, the rows are called
+locally infeasible after a second elastic solve with every row elastic (ELASTIC_RHO_GROWTH): ``solvers.nlp``
+then skips Ipopt in its tightening rounds.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import casadi as ca
@@ -143,6 +145,25 @@ ELASTIC_ZETA_MIN = 1.0
 #: 276's three that did not ran out their 100 iterations at MU_MIN (4.5 s of its 20.6 s, for Ipopt to solve
 #: them after).
 ELASTIC_STALL_ITER = 10
+#: An elastic solve whose elastic problem is solved (its own KKT conditions to TOL_DUAL and TOL_COMPL, every row
+#: within TOL_VIOL once r is added) with some r_i > ELASTIC_INFEASIBLE_R sits where the penalty does not lower the
+#: violation.  Only the rows violated at x0 were elastic, the others hard, so a fresh solve goes on from that point
+#: with every row elastic (those that hold start at r = PUSH; Ipopt's restoration phase relaxes every row too).
+#: Solved so again, its rho grows by ELASTIC_RHO_GROWTH (zeta = rho - z) up to ELASTIC_RHO_MAX_FACTOR x its first;
+#: still so there, the point is stationary for f + rho sum max(0, -c_i) with rho 100 x over every multiplier it
+#: needed, and the rows are called locally infeasible: status Infeasible_Problem_Detected, Ipopt's verdict when
+#: its restoration phase converges to a point of non-zero violation.  The verdict is a local one, as Ipopt's: on
+#: a random non-convex draw it came at a local minimiser of the violation (8.7e-3) from which Ipopt found the rows'
+#: feasible set (test_ipm).  With only the first rows elastic it also came where hard rows held the elastic ones
+#: (52 rows at a violation of 104, hard multipliers 20 x rho), not at a minimiser.  The 18.35 m flower at the
+#: default knots: the 4 solves the dense method handed to Ipopt were tightening rounds that left two rows 1-2 %
+#: over their bound; Ipopt's safe settings answered Infeasible_Problem_Detected on each after 15-37 iterations
+#: (~0.2 s each, plus ~0.5 s to build its solver), the dense method now says so in 40-42 iterations (~0.05 s).
+ELASTIC_RHO_GROWTH = 10.0
+ELASTIC_RHO_MAX_FACTOR = 100.0
+#: ... only where some r_i is over this (Ipopt's default ``constr_viol_tol``, under which Ipopt's own solve
+#: would call a point feasible): a smaller r stays for the stall rule and Ipopt.
+ELASTIC_INFEASIBLE_R = 1e-4
 
 
 @dataclass(frozen=True)
@@ -275,7 +296,8 @@ class DenseIpm:
             return self._solve(x0, p, lbx, ubx, lbg, ubg, lam_g0, max_iter, elastic)
 
     def _solve(self, x0: FloatArray, p: FloatArray, lbx: FloatArray, ubx: FloatArray, lbg: FloatArray,
-               ubg: FloatArray, lam_g0: FloatArray | None, max_iter: int | None, elastic: bool) -> IpmResult:
+               ubg: FloatArray, lam_g0: FloatArray | None, max_iter: int | None, elastic: bool,
+               every_row: bool = False) -> IpmResult:
         n, m, m0 = self.n, self.m, self.m0
         max_iter = MAX_ITER if max_iter is None else max_iter
         jr, jc = self._jr, self._jc
@@ -310,11 +332,14 @@ class DenseIpm:
             z = np.ones(mi)
         ela: _Elastic | None = None
         if elastic:
-            el = np.flatnonzero(c < 0.0)
+            el = np.arange(mi) if every_row else np.flatnonzero(c < 0.0)
             if el.size == 0:  # (the plain solve from x0 is the one)
                 return IpmResult(x, np.zeros(m0), np.zeros(n), 0, "No_Elastic_Rows")
+            if every_row:  # the rows that hold start with r = PUSH, their slack over it
+                w = np.where(c < 0.0, w, c + PUSH)
             rho = max(ELASTIC_RHO, ELASTIC_RHO_FACTOR * float(z.max()))
             ela = _Elastic(el, w[el] - c[el], np.maximum(rho - z[el], ELASTIC_ZETA_MIN), rho)
+        rho_max = ELASTIC_RHO_MAX_FACTOR * ela.rho if ela is not None else 0.0
         at_floor = 0
         ne = 0 if ela is None else ela.el.size
         theta_start = max(1.0, float(np.abs(c - w).sum()))
@@ -353,6 +378,19 @@ class DenseIpm:
                                          and float((ela.r * ela.zeta).max()) <= TOL_COMPL))):
                 status = "Solve_Succeeded"
                 break
+            if ela is not None and self._elastic_solved(c, w, z, rd, rr, s_d, ela):
+                # (ELASTIC_RHO_GROWTH) first a fresh solve from here with every row elastic, then rho up there,
+                # then the verdict
+                if not every_row:
+                    res = self._solve(x, p, lbx, ubx, lbg, ubg, None, max_iter - it, True, every_row=True)
+                    return replace(res, iterations=it + res.iterations)
+                if ela.rho >= rho_max:
+                    status = "Infeasible_Problem_Detected"
+                    break
+                rho = ELASTIC_RHO_GROWTH * ela.rho
+                ela = _Elastic(ela.el, ela.r, np.maximum(rho - z[ela.el], ELASTIC_ZETA_MIN), rho)
+                rr = rho - z[ela.el] - ela.zeta
+                at_floor = 0
             if it == max_iter:
                 break
             # condensed system M = H + J^T diag(D_g) J, fixed variables' rows and columns identity
@@ -417,6 +455,19 @@ class DenseIpm:
             # the fixed variables' multipliers close grad f + J^T lam_g + lam_x = 0 (gf, jv: at this x and z)
             lam_x[fixed] = -(gf + np.bincount(jc, jv * lam_all[jr], minlength=n))[fixed]
         return IpmResult(x, lam_g, lam_x, it, status)
+
+    @staticmethod
+    def _elastic_solved(c: FloatArray, w: FloatArray, z: FloatArray, rd: FloatArray, rr: FloatArray, s_d: float,
+                        ela: _Elastic) -> bool:
+        """The elastic problem's own convergence test (the plain one with c + r in place of c on its rows, and
+        the dual residual and complementarity of r too) passed with some r over ELASTIC_INFEASIBLE_R
+        (ELASTIC_RHO_GROWTH)."""
+        ce = c.copy()
+        ce[ela.el] += ela.r
+        return (float(ela.r.max()) > ELASTIC_INFEASIBLE_R
+                and float(np.abs(rd).max()) / s_d <= TOL_DUAL and float(np.abs(rr).max()) / s_d <= TOL_DUAL
+                and max(0.0, -float(ce.min())) <= TOL_VIOL and float((w * z).max()) <= TOL_COMPL
+                and float((ela.r * ela.zeta).max()) <= TOL_COMPL)
 
     def _line_search(self, x: FloatArray, w: FloatArray, rp: FloatArray, fv: float, gf: FloatArray,
                      dx: FloatArray, dw: FloatArray, a: float, mu_t: float, idx: IntArray, sgn: FloatArray,

@@ -291,6 +291,12 @@ DENSE_IPM = True
 #: rows violated at the start elastic (``solvers.ipm``, ``solve(elastic=True)``) before Ipopt: such starts read
 #: up to 600 x a limit, and the plain method's steps shrink to 1e-4..1e-9 there.
 DENSE_ELASTIC = True
+#: The dense method's status for rows its elastic attempt found locally infeasible (``ipm.ELASTIC_RHO_GROWTH``).
+#: In a tightening round (or its softer retries) the solve is then not handed to Ipopt but fails as Ipopt's
+#: infeasible ones do: the best verified feed so far, else a softer retry.  A window's first solve still goes to
+#: Ipopt: the verdict is a local one (on random non-convex rows it was once wrong where Ipopt solved, test_ipm),
+#: and there a wrong one would cost the window its NLP feed, where in a round it costs a softer tightening.
+DENSE_INFEASIBLE = "Infeasible_Problem_Detected"
 
 
 def _dense_solve(ipm: DenseIpm | None, x: FloatArray, p: FloatArray, lbx: FloatArray, ubx: FloatArray,
@@ -976,6 +982,8 @@ class NlpStats:
     #: iterations of ``solvers.ipm.DenseIpm`` (also in ``iterations``), and its solves handed to Ipopt
     ipm_iterations: int = 0
     ipm_handed: int = 0
+    #: ... and its solves found locally infeasible (``DENSE_INFEASIBLE``: not handed to Ipopt)
+    ipm_infeasible: int = 0
 
 
 #: NLP shapes kept per thread across schedules (each ~0.15-0.3 s of CasADi set-up, Ipopt's more; a shape
@@ -1573,9 +1581,14 @@ class NlpRefiner:
             elif dense is not None:
                 # not finished by the dense method (from the given multipliers, then from unit ones): it was the
                 # fast attempt, Ipopt's safe settings below are the retry (the fast Ipopt settings first cost
-                # 2 Ipopt solves per window that is infeasible after a tightening: 18.35 m path, 7 of 7 handed)
+                # 2 Ipopt solves per window that is infeasible after a tightening: 18.35 m path, 7 of 7 handed),
+                # unless its elastic attempt found the rows of a tightening round locally infeasible
+                # (``DENSE_INFEASIBLE``)
                 self.stats.ipm_iterations += dense.iterations
-                self.stats.ipm_handed += 1
+                if dense.status == DENSE_INFEASIBLE and rnd > 0:
+                    self.stats.ipm_infeasible += 1
+                else:
+                    self.stats.ipm_handed += 1
                 res = {}
                 st = {"success": False, "return_status": dense.status, "iter_count": dense.iterations}
             else:
@@ -1591,7 +1604,8 @@ class NlpRefiner:
                 else:
                     self.stats.warm_resolves += 1
             status = str(st.get("return_status", "unknown"))
-            if not st.get("success", False) and status != "Solved_To_Acceptable_Level":
+            if (not st.get("success", False) and status != "Solved_To_Acceptable_Level"
+                    and not (status == DENSE_INFEASIBLE and rnd > 0)):
                 # once per solve: Ipopt's own cold start with the safe settings
                 safe = shape.safe_solver
                 res = safe(**{k: v for k, v in args.items() if k not in ("lam_g0", "lam_x0")})
@@ -2845,6 +2859,7 @@ def _merge_stats(into: NlpStats, st: NlpStats) -> None:
     into.rest_retries += st.rest_retries
     into.ipm_iterations += st.ipm_iterations
     into.ipm_handed += st.ipm_handed
+    into.ipm_infeasible += st.ipm_infeasible
     into.worst_verified = max(into.worst_verified, st.worst_verified)
     into.window_times.extend(st.window_times)
     into.failures.extend({**f, "nlp_window": base + f["nlp_window"]} for f in st.failures)

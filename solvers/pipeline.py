@@ -1932,6 +1932,8 @@ def _schedule_stream(
             # of which the dense interior point's (solvers.ipm), and its solves handed to Ipopt
             "nlp_ipm_iterations": nlp_stats.ipm_iterations,
             "nlp_ipm_handed": nlp_stats.ipm_handed,
+            # ... and its solves found locally infeasible by its elastic attempt (not handed to Ipopt)
+            "nlp_ipm_infeasible": nlp_stats.ipm_infeasible,
             "nlp_cut_rounds": nlp_stats.cut_rounds,
             "nlp_failures": len(nlp_stats.failures),
             "nlp_softer_retries": nlp_stats.softer_retries,

@@ -561,6 +561,33 @@ def test_dense_solves_not_finished_go_to_ipopt(monkeypatch: pytest.MonkeyPatch) 
         _check_drive(m, sch)
 
 
+def test_tightening_rounds_the_dense_method_finds_infeasible_are_not_handed_to_ipopt(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``nlp.DENSE_INFEASIBLE``: two flower loops at 4.63 mm knots have 3 tightening rounds whose rows no feed
+    meets (the 18.35 m path at the default knots had 4, each ~0.2 s of Ipopt plus its solver's build).  The
+    dense method's elastic attempt says Infeasible_Problem_Detected there and no solve goes to Ipopt.  Without
+    the verdict (``ipm.ELASTIC_INFEASIBLE_R`` = inf) the same solves go to Ipopt's safe settings, which find
+    them infeasible too: the samples are the same, and the drive limits hold in them."""
+    from solvers import ipm, nlp
+
+    made = _capture_stats(monkeypatch)
+    m = router()
+    runs: dict[str, Schedule] = {}
+    for name, r_min in (("verdict", ipm.ELASTIC_INFEASIBLE_R), ("ipopt", np.inf)):
+        monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)
+        monkeypatch.setattr(ipm, "ELASTIC_INFEASIBLE_R", r_min)
+        runs[name] = schedule(ex.flower(2), m, Options(method="lp+nlp", knot_spacing=4.63, nlp_workers=1))
+    st_verdict, st_ipopt = made[-2:]
+    assert st_verdict.ipm_infeasible > 0
+    assert st_verdict.ipm_handed == st_verdict.safe_retries == 0
+    assert st_ipopt.ipm_infeasible == 0
+    assert st_ipopt.ipm_handed == st_ipopt.safe_retries == st_verdict.ipm_infeasible
+    assert runs["verdict"].summary["nlp_ipm_infeasible"] == st_verdict.ipm_infeasible
+    for col in ("t", "position"):
+        np.testing.assert_array_equal(getattr(runs["verdict"].samples, col), getattr(runs["ipopt"].samples, col))
+    _check_drive(m, runs["verdict"])
+
+
 #: Context time against the analytic s / F of a constant feed: the trapezoid is exact there.
 CONTEXT_TIME_RTOL = 1e-12
 
