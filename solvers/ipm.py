@@ -235,8 +235,14 @@ class DenseIpm:
         #: H's non-zeros (its lower triangle) as flat positions in an n x n matrix
         self._h_at: IntArray = hr_a * n + hc_a
         self._nj = self._jr.size
-        self._pairs(m)
-        self._kkt: _DenseKkt | _BandKkt = _choose_kkt(n, self._jc[self._ia], self._jc[self._ib], hr_a, hc_a, banded)
+        ia, ib = self._pairs(m)
+        self._kkt: _DenseKkt | _BandKkt = _choose_kkt(n, self._jc[ia], self._jc[ib], hr_a, hc_a, banded)
+        if self._kkt.pair_keep is not None:  # (the band reads one of each symmetric pair: the others are not formed)
+            ia, ib = ia[self._kkt.pair_keep], ib[self._kkt.pair_keep]
+        #: the pairs ``factor`` reads: their non-zeros of J and their row
+        self._ia: IntArray = ia
+        self._ib: IntArray = ib
+        self._pair_row: IntArray = self._jr[ia]
         full = ca.Function("ipm_full", [v, p, lam],
                            [ca.vertcat(f, ca.densify(gradf), ca.densify(gx), _nonzeros(J), _nonzeros(Hl))])
         self._v: FloatArray = np.zeros(int(v.size1()))
@@ -255,7 +261,7 @@ class DenseIpm:
         self._buf_fg.set_arg(1, _view(self._p))
         self._buf_fg.set_res(0, _view(self._out_fg))
 
-    def _pairs(self, m: int) -> None:
+    def _pairs(self, m: int) -> tuple[IntArray, IntArray]:
         """Pairs (a, b) of non-zeros of J in one row: (A^T D A)[col a, col b] += D_row J_a J_b."""
         order = np.argsort(self._jr, kind="stable")
         rows = self._jr[order]
@@ -271,9 +277,8 @@ class DenseIpm:
                 ok = (table[:, i] >= 0) & (table[:, j] >= 0)
                 ia.append(table[ok, i])
                 ib.append(table[ok, j])
-        self._ia: IntArray = np.concatenate(ia) if ia else np.zeros(0, dtype=np.int64)
-        self._ib: IntArray = np.concatenate(ib) if ib else np.zeros(0, dtype=np.int64)
-        self._pair_row: IntArray = self._jr[self._ia]
+        empty = np.zeros(0, dtype=np.int64)
+        return (np.concatenate(ia) if ia else empty), (np.concatenate(ib) if ib else empty)
 
     def _lx(self, x: FloatArray) -> FloatArray:
         """v = L x."""
@@ -544,6 +549,8 @@ class _DenseKkt:
 
     def __init__(self, n: int, pa: IntArray, pb: IntArray, hr: IntArray, hc: IntArray) -> None:
         self.n = n
+        #: the pairs ``factor`` reads (None: every one)
+        self.pair_keep: NDArray[np.bool_] | None = None
         #: flat positions in M (n x n, C order) of the pairs, of H's lower triangle, and of its mirror
         self._pair_at: IntArray = pa * n + pb
         self._h_at: IntArray = hr * n + hc
@@ -590,9 +597,10 @@ class _BandKkt:
         self.n, self.kd, self.perm = n, kd, perm
         w = kd + 1
         i, j = pos[pa], pos[pb]
-        #: the pairs in the upper triangle of M_p (J^T D J holds both (a, b) and (b, a)) and their places in ab
-        self._pair_keep = i <= j
-        self._pair_at: IntArray = (kd + i - j + j * w)[self._pair_keep]
+        #: the pairs in the upper triangle of M_p (J^T D J holds both (a, b) and (b, a)), the only ones ``factor``
+        #: reads, and their places in ab
+        self.pair_keep: NDArray[np.bool_] | None = i <= j
+        self._pair_at: IntArray = (kd + i - j + j * w)[i <= j]
         # H's lower triangle (r >= c) is one entry of M_p's upper triangle each
         hi, hj = np.minimum(pos[hr], pos[hc]), np.maximum(pos[hr], pos[hc])
         self._h_at: IntArray = kd + hi - hj + hj * w
@@ -605,10 +613,10 @@ class _BandKkt:
         self._sc: FloatArray = np.zeros(0)
 
     def factor(self, pair_w: FloatArray, hv: FloatArray, fixed: NDArray[np.bool_]) -> str | None:
-        """As ``_DenseKkt.factor``, on the band."""
+        """As ``_DenseKkt.factor``, on the band; pair_w holds the weights of the pairs in ``pair_keep`` only."""
         n, kd = self.n, self.kd
         size = (kd + 1) * n
-        ab = (_bincount(self._pair_at, pair_w[self._pair_keep], size) + _bincount(self._h_at, hv, size))
+        ab = (_bincount(self._pair_at, pair_w, size) + _bincount(self._h_at, hv, size))
         ab = ab.reshape((kd + 1, n), order="F")
         fx = fixed[self.perm]
         if fx.any():
