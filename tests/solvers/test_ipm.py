@@ -9,7 +9,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 import pytest
-from hypothesis import example, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linprog
 
@@ -17,6 +17,8 @@ from solvers.ipm import (
     BAND_MIN_N,
     BAND_SHARE,
     ELASTIC_INFEASIBLE_R,
+    ELASTIC_RHO,
+    ELASTIC_RHO_MAX_FACTOR,
     TOL_COMPL,
     TOL_VIOL,
     DenseIpm,
@@ -51,11 +53,14 @@ VIOL_TOL = TOL_VIOL
 #: multiplier x slack of a row's bound at a returned point (the method stops at w z <= TOL_COMPL)
 COMPL_TOL = 10 * TOL_COMPL
 HYPOTHESIS_EXAMPLES = 40
-#: An Infeasible_Problem_Detected point is a local minimiser of the rows' violation v: no step within
-#: VERDICT_STEP (inf-norm) lowers v by more than VERDICT_DV_TOL x v to first order (the method stops there at
-#: rho = 100 x its first, where the objective's pull on x is ~1e-5 of the violation's).
+#: An Infeasible_Problem_Detected point is a local minimiser of the rows' violation v: no step d within
+#: VERDICT_STEP (inf-norm) lowers v to first order by more than the objective's pull allows, grad f . d / rho
+#: <= VERDICT_STEP |grad f|_1 / rho at the verdict's rho (the method stops at a KKT point of f + rho v, rho =
+#: ELASTIC_RHO_MAX_FACTOR x its first, ELASTIC_RHO on a cold start), with VERDICT_DV_FLOOR for its stopping
+#: tolerances (TOL_DUAL on the scaled dual residual).  A fixed 1e-6 x v failed on a draw whose decrease was
+#: 1.2e-6 v (5.2e-8, within the pull).
 VERDICT_STEP = 1e-3
-VERDICT_DV_TOL = 1e-6
+VERDICT_DV_FLOOR = 1e-9
 
 
 def _ipopt(problem: dict[str, Any], args: dict[str, Any]) -> tuple[np.ndarray, float]:
@@ -339,6 +344,7 @@ def test_band_and_dense_solves_end_at_the_same_point(seed: int, n: int, rows_per
 @settings(max_examples=HYPOTHESIS_EXAMPLES // 2, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), n=st.integers(4, 40), rows_per_var=st.integers(1, 8),
        start=st.floats(1.5, 4.0))
+@example(seed=3, n=4, rows_per_var=3, start=2.6603767670217735)  # (line search failed: ``ipm.ELASTIC_RECENTRE``)
 def test_an_elastic_start_far_outside_the_rows_reaches_ipopts_optimum(seed: int, n: int, rows_per_var: int,
                                                                      start: float) -> None:
     """From x0 = start (rows a . x + b |x|^2 <= 1 read up to ~50), the rows violated there start elastic: the
@@ -348,7 +354,7 @@ def test_an_elastic_start_far_outside_the_rows_reaches_ipopts_optimum(seed: int,
     x0[0] = 0.0
     args = {**args, "x0": x0}
     g = ca.Function("g", [prob["x"], prob["p"]], [prob["g"]])
-    assert float(np.max(np.asarray(g(x0, args["p"])))) > 2.0  # (far outside: the rows' bound is 1)
+    assume(float(np.max(np.asarray(g(x0, args["p"])))) > 2.0)  # (far outside: the rows' bound is 1)
     res = DenseIpm(prob).solve(**args, elastic=True)
     assert res.success, res.status
     x_ref, f_ref = _ipopt(prob, args)
@@ -364,13 +370,14 @@ def _ipopt_status(problem: dict[str, Any], args: dict[str, Any]) -> str:
     return str(s.stats()["return_status"])
 
 
-def _violation_decrease(problem: dict[str, Any], args: dict[str, Any], x: np.ndarray) -> tuple[float, float]:
-    """(v, the most a step d with |d|_inf <= VERDICT_STEP can lower v to first order): v = sum of the rows'
-    violations at x, the rows linearised by CasADi, the step an LP (scipy's HiGHS) that keeps x within its
-    bounds, as Ipopt's restoration phase does."""
+def _violation_decrease(problem: dict[str, Any], args: dict[str, Any], x: np.ndarray,
+                        ) -> tuple[float, float, float]:
+    """(v, the most a step d with |d|_inf <= VERDICT_STEP can lower v to first order, the objective's pull on
+    such a step at the verdict's rho): v = sum of the rows' violations at x, the rows linearised by CasADi, the
+    step an LP (scipy's HiGHS) that keeps x within its bounds, as Ipopt's restoration phase does."""
     X, P = problem["x"], problem["p"]
-    g, J = (np.asarray(v) for v in ca.Function("gj", [X, P], [problem["g"], ca.jacobian(problem["g"], X)])(
-        x, args["p"]))
+    g, J, gf = (np.asarray(v) for v in ca.Function(
+        "gj", [X, P], [problem["g"], ca.jacobian(problem["g"], X), ca.gradient(problem["f"], X)])(x, args["p"]))
     g = g.ravel()
     n, m = x.size, g.size
     lo, hi = args["lbg"], args["ubg"]
@@ -385,15 +392,17 @@ def _violation_decrease(problem: dict[str, Any], args: dict[str, Any], x: np.nda
     lp = linprog(np.concatenate([np.zeros(n), np.ones(2 * m)]), A_ub=A[fin], b_ub=b[fin],
                  bounds=bounds + [(0.0, None)] * (2 * m), method="highs")
     assert lp.status == 0
-    return v, v - float(lp.fun)
+    pull = VERDICT_STEP * float(np.abs(gf[~fixed]).sum()) / (ELASTIC_RHO * ELASTIC_RHO_MAX_FACTOR)
+    return v, v - float(lp.fun), pull
 
 
 def _check_verdict(problem: dict[str, Any], args: dict[str, Any], res: Any) -> None:
     """An Infeasible_Problem_Detected point: violated by more than ELASTIC_INFEASIBLE_R, and no step lowers the
-    violation to first order (a local minimiser of it: the verdict is a local one)."""
-    v, dv = _violation_decrease(problem, args, res.x)
+    violation to first order by more than the objective's pull (a local minimiser of it: the verdict is a local
+    one)."""
+    v, dv, pull = _violation_decrease(problem, args, res.x)
     assert v > ELASTIC_INFEASIBLE_R
-    assert dv <= VERDICT_DV_TOL * v
+    assert dv <= pull + VERDICT_DV_FLOOR
 
 
 def test_an_elastic_solve_of_an_infeasible_problem_says_so_where_the_violation_is_least() -> None:
@@ -417,9 +426,9 @@ def test_an_elastic_solve_of_an_infeasible_problem_says_so_where_the_violation_i
 def test_an_elastic_solve_of_contradicting_rows_is_never_solved(seed: int, n: int, rows_per_var: int, gap: float,
                                                                 start: float) -> None:
     """The random convex rows plus x_k >= 1 + gap and x_k - x_k+1 <= 1 with x_k+1 <= 0 (a bound), which no x
-    meets: the elastic solve is never reported solved, and where it says Infeasible_Problem_Detected (on about a
-    third of such draws; else its line search fails or it runs out of iterations, and the caller hands the
-    window to Ipopt) its point is a local minimiser of the violation."""
+    meets: the elastic solve is never reported solved, and where it says Infeasible_Problem_Detected (on 46 of 60
+    such draws; else its line search fails or it runs out of iterations, and the caller hands the window to
+    Ipopt) its point is a local minimiser of the violation."""
     prob, args = _random_problem(seed, n, n * rows_per_var, convex=True)
     k = 1 + seed % (n - 2)
     x = prob["x"]
