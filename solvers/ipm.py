@@ -347,11 +347,10 @@ class DenseIpm:
         hard = np.ones(mi, dtype=bool)  # (the linear rows the step keeps feasible where they hold: ``lin_i``)
         if elastic:
             el = np.flatnonzero(idx < m0) if every_row else np.flatnonzero(c < 0.0)
-            if every_row:
-                hard[el] = False
             if el.size == 0:  # (the plain solve from x0 is the one)
                 return IpmResult(x, np.zeros(m0), np.zeros(n), 0, "No_Elastic_Rows")
-            if every_row:  # the rows that hold start with r = PUSH, their slack over it
+            if every_row:  # (ELASTIC_RHO_GROWTH) the rows that hold start with r = PUSH, their slack over it
+                hard[el] = False
                 w[el] = np.where(c[el] < 0.0, w[el], c[el] + PUSH)
             rho = max(ELASTIC_RHO, ELASTIC_RHO_FACTOR * float(z.max()))
             ela = _Elastic(el, w[el] - c[el], np.maximum(rho - z[el], ELASTIC_ZETA_MIN), rho)

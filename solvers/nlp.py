@@ -1574,6 +1574,8 @@ class NlpRefiner:
             dense = _dense_solve(shape.ipm, x, p_all, lbx, ubx, lbg, ubg, args["lam_g0"])
             res: dict[str, Any]
             st: dict[str, Any]
+            # the dense method's own verdict on a round's rows (never Ipopt's: that one gets the safe retry)
+            dense_infeasible = dense is not None and dense.status == DENSE_INFEASIBLE and rnd > 0
             if dense is not None and dense.success:
                 res = {"x": dense.x, "lam_g": dense.lam_g, "lam_x": dense.lam_x}
                 st = {"success": True, "return_status": dense.status, "iter_count": dense.iterations}
@@ -1585,7 +1587,7 @@ class NlpRefiner:
                 # unless its elastic attempt found the rows of a tightening round locally infeasible
                 # (``DENSE_INFEASIBLE``)
                 self.stats.ipm_iterations += dense.iterations
-                if dense.status == DENSE_INFEASIBLE and rnd > 0:
+                if dense_infeasible:
                     self.stats.ipm_infeasible += 1
                 else:
                     self.stats.ipm_handed += 1
@@ -1604,8 +1606,7 @@ class NlpRefiner:
                 else:
                     self.stats.warm_resolves += 1
             status = str(st.get("return_status", "unknown"))
-            if (not st.get("success", False) and status != "Solved_To_Acceptable_Level"
-                    and not (status == DENSE_INFEASIBLE and rnd > 0)):
+            if not st.get("success", False) and status != "Solved_To_Acceptable_Level" and not dense_infeasible:
                 # once per solve: Ipopt's own cold start with the safe settings
                 safe = shape.safe_solver
                 res = safe(**{k: v for k, v in args.items() if k not in ("lam_g0", "lam_x0")})

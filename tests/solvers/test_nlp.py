@@ -567,17 +567,22 @@ def test_tightening_rounds_the_dense_method_finds_infeasible_are_not_handed_to_i
     meets (the 18.35 m path at the default knots had 4, each ~0.2 s of Ipopt plus its solver's build).  The
     dense method's elastic attempt says Infeasible_Problem_Detected there and no solve goes to Ipopt.  Without
     the verdict (``ipm.ELASTIC_INFEASIBLE_R`` = inf) the same solves go to Ipopt's safe settings, which find
-    them infeasible too: the samples are the same, and the drive limits hold in them."""
+    them infeasible too: the samples are the same, and the drive limits hold in them.  Without the dense method
+    (``DENSE_IPM`` off) Ipopt's own verdict on a round still gets the safe settings' retry (the first version
+    skipped it: the status is the same string)."""
     from solvers import ipm, nlp
 
     made = _capture_stats(monkeypatch)
     m = router()
     runs: dict[str, Schedule] = {}
-    for name, r_min in (("verdict", ipm.ELASTIC_INFEASIBLE_R), ("ipopt", np.inf)):
+    for name, r_min, dense in (("verdict", ipm.ELASTIC_INFEASIBLE_R, True), ("ipopt", np.inf, True),
+                               ("no_dense", ipm.ELASTIC_INFEASIBLE_R, False)):
         monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)
         monkeypatch.setattr(ipm, "ELASTIC_INFEASIBLE_R", r_min)
+        monkeypatch.setattr(nlp, "DENSE_IPM", dense)
         runs[name] = schedule(ex.flower(2), m, Options(method="lp+nlp", knot_spacing=4.63, nlp_workers=1))
-    st_verdict, st_ipopt = made[-2:]
+    st_verdict, st_ipopt, st_no_dense = made[-3:]
+    assert st_no_dense.safe_retries > 0 and st_no_dense.ipm_infeasible == 0
     assert st_verdict.ipm_infeasible > 0
     assert st_verdict.ipm_handed == st_verdict.safe_retries == 0
     assert st_ipopt.ipm_infeasible == 0
