@@ -448,15 +448,15 @@ def test_an_elastic_solve_of_contradicting_rows_is_never_solved(seed: int, n: in
 @settings(max_examples=HYPOTHESIS_EXAMPLES // 2, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), n=st.integers(4, 30), rows_per_var=st.integers(1, 8),
        start=st.floats(1.5, 4.0))
-@example(seed=0, n=8, rows_per_var=7, start=3.0)  # (52 rows held at a violation of 104 by hard rows: not a verdict)
+@example(seed=0, n=8, rows_per_var=7, start=3.0)  # (solved; the first version's verdict: 52 rows at 104, held)
 @example(seed=1991058916, n=27, rows_per_var=2, start=1.6318303584413778)  # (a verdict; Ipopt solves it)
 def test_an_elastic_solve_of_non_convex_rows_ends_solved_or_at_a_local_minimum_of_the_violation(
         seed: int, n: int, rows_per_var: int, start: float) -> None:
     """The non-convex rows hold at x = 0; from x0 = start outside them the elastic solve ends solved at a KKT
     point, or unsolved, or says Infeasible_Problem_Detected only at a local minimiser of the violation: a local
-    verdict, as Ipopt's (seed 1991058916: violation 8.7e-3 where no step lowers it, x_9 at its bound, while
-    Ipopt from the same start solves the rows).  With only the rows violated at x0 elastic, the first example
-    was called infeasible at a point the other rows held, far from a minimiser."""
+    verdict, as Ipopt's (seed 1991058916: violation 8.7e-3 where no step lowers it, while Ipopt from the same
+    start solves the rows).  With only the rows violated at x0 elastic, the first example was called infeasible
+    at a point the other rows held, far from a minimiser; it is solved now."""
     prob, args = _random_problem(seed, n, n * rows_per_var, convex=False)
     x0 = np.full(n, start)
     x0[0] = 0.0
