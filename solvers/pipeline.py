@@ -699,7 +699,7 @@ def _refined(
         result = (best[1], best[2])
     if result[0] is None:  # (unreachable: without ``first`` the first solve's failure is raised)
         raise SolverFailure("no knot plan of the piece could be solved")
-    if plain is not None and result[0] is not None:
+    if plain is not None:
         # the levels coarser than the one kept, finest first, one per knot count (the faster LP of equal counts)
         if first is not None:
             levels.append(first)
