@@ -172,6 +172,8 @@ ELASTIC_RECENTRE = 0.01
 #: ... only where some r_i is over this (Ipopt's default ``constr_viol_tol``, under which Ipopt's own solve
 #: would call a point feasible): a smaller r stays for the stall rule and Ipopt.
 ELASTIC_INFEASIBLE_R = 1e-4
+#: The status of that verdict (``solvers.nlp.DENSE_INFEASIBLE``).
+STATUS_INFEASIBLE = "Infeasible_Problem_Detected"
 
 
 @dataclass(frozen=True)
@@ -387,20 +389,21 @@ class DenseIpm:
             rd[fixed] = 0.0
             mu = float(w @ z) / mi if ela is None else (float(w @ z) + float(ela.r @ ela.zeta)) / (mi + ne)
             s_d = max(100.0, float(z.sum()) / mi) / 100.0
-            if (float(np.abs(rd).max()) / s_d <= TOL_DUAL and max(0.0, -float(c.min())) <= TOL_VIOL
-                    and float((w * z).max()) <= TOL_COMPL
-                    and (ela is None or (float(np.abs(rr).max()) / s_d <= TOL_DUAL
-                                         and float((ela.r * ela.zeta).max()) <= TOL_COMPL))):
+            # stationarity and complementarity (of r too), then the rows: each on its own, or with r added
+            centred = (float(np.abs(rd).max()) / s_d <= TOL_DUAL and float((w * z).max()) <= TOL_COMPL
+                       and (ela is None or (float(np.abs(rr).max()) / s_d <= TOL_DUAL
+                                            and float((ela.r * ela.zeta).max()) <= TOL_COMPL)))
+            if centred and max(0.0, -float(c.min())) <= TOL_VIOL:
                 status = "Solve_Succeeded"
                 break
-            if ela is not None and self._elastic_solved(c, w, z, rd, rr, s_d, ela):
+            if centred and ela is not None and _elastic_solved(c, ela):
                 # (ELASTIC_RHO_GROWTH) first a fresh solve from here with every row elastic, then rho up there,
                 # then the verdict
                 if not every_row:
                     res = self._solve(x, p, lbx, ubx, lbg, ubg, None, max_iter - it, True, every_row=True)
                     return replace(res, iterations=it + res.iterations)
                 if ela.rho >= rho_max:
-                    status = "Infeasible_Problem_Detected"
+                    status = STATUS_INFEASIBLE
                     break
                 rho = ELASTIC_RHO_GROWTH * ela.rho
                 ela = _Elastic(ela.el, ela.r, np.maximum(rho - z[ela.el], ELASTIC_ZETA_MIN), rho)
@@ -474,19 +477,6 @@ class DenseIpm:
             # the fixed variables' multipliers close grad f + J^T lam_g + lam_x = 0 (gf, jv: at this x and z)
             lam_x[fixed] = -(gf + np.bincount(jc, jv * lam_all[jr], minlength=n))[fixed]
         return IpmResult(x, lam_g, lam_x, it, status)
-
-    @staticmethod
-    def _elastic_solved(c: FloatArray, w: FloatArray, z: FloatArray, rd: FloatArray, rr: FloatArray, s_d: float,
-                        ela: _Elastic) -> bool:
-        """The elastic problem's own convergence test (the plain one with c + r in place of c on its rows, and
-        the dual residual and complementarity of r too) passed with some r over ELASTIC_INFEASIBLE_R
-        (ELASTIC_RHO_GROWTH)."""
-        ce = c.copy()
-        ce[ela.el] += ela.r
-        return (float(ela.r.max()) > ELASTIC_INFEASIBLE_R
-                and float(np.abs(rd).max()) / s_d <= TOL_DUAL and float(np.abs(rr).max()) / s_d <= TOL_DUAL
-                and max(0.0, -float(ce.min())) <= TOL_VIOL and float((w * z).max()) <= TOL_COMPL
-                and float((ela.r * ela.zeta).max()) <= TOL_COMPL)
 
     def _line_search(self, x: FloatArray, w: FloatArray, rp: FloatArray, fv: float, gf: FloatArray,
                      dx: FloatArray, dw: FloatArray, a: float, mu_t: float, idx: IntArray, sgn: FloatArray,
@@ -673,6 +663,14 @@ def _first_factor(attempt: Callable[[float], tuple[Any, int]]) -> Any:
             return c
         delta = 8.0 * delta if delta else DELTA0
     return None
+
+
+def _elastic_solved(c: FloatArray, ela: _Elastic) -> bool:
+    """With the solve's stationarity and complementarity met (``DenseIpm._solve``): every row holds once r is
+    added, while some r is over ELASTIC_INFEASIBLE_R (ELASTIC_RHO_GROWTH)."""
+    ce = c.copy()
+    ce[ela.el] += ela.r
+    return float(ela.r.max()) > ELASTIC_INFEASIBLE_R and max(0.0, -float(ce.min())) <= TOL_VIOL
 
 
 def _max_step(v: FloatArray, dv: FloatArray, tau: float) -> float:

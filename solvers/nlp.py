@@ -85,7 +85,7 @@ from scipy.ndimage import maximum_filter1d
 
 from geometry.toolpath import PathSamples
 from solvers import bspline, ccompile, kinematics
-from solvers.ipm import DenseIpm, IpmResult
+from solvers.ipm import STATUS_INFEASIBLE, DenseIpm, IpmResult
 from solvers.lp import SIGN_EPS, V_KERNEL_A, V_KERNEL_JC, axis_moves, step_cap, tangent_jump
 from solvers.machine import Machine
 
@@ -296,7 +296,7 @@ DENSE_ELASTIC = True
 #: infeasible ones do: the best verified feed so far, else a softer retry.  A window's first solve still goes to
 #: Ipopt: the verdict is a local one (on random non-convex rows it was once wrong where Ipopt solved, test_ipm),
 #: and there a wrong one would cost the window its NLP feed, where in a round it costs a softer tightening.
-DENSE_INFEASIBLE = "Infeasible_Problem_Detected"
+DENSE_INFEASIBLE = STATUS_INFEASIBLE
 
 
 def _dense_solve(ipm: DenseIpm | None, x: FloatArray, p: FloatArray, lbx: FloatArray, ubx: FloatArray,
