@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from solvers import native
+from solvers import csr, native
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -68,8 +68,8 @@ def combination(k: IntArray, terms: list[tuple[FloatArray, FloatArray]], col0: i
     K = k.size
     # (32-bit indices, as scipy would make them: given 64-bit ones it scans them to see that they fit, twice the
     # constructor's ~30 us)
-    return sp.csr_matrix((combination_data(terms).ravel(), design_columns(k, col0).astype(np.int32),
-                          np.arange(0, 3 * K + 1, 3, dtype=np.int32)), shape=(K, ncols))
+    return csr.make(combination_data(terms).ravel(), design_columns(k, col0).astype(np.int32),
+                    np.arange(0, 3 * K + 1, 3, dtype=np.int32), (K, ncols))
 
 
 def combination_data(terms: list[tuple[FloatArray, FloatArray]]) -> FloatArray:

@@ -46,7 +46,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from geometry.toolpath import PathSamples
-from solvers import bspline, kinematics, native
+from solvers import bspline, csr, kinematics, native
 from solvers.errors import InfeasibleError, SolverFailure
 from solvers.machine import Machine
 
@@ -377,7 +377,7 @@ def _admit(
     A: sp.csr_matrix, lo: FloatArray, hi: FloatArray, near: NDArray[np.bool_], x: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Rows lo <= A y <= hi widened at the ``near`` rows to admit the point x."""
-    val = A[near] @ x
+    val = (A @ x)[near]  # (the rows' products as A[near] @ x forms them, without scipy's copy of the rows)
     lo, hi = lo.copy(), hi.copy()
     lo[near] = np.minimum(lo[near], val)
     hi[near] = np.maximum(hi[near], val)
@@ -409,8 +409,7 @@ def select_rows(A: sp.csr_matrix, which: NDArray[np.bool_]) -> sp.csr_matrix:
     # each kept row's entries: its start, plus 0 .. count - 1
     take = np.repeat(A.indptr[:-1][idx] - indptr[:-1], counts) + np.arange(int(indptr[-1]))
     itype = _index_type(int(indptr[-1]), A.shape[1])
-    return sp.csr_matrix((A.data[take], A.indices[take].astype(itype), indptr.astype(itype)),
-                         shape=(idx.size, A.shape[1]))
+    return csr.make(A.data[take], A.indices[take].astype(itype), indptr.astype(itype), (idx.size, A.shape[1]))
 
 
 def stack_rows(blocks: list[sp.csr_matrix]) -> sp.csr_matrix:
@@ -424,7 +423,7 @@ def stack_rows(blocks: list[sp.csr_matrix]) -> sp.csr_matrix:
     indptr = np.concatenate([np.zeros(1, dtype=itype), *shifted])
     data = np.concatenate([b.data[: b.indptr[-1]] for b in blocks])
     indices = np.concatenate([b.indices[: b.indptr[-1]].astype(itype) for b in blocks])
-    return sp.csr_matrix((data, indices, indptr), shape=(int(indptr.size - 1), ncols))
+    return csr.make(data, indices, indptr, (int(indptr.size - 1), ncols))
 
 
 def column_reach(
@@ -896,7 +895,8 @@ class WindowLP:
         order = np.lexsort((c, r))
         indptr = np.concatenate([[0], np.cumsum(np.bincount(r, minlength=K))])
         v = np.concatenate([data3, np.asarray(data, dtype=np.float64).ravel()])
-        return sp.csr_matrix((v[order], c[order], indptr), shape=(K, self.nvar))
+        itype = _index_type(v.size, self.nvar)
+        return csr.make(v[order], c[order].astype(itype), indptr.astype(itype), (K, self.nvar))
 
     def _add_needed(self, rows: _Rows, A: sp.csr_matrix, s: FloatArray, need: NDArray[np.bool_]) -> None:
         """Rows -1 <= A chat <= 1 at the points s where ``need`` (the others are implied, ``implied_rows``)."""
@@ -1098,8 +1098,8 @@ class WindowLP:
             implied = {ax: implied[ax] | held[ax] for ax in moving}
         for ax in moving:
             J = self._combo(basis, g.d3[:, ax], 1.5 * g.d2[:, ax], 0.5 * g.d1[:, ax])
-            A = sp.csr_matrix((J.data * np.repeat(rq * Q / self.lim.jmax[ax], np.diff(J.indptr)), J.indices, J.indptr),
-                              shape=J.shape)
+            A = csr.make(J.data * np.repeat(rq * Q / self.lim.jmax[ax], np.diff(J.indptr)), J.indices, J.indptr,
+                         J.shape)
             self._add_needed(rows, A, g.s, ~implied[ax])
             # next to a curvature jump, |j| + the step's share <= jmax (``_step_jerk``); next to a
             # tangent break, + the velocity step's impulse (``_vstep_coupling``): one row holds both
