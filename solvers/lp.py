@@ -980,7 +980,8 @@ class WindowLP:
         if record:
             rows.velocity_rows = (n_blocks, ~v_held) if len(rows.blocks) > n_blocks else None
         for ax in [] if velocity_only else moving:
-            A = self._combo(basis, g.d2[:, ax], 0.5 * g.d1[:, ax]) * (Q / self.lim.amax[ax])
+            A = self._combo(basis, g.d2[:, ax], 0.5 * g.d1[:, ax])
+            A.data *= Q / self.lim.amax[ax]  # (a fresh matrix: A * scale's entries, without its copy)
             self._add_needed(rows, A, g.s, ~(implied[ax] | a_held[ax]))
             self._add_coupled(rows, A, g.s, self._vstep_coupling(g.s, ax, self.lim.amax[ax], V_KERNEL_A, 1))
 

@@ -129,7 +129,18 @@ PHASE_GRID = 8
 _PHASE_CACHE: weakref.WeakKeyDictionary[Toolpath, dict[tuple[int, int], int]] = weakref.WeakKeyDictionary()
 #: Overlap safety factor over the stopping distance (spec §6).
 OVERLAP_SAFETY = 2.0
+#: LP window (``Options.lp_window`` None): DEFAULT_LP_WINDOW knot intervals, and on a long piece of method lp
+#: n_int / LP_WINDOWS_PER_PIECE, at most LP_WINDOW_MAX (``lp_window``).  A window costs a fixed ~10 ms of row
+#: building, checks and HiGHS set-up besides its simplex work, and its overlap (twice the stopping distance) is
+#: solved twice: cam-bench seed 71 (method lp, 1.13 M knot intervals of 0.22 um in 169 pieces) ran 6,677
+#: windows of 200 in 99 s of CPU, 2,166 of up to 800 in 75 s, the motion 275.90721 vs 275.90736 s.  18.35 m path,
+#: 1 worker: default knots (7,945 intervals) 1.54-1.70 -> 1.29-1.37 s, 4.63 mm 1.05-1.21 -> 0.90 s, the motion
+#: within 2e-6.  At least LP_WINDOWS_PER_PIECE windows keep a long piece's two chains (``_chain_split``).  Not
+#: under lp+nlp, whose NLP chains end at the LP's joins: random program cam 4 ran 286 NLP windows instead of
+#: 173 on longer chains (CPU 1.3x).
 DEFAULT_LP_WINDOW = 200
+LP_WINDOWS_PER_PIECE = 8
+LP_WINDOW_MAX = 800
 #: Default NLP window as a multiple of its overlap.
 NLP_WINDOW_PER_OVERLAP = 3
 #: ... and in a chain that holds at least one window this long (``NlpRefiner.chain_window``): the share
@@ -248,7 +259,8 @@ class Options:
         sample_period: Ts of the output, s.
         knot_spacing: feed-profile knot spacing d, mm; default 0.1 x stopping distance (2.3 mm on the router).
         checkpoints_per_interval: N, constraint checkpoints per knot interval.
-        lp_window: LP window size in knot intervals.
+        lp_window: LP window size in knot intervals; default DEFAULT_LP_WINDOW, and on a long piece of method
+            lp up to LP_WINDOW_MAX (at least LP_WINDOWS_PER_PIECE windows a piece: ``lp_window``).
         lp_overlap: LP window overlap in knot intervals; default from the stopping distance.
         jerk: include the pseudo-jerk stage.
         solver: "highs" or "clarabel".
@@ -279,7 +291,7 @@ class Options:
     sample_period: float = 1e-3
     knot_spacing: float | None = None
     checkpoints_per_interval: int = 5
-    lp_window: int = DEFAULT_LP_WINDOW
+    lp_window: int | None = None
     lp_overlap: int | None = None
     jerk: bool = True
     solver: str = "highs"
@@ -308,12 +320,13 @@ class Options:
                 "must be an integer in [1, 64]", field="options.checkpoints_per_interval",
                 value=self.checkpoints_per_interval,
             )
-        if not (isinstance(self.lp_window, int) and 8 <= self.lp_window <= 100_000):
+        if self.lp_window is not None and not (isinstance(self.lp_window, int) and 8 <= self.lp_window <= 100_000):
             raise InvalidOptionsError(
                 "must be an integer in [8, 100000]", field="options.lp_window", value=self.lp_window
             )
         if self.lp_overlap is not None and not (
-            isinstance(self.lp_overlap, int) and 3 <= self.lp_overlap <= self.lp_window // 2
+            isinstance(self.lp_overlap, int)
+            and 3 <= self.lp_overlap <= (DEFAULT_LP_WINDOW if self.lp_window is None else self.lp_window) // 2
         ):
             raise InvalidOptionsError(
                 "must be an integer in [3, lp_window / 2]", field="options.lp_overlap", value=self.lp_overlap
@@ -475,13 +488,20 @@ def plan_piece(
             n_int = phase_intervals(toolpath, piece, n_int)
     d = piece.length / n_int
     overlap = opt.lp_overlap if opt.lp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
-    window = max(opt.lp_window, 3 * overlap)
+    window = max(opt.lp_window if opt.lp_window is not None else lp_window(n_int, opt.method), 3 * overlap)
     nlp_overlap = opt.nlp_overlap if opt.nlp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
     nlp_window = opt.nlp_window if opt.nlp_window is not None else NLP_WINDOW_PER_OVERLAP * nlp_overlap
     long = min(NLP_LONG_WINDOW_PER_OVERLAP * nlp_overlap, NLP_LONG_WINDOW_MAX)
     use_long = opt.nlp_window is None and long >= 4 * nlp_overlap and n_int >= NLP_LONG_WINDOW_MIN_COUNT * long
     return WindowPlan(d, n_int, window, overlap, max(nlp_window, 2 * nlp_overlap), nlp_overlap,
                       long if use_long else None)
+
+
+def lp_window(n_int: int, method: str) -> int:
+    """The default LP window (knot intervals) of a piece of n_int intervals (``LP_WINDOWS_PER_PIECE``)."""
+    if method != "lp":
+        return DEFAULT_LP_WINDOW
+    return min(LP_WINDOW_MAX, max(DEFAULT_LP_WINDOW, math.ceil(n_int / LP_WINDOWS_PER_PIECE)))
 
 
 def phase_intervals(toolpath: Toolpath, piece: Piece, n0: int) -> int:

@@ -205,3 +205,40 @@ def test_failed_sampling_process_leaves_its_half_to_this_one(monkeypatch: pytest
     assert calls == [K // 2, K - K // 2]  # (its own half, then the failed process's)
     for col in COLUMNS:
         np.testing.assert_array_equal(getattr(two, col), getattr(one, col), err_msg=col)
+
+
+#: Motion time of the default windows (``pipeline.lp_window``) against DEFAULT_LP_WINDOW ones, relative: the
+#: same receding-horizon optimum over windows of other lengths (18.35 m at 4.63 mm: 193.9609 vs 193.9606 s).
+WINDOW_MOTION_RTOL = 1e-4
+
+
+def test_default_lp_windows_grow_on_long_pieces_of_method_lp() -> None:
+    """Method lp: n_int / LP_WINDOWS_PER_PIECE intervals a window, from DEFAULT_LP_WINDOW up to LP_WINDOW_MAX;
+    lp+nlp (whose NLP chains end at the LP's joins) and a given ``lp_window`` as before."""
+    m = router()
+    long = ex.flower(45).pieces[0]
+    for method, knots in (("lp", None), ("lp", 4.63), ("lp+nlp", None)):
+        plan = pipeline.plan_piece(long, m, Options(method=method, knot_spacing=knots))
+        want = pipeline.DEFAULT_LP_WINDOW
+        if method == "lp":
+            want = min(pipeline.LP_WINDOW_MAX, -(-plan.n_int // pipeline.LP_WINDOWS_PER_PIECE))
+            assert want > pipeline.DEFAULT_LP_WINDOW
+        assert plan.window == want
+        assert pipeline.plan_piece(long, m, Options(method=method, knot_spacing=knots, lp_window=60)).window == max(
+            60, 3 * plan.overlap)
+    short = ex.flower(1).pieces[0]
+    assert pipeline.plan_piece(short, m, Options(method="lp")).window == pipeline.DEFAULT_LP_WINDOW
+    # a piece long enough to grow its windows still has enough of them for two chains
+    assert pipeline.LP_WINDOWS_PER_PIECE >= 2 * pipeline.LP_CHAIN_MIN_WINDOWS
+
+
+def test_grown_lp_windows_hold_the_limits_at_the_same_motion() -> None:
+    """Twelve flower loops (2,119 intervals: windows of 265): two chains, the sampled limits hold, and the motion
+    is that of 200-interval windows within WINDOW_MOTION_RTOL."""
+    tp, m = ex.flower(12), router()
+    grown = schedule(tp, m, Options(method="lp", nlp_workers=1))
+    plain = schedule(tp, m, Options(method="lp", nlp_workers=1, lp_window=pipeline.DEFAULT_LP_WINDOW))
+    assert grown.summary["windows"] < plain.summary["windows"]
+    assert grown.summary["lp_chains"] == 1 and grown.summary["lp_seam_fallbacks"] == 0
+    _check(tp, m, grown)
+    assert grown.summary["motion_time"] == pytest.approx(plain.summary["motion_time"], rel=WINDOW_MOTION_RTOL)
