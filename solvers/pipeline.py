@@ -135,9 +135,11 @@ OVERLAP_SAFETY = 2.0
 #: solved twice: cam-bench seed 71 (method lp, 1.13 M knot intervals of 0.22 um in 169 pieces) ran 6,677
 #: windows of 200 in 99 s of CPU, 2,166 of up to 800 in 75 s, the motion 275.90721 vs 275.90736 s.  18.35 m path,
 #: 1 worker: default knots (7,945 intervals) 1.54-1.70 -> 1.29-1.37 s, 4.63 mm 1.05-1.21 -> 0.90 s, the motion
-#: within 2e-6.  At least LP_WINDOWS_PER_PIECE windows keep a long piece's two chains (``_chain_split``).  Not
+#: within 4e-6.  At least LP_WINDOWS_PER_PIECE windows keep a long piece's two chains (``_chain_split``).  Not
 #: under lp+nlp, whose NLP chains end at the LP's joins: random program cam 4 ran 286 NLP windows instead of
-#: 173 on longer chains (CPU 1.3x).
+#: 173 on longer chains (CPU 1.3x).  Nor with Clarabel, whose time per window grows with it (18.35 m at 4.63 mm,
+#: v+a: 23 windows of ~80 ms, 10 of ~200 ms; CPU 1.80-1.90 vs 1.78-1.82 s on 1 worker, and `make bench` with 2
+#: read 0.99 -> 1.20 s: no gain to have).
 DEFAULT_LP_WINDOW = 200
 LP_WINDOWS_PER_PIECE = 8
 LP_WINDOW_MAX = 800
@@ -260,7 +262,7 @@ class Options:
         knot_spacing: feed-profile knot spacing d, mm; default 0.1 x stopping distance (2.3 mm on the router).
         checkpoints_per_interval: N, constraint checkpoints per knot interval.
         lp_window: LP window size in knot intervals; default DEFAULT_LP_WINDOW, and on a long piece of method
-            lp up to LP_WINDOW_MAX (at least LP_WINDOWS_PER_PIECE windows a piece: ``lp_window``).
+            lp with HiGHS up to LP_WINDOW_MAX (at least LP_WINDOWS_PER_PIECE windows a piece: ``lp_window``).
         lp_overlap: LP window overlap in knot intervals; default from the stopping distance.
         jerk: include the pseudo-jerk stage.
         solver: "highs" or "clarabel".
@@ -488,7 +490,7 @@ def plan_piece(
             n_int = phase_intervals(toolpath, piece, n_int)
     d = piece.length / n_int
     overlap = opt.lp_overlap if opt.lp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
-    window = max(opt.lp_window if opt.lp_window is not None else lp_window(n_int, opt.method), 3 * overlap)
+    window = max(opt.lp_window if opt.lp_window is not None else lp_window(n_int, opt), 3 * overlap)
     nlp_overlap = opt.nlp_overlap if opt.nlp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
     nlp_window = opt.nlp_window if opt.nlp_window is not None else NLP_WINDOW_PER_OVERLAP * nlp_overlap
     long = min(NLP_LONG_WINDOW_PER_OVERLAP * nlp_overlap, NLP_LONG_WINDOW_MAX)
@@ -497,9 +499,9 @@ def plan_piece(
                       long if use_long else None)
 
 
-def lp_window(n_int: int, method: str) -> int:
+def lp_window(n_int: int, opt: Options) -> int:
     """The default LP window (knot intervals) of a piece of n_int intervals (``LP_WINDOWS_PER_PIECE``)."""
-    if method != "lp":
+    if opt.method != "lp" or opt.solver != "highs":
         return DEFAULT_LP_WINDOW
     return min(LP_WINDOW_MAX, max(DEFAULT_LP_WINDOW, math.ceil(n_int / LP_WINDOWS_PER_PIECE)))
 

@@ -213,8 +213,8 @@ WINDOW_MOTION_RTOL = 1e-4
 
 
 def test_default_lp_windows_grow_on_long_pieces_of_method_lp() -> None:
-    """Method lp: n_int / LP_WINDOWS_PER_PIECE intervals a window, from DEFAULT_LP_WINDOW up to LP_WINDOW_MAX;
-    lp+nlp (whose NLP chains end at the LP's joins) and a given ``lp_window`` as before."""
+    """Method lp with HiGHS: n_int / LP_WINDOWS_PER_PIECE intervals a window, from DEFAULT_LP_WINDOW up to
+    LP_WINDOW_MAX; lp+nlp (whose NLP chains end at the LP's joins), Clarabel and a given ``lp_window`` as before."""
     m = router()
     long = ex.flower(45).pieces[0]
     for method, knots in (("lp", None), ("lp", 4.63), ("lp+nlp", None)):
@@ -226,6 +226,8 @@ def test_default_lp_windows_grow_on_long_pieces_of_method_lp() -> None:
         assert plan.window == want
         assert pipeline.plan_piece(long, m, Options(method=method, knot_spacing=knots, lp_window=60)).window == max(
             60, 3 * plan.overlap)
+    clarabel = pipeline.plan_piece(long, m, Options(method="lp", solver="clarabel"))
+    assert clarabel.window == pipeline.DEFAULT_LP_WINDOW
     short = ex.flower(1).pieces[0]
     assert pipeline.plan_piece(short, m, Options(method="lp")).window == pipeline.DEFAULT_LP_WINDOW
     # a piece long enough to grow its windows still has enough of them for two chains
