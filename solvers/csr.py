@@ -44,11 +44,10 @@ def _fast_agrees() -> bool:
     """Whether the fast path builds, for a small matrix, the object scipy's constructor builds: the same
     attributes (names, values, types) and the same matrix."""
     try:
-        ref = sp.csr_matrix(_reference()[:3], shape=_reference()[3])
-        global _MAXPRINT
-        _MAXPRINT = ref.maxprint
+        data, indices, indptr, shape = _reference()
+        ref = sp.csr_matrix((data, indices, indptr), shape=shape)
         got = _build(*_reference())
-        same = set(vars(ref)) == set(vars(got)) and ref.shape == got.shape
+        same = set(vars(ref)) == set(vars(got)) and ref.shape == got.shape and ref.maxprint == got.maxprint
         for name in ("data", "indices", "indptr"):
             a, b = getattr(ref, name), getattr(got, name)
             same = same and a.dtype == b.dtype and np.array_equal(a, b)
@@ -57,7 +56,8 @@ def _fast_agrees() -> bool:
         return False
 
 
-_MAXPRINT: Any = None
+#: what scipy's constructor sets ``maxprint`` to (its default)
+_MAXPRINT = sp.csr_matrix((1, 1)).maxprint
 _FAST = _fast_agrees()
 
 
