@@ -228,3 +228,30 @@ def test_rejects_a_feed_over_a_programmed_f(cam_run: tuple) -> None:  # type: ig
     rep = checker.check(case.segments, lim, TS, smp.t, smp.feed, smp.position, kinematic=True, drive=False,
                         program=lower)
     assert any("programmed feed" in v for v in rep.violations), rep.violations
+
+
+def test_drive_check_reads_the_same_from_given_kinematics() -> None:
+    """``fd_drive`` with the differences already at hand (``check`` passes its own) gives what it computes
+    itself, and that is the drive model on the differences of a cubic: a and j exact, the central v off by
+    Ts^2 x'''/6."""
+    t = np.arange(200) * TS
+    pos = np.stack([2.0 * t**3, -t**3 + t, 0.5 * t**2], axis=1)
+    drive = {k: np.array(v, dtype=float) for k, v in
+             {"M": [2.0, 3.0, 4.0], "b": [0.1, 0.2, 0.3], "c": [0.0, 0.5, 0.0], "d": [0.2, 0.0, 0.1],
+              "Kv": [1e-3, 2e-3, 3e-3], "Ka": [1e-5, 0.0, 2e-5], "Kj": [0.0, 1e-7, 0.0]}.items()}
+    u, e = checker.fd_drive(pos, TS, drive)
+    u2, e2 = checker.fd_drive(pos, TS, drive, checker.fd_kinematics(pos, TS))
+    np.testing.assert_array_equal(u, u2)
+    np.testing.assert_array_equal(e, e2)
+    # an interior sample k (index REST_PAD + k - 2 of u): v, a, j of the cubic at t_k
+    k = 100
+    tk = t[k]
+    v = np.array([6.0 * tk**2, -3.0 * tk**2 + 1.0, tk])
+    a = np.array([12.0 * tk, -6.0 * tk, 1.0])
+    j = np.array([12.0, -6.0, 0.0])
+    v = v + TS**2 * j / 6.0  # (the central difference's error on a cubic)
+    want_u = drive["M"] * a + drive["b"] * v + drive["c"] + drive["d"] * np.sign(v)
+    want_e = drive["Kv"] * v + drive["Ka"] * a + drive["Kj"] * j
+    i = checker.REST_PAD + k - 2
+    np.testing.assert_allclose(u[i], want_u, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(e[i], want_e, rtol=1e-6, atol=1e-12)
