@@ -516,6 +516,21 @@ def warm_interval_functions(N: int = 4, axes: Sequence[int] = (1, 2, 3)) -> None
             _interval_function(na, False, N, values_only)
 
 
+def _splice(col: Any, rep: dict[int, Any]) -> Any:
+    """The SX column ``col`` with its entries at rep's keys replaced by rep's values: the runs between them
+    as slices."""
+    parts: list[Any] = []
+    i0 = 0
+    for i in sorted(rep):
+        if i > i0:
+            parts.append(col[i0:i])
+        parts.append(rep[i])
+        i0 = i + 1
+    if i0 < col.size1():
+        parts.append(col[i0:])
+    return ca.vertcat(*parts)
+
+
 def _gathered(nr: int, nc: int, rows: NDArray[np.int64], cols: NDArray[np.int64], src: NDArray[np.int64],
               values: Any) -> Any:
     """An nr x nc sparse MX whose entry (rows[i], cols[i]) is values[src[i]] (no position twice)."""
@@ -829,10 +844,12 @@ class _Shape:
 
         Returns (scaled feed at every checkpoint, the base rows with the rest intervals' checkpoints
         replaced, the travel time term, the extra rows)."""
-        n, N, K = self.n, self.N, self.K
+        n, N = self.n, self.N
         full = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj)
-        fh_parts = [fh[i] for i in range(K)]
-        full_parts = [[blk[i] for i in range(K)] for blk in full]
+        # the rest intervals' checkpoints replaced (index -> expression), the others kept as slices: no SX
+        # element by element over the window (~2,800 element reads at 70 intervals)
+        fh_rep: dict[int, Any] = {}
+        full_rep: list[dict[int, Any]] = [{} for _ in full]
         rest_time: Any = 0.0
         extra: list[Any] = []
         wq, xq = REST_GL
@@ -863,9 +880,9 @@ class _Shape:
                 r, sd, sdd, sddd = _rest_point(float(t), (c0, c1, c2), g, h, k == 0, Fs, inv_d)
                 vals = self._axis_rows_t(sd, sdd, sddd, [v[i] for v in xs], [v[i] for v in xss],
                                          [v[i] for v in xsss_hi], [v[i] for v in xsss_lo], coef, with_aj)
-                for blk, val in zip(full_parts, vals, strict=True):
-                    blk[i] = val
-                fh_parts[i] = r
+                for rep, val in zip(full_rep, vals, strict=True):
+                    rep[i] = val
+                fh_rep[i] = r
             for j, t in enumerate(taus_p):
                 i = (n_end - 1) * taus_p.size + j
                 _, sd, sdd, sddd = _rest_point(float(t), (c0, c1, c2), g, h, k == 0, Fs, inv_d)
@@ -878,10 +895,10 @@ class _Shape:
                 for blk, val in zip(point_rows, vals, strict=True):
                     blk.append(val)
         reduced = ([True, False, False] + ([True, False, False] if with_aj else [])) * len(xs)
-        rows = [ca.vertcat(*(blk[i] for i in sel)) if red else ca.vertcat(*blk)
-                for blk, red in zip(full_parts, reduced, strict=True)]
+        spliced = [_splice(col, rep) for col, rep in zip(full, full_rep, strict=True)]
+        rows = [blk[sel] if red else blk for blk, red in zip(spliced, reduced, strict=True)]
         extra += [ca.vertcat(*blk) for blk in point_rows]
-        return ca.vertcat(*fh_parts), rows, rest_time, extra
+        return _splice(fh, fh_rep), rows, rest_time, extra
 
     @staticmethod
     def _axis_rows_t(sd: Any, sdd: Any, sddd: Any, xs: list[Any], xss: list[Any], xsss_hi: list[Any],

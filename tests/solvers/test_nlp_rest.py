@@ -430,3 +430,19 @@ def test_rest_windows_start_with_their_slot_rows(monkeypatch: pytest.MonkeyPatch
     assert on.summary["motion_time"] == pytest.approx(off.summary["motion_time"], rel=SLOTTED_MOTION_RTOL)
     _assert_seams_continuous(on)
     _check_drive(m, on)
+
+
+@pytest.mark.parametrize("keys", [(), (0,), (9,), (0, 1, 2, 7, 8, 9), (3, 5), tuple(range(10))])
+def test_splice_replaces_exactly_the_given_entries(keys: tuple[int, ...]) -> None:
+    """``nlp._splice`` (a rest window's checkpoints put into the window's rows): the entries at the keys are
+    the given expressions, every other entry is the column's, in order."""
+    x = ca.SX.sym("x", 10)
+    col = 2.0 * x + 1.0
+    rep = {k: x[k] * x[k] for k in keys}
+    out = nlp._splice(col, rep)
+    assert out.size1() == 10
+    f = ca.Function("f", [x], [out])
+    xv = np.arange(10.0) + 0.5
+    want = 2.0 * xv + 1.0
+    want[list(keys)] = xv[list(keys)] ** 2
+    np.testing.assert_array_equal(np.asarray(f(xv)).ravel(), want)
