@@ -517,15 +517,15 @@ def warm_interval_functions(N: int = 4, axes: Sequence[int] = (1, 2, 3)) -> None
 
 
 def _splice(col: Any, rep: dict[int, Any]) -> Any:
-    """The SX column ``col`` with its entries at rep's keys replaced by rep's values: the runs between them
-    as slices."""
+    """The SX column ``col`` with the entries from each of rep's keys on replaced by rep's value there (a
+    column: as many entries as it has), the runs between them as slices."""
     parts: list[Any] = []
     i0 = 0
     for i in sorted(rep):
         if i > i0:
             parts.append(col[i0:i])
         parts.append(rep[i])
-        i0 = i + 1
+        i0 = i + int(ca.SX(rep[i]).size1())
     if i0 < col.size1():
         parts.append(col[i0:])
     return ca.vertcat(*parts)
@@ -875,25 +875,24 @@ class _Shape:
                     + (0.0 if g is None else bspline.rest_bump_quotient(float(xi) ** 2, g, h)), REST_Q_FLOOR))
                 for wi, xi in zip(wq, xq, strict=True)
             )
-            for j, t in enumerate(tau):
-                i = k * (N + 1) + j
-                r, sd, sdd, sddd = _rest_point(float(t), (c0, c1, c2), g, h, k == 0, Fs, inv_d)
-                vals = self._axis_rows_t(sd, sdd, sddd, [v[i] for v in xs], [v[i] for v in xss],
-                                         [v[i] for v in xsss_hi], [v[i] for v in xsss_lo], coef, with_aj)
-                for rep, val in zip(full_rep, vals, strict=True):
-                    rep[i] = val
-                fh_rep[i] = r
-            for j, t in enumerate(taus_p):
-                i = (n_end - 1) * taus_p.size + j
-                _, sd, sdd, sddd = _rest_point(float(t), (c0, c1, c2), g, h, k == 0, Fs, inv_d)
-                px = [[v[i] for v in rp_j] for rp_j in rp]
-                # (x_sss exact: e_hi = e_lo and j_hi = j_lo, one row each with both bounds: ``_exact_rows``)
-                vals = _exact_rows(self._axis_rows_t(sd, sdd, sddd, px[0], px[1], px[2], px[2], coef, with_aj),
-                                   with_aj)
-                if not point_rows:
-                    point_rows = [[] for _ in vals]
-                for blk, val in zip(point_rows, vals, strict=True):
-                    blk.append(val)
+            # the interval's checkpoints k (N + 1) .. k (N + 1) + N
+            i0, i1 = k * (N + 1), (k + 1) * (N + 1)
+            r, sd, sdd, sddd = _rest_point(tau, (c0, c1, c2), g, h, k == 0, Fs, inv_d)
+            vals = self._axis_rows_t(sd, sdd, sddd, [v[i0:i1] for v in xs], [v[i0:i1] for v in xss],
+                                     [v[i0:i1] for v in xsss_hi], [v[i0:i1] for v in xsss_lo], coef, with_aj)
+            for rep, val in zip(full_rep, vals, strict=True):
+                rep[i0] = val
+            fh_rep[i0] = r
+            # its rest points
+            p0, p1 = (n_end - 1) * taus_p.size, n_end * taus_p.size
+            _, sd, sdd, sddd = _rest_point(taus_p, (c0, c1, c2), g, h, k == 0, Fs, inv_d)
+            px = [[v[p0:p1] for v in rp_j] for rp_j in rp]
+            # (x_sss exact: e_hi = e_lo and j_hi = j_lo, one row each with both bounds: ``_exact_rows``)
+            vals = _exact_rows(self._axis_rows_t(sd, sdd, sddd, px[0], px[1], px[2], px[2], coef, with_aj), with_aj)
+            if not point_rows:
+                point_rows = [[] for _ in vals]
+            for blk, val in zip(point_rows, vals, strict=True):
+                blk.append(val)
         reduced = ([True, False, False] + ([True, False, False] if with_aj else [])) * len(xs)
         spliced = [_splice(col, rep) for col, rep in zip(full, full_rep, strict=True)]
         rows = [blk[sel] if red else blk for blk, red in zip(spliced, reduced, strict=True)]
@@ -2336,21 +2335,32 @@ def _rest_fine(fine: FloatArray, s_head: float | None, s_tail: float | None, d: 
     return np.unique(np.concatenate([fine, more[(more > fine[0]) & (more < fine[-1])]]))
 
 
-def _rest_point(t: float, cps: tuple[Any, Any, Any], g: Any, h: list[Any], head: bool, Fs: Any,
+def _rest_point(ts: FloatArray, cps: tuple[Any, Any, Any], g: Any, h: list[Any], head: bool, Fs: Any,
                 inv_d: Any) -> tuple[Any, Any, Any, Any]:
-    """(sqrt(q), sdot, sddot, sdddot) at unit tau t of a rest interval (``_Shape._rest_rows``; CasADi
-    expressions, q scaled by Fs^2): the quadratic of control points ``cps``, plus g b (None: no bump) and
-    sum_k h_k e_k (``bspline.rest_bump``).  sdot = Fs sqrt(q), sddot = q' / 2, sdddot = sqrt(q) q'' / 2."""
+    """(sqrt(q), sdot, sddot, sdddot) at the unit taus ``ts`` (T,) of a rest interval (``_Shape._rest_rows``;
+    CasADi columns of T, q scaled by Fs^2): the quadratic of control points ``cps``, plus g b (None: no bump)
+    and sum_k h_k e_k (``bspline.rest_bump``).  sdot = Fs sqrt(q), sddot = q' / 2, sdddot = sqrt(q) q'' / 2.
+    The constants are taken tau by tau, in floats, and the expressions are column operations: entry by
+    entry the arithmetic of one tau at a time."""
     c0, c1, c2 = cps
-    qh = 0.5 * (c0 * (1 - t) ** 2 + c1 * (1 + 2 * t - 2 * t * t) + c2 * t * t)
-    dq, d2q = (c1 - c0) + (c0 - 2.0 * c1 + c2) * t, c0 - 2.0 * c1 + c2
+    t = [float(v) for v in ts]
+
+    def col(vals: list[float]) -> Any:  # (a column of constants)
+        return ca.DM(vals)
+
+    qh = 0.5 * (c0 * col([(1 - v) ** 2 for v in t]) + c1 * col([1 + 2 * v - 2 * v * v for v in t])
+                + c2 * col([v * v for v in t]))
+    d2q = c0 - 2.0 * c1 + c2
+    dq, d2q = (c1 - c0) + d2q * col(t), d2q * col([1.0] * len(t))
     if g is not None:
-        b, b1, b2 = (float(v[0]) for v in bspline.rest_bump(np.array([t]), 1.0, 0, head, 1.0))
-        qh, dq, d2q = qh + g * b, dq + g * b1, d2q + g * b2
+        bs = [[float(v[0]) for v in bspline.rest_bump(np.array([v]), 1.0, 0, head, 1.0)] for v in t]
+        qh, dq, d2q = (qh + g * col([b[0] for b in bs]), dq + g * col([b[1] for b in bs]),
+                       d2q + g * col([b[2] for b in bs]))
         for ir, hr in enumerate(h):
             unit = tuple(float(ir == jr) for jr in range(len(h)))
-            e, e1, e2 = (float(v[0]) for v in bspline.rest_bump(np.array([t]), 1.0, 0, head, 0.0, unit))
-            qh, dq, d2q = qh + hr * e, dq + hr * e1, d2q + hr * e2
+            es = [[float(w[0]) for w in bspline.rest_bump(np.array([v]), 1.0, 0, head, 0.0, unit)] for v in t]
+            qh, dq, d2q = (qh + hr * col([e[0] for e in es]), dq + hr * col([e[1] for e in es]),
+                           d2q + hr * col([e[2] for e in es]))
     r = ca.sqrt(ca.fmax(qh, REST_Q_FLOOR))
     sd = Fs * r
     return r, sd, 0.5 * Fs * Fs * inv_d * dq, 0.5 * sd * Fs * Fs * inv_d * inv_d * d2q
