@@ -506,14 +506,55 @@ def interval_sx(na: int, with_aj: bool, N: int, values_only: bool) -> Any:
     return ca.Function(name, ins, [base.map(N + 1)(*ins)])
 
 
+def _slot_function(na: int, with_aj: bool, values_only: bool = False) -> Any:
+    """``_slot_functions`` (cached by its arguments given in full, however they are given here)."""
+    return _slot_functions(int(na), bool(with_aj), bool(values_only))
+
+
+@functools.cache
+def _slot_functions(na: int, with_aj: bool, values_only: bool) -> Any:
+    """``slot_sx`` compiled to C (``solvers.ccompile``)."""
+    return ccompile.compiled(slot_sx(na, with_aj, values_only))
+
+
+def slot_sx(na: int, with_aj: bool, values_only: bool) -> Any:
+    r"""The rows of one cut slot (``_Shape`` ``slotted``) as a function of its knot interval's control points
+    c = (c_0, c_1, c_2), its parameters (tau, then x_s, x_ss, x_sss per moving axis), the window's (2 + 8 na)
+    [and the rows' multipliers lam (R)]: ``_checkpoint_function``'s R rows at y = B(tau) c, the point's
+    (f^, f^', f^'') (q's quadratic on the interval), with x_sss as both envelope bounds.
+
+    Out (one column): the R rows; unless ``values_only`` then their Jacobian in c (R x 3, column by column)
+    and the Hessian of lam^T rows in c (3 x 3, column by column): J_y B and B^T H_y B, by automatic
+    differentiation of this one slot (``_Shape._mapped_problem`` maps it over the window's n slots)."""
+    c3 = ca.SX.sym("c", 3)
+    ps = ca.SX.sym("ps", 1 + 3 * na)
+    gl = ca.SX.sym("gl", 2 + 8 * na)
+    t = ps[0]
+    c0, c1, c2 = c3[0], c3[1], c3[2]
+    y3 = ca.vertcat(0.5 * (c0 + c1) + t * ((c1 - c0) + 0.5 * (c0 - 2 * c1 + c2) * t),
+                    (c1 - c0) + (c0 - 2 * c1 + c2) * t, c0 - 2 * c1 + c2)
+    xsss = ps[1 + 2 * na : 1 + 3 * na]
+    pk = ca.vertcat(ps[1 : 1 + 2 * na], xsss, xsss, ca.SX.zeros(2))
+    base = _checkpoint_function(na, with_aj, values_only=True)
+    r = base(y3, pk, gl)[: base.size1_out(0) - 1]  # (without the checkpoint's travel-time term)
+    name = f"nlp_slot{'' if values_only else '_d'}_{na}{'aj' if with_aj else ''}"
+    if values_only:
+        return ca.Function(name, [c3, ps, gl], [r])
+    lam = ca.SX.sym("lam", r.size1())
+    h, _ = ca.hessian(ca.dot(lam, r), c3)
+    return ca.Function(name, [c3, ps, gl, lam],
+                       [ca.vertcat(r, ca.vec(ca.densify(ca.jacobian(r, c3))), ca.vec(ca.densify(h)))])
+
+
 def warm_interval_functions(N: int = 4, axes: Sequence[int] = (1, 2, 3)) -> None:
     """Build (and compile: ``solvers.ccompile``) the interval functions of windows moving ``axes`` axes at N
-    checkpoints an interval, without the kinematic rows (the defaults), so that processes forked afterwards
-    start with them: the service's forkserver, whose every job would otherwise generate their C again
-    (~50 ms for 2 axes)."""
+    checkpoints an interval and the cut slots' (``slot_sx``), without the kinematic rows (the defaults), so
+    that processes forked afterwards start with them: the service's forkserver, whose every job would
+    otherwise generate their C again (~50 ms for 2 axes)."""
     for na in axes:
         for values_only in (False, True):
             _interval_function(na, False, N, values_only)
+            _slot_function(na, False, values_only)
 
 
 def _splice(col: Any, rep: dict[int, Any]) -> Any:
@@ -720,7 +761,13 @@ class _Shape:
         row_k = np.full(m0, -1, dtype=np.int64)
         row_t[at[keep]], row_k[at[keep]] = blk[keep], cp[keep]
         mr = np.flatnonzero(row_t >= 0)
-        ns_rows = np.flatnonzero(row_t < 0)
+        # the cut slots' rows (``slot_sx``, mapped over the n slots): g row base_rows + r n + i is template row r
+        # of slot i
+        s_idx = (self.base_rows + np.arange(R)[:, None] * n + np.arange(n)[None, :] if self.slotted
+                 else np.zeros((R, 0), dtype=np.int64))
+        in_slot = np.zeros(m0, dtype=bool)
+        in_slot[s_idx.ravel()] = True
+        ns_rows = np.flatnonzero((row_t < 0) & ~in_slot)
         y = ca.MX.sym("y", ny)
         x = ca.MX.sym("x", nx)
         P = ca.MX.sym("P", int(lf["p"].size1()))
@@ -735,6 +782,19 @@ class _Shape:
         # entry o of checkpoint k at k nout + o (the map over intervals keeps the checkpoints' columns)
         out = ca.vec(tmpl.map(n)(Y, PK, GL, LK))
         out_fg = ca.vec(_interval_function(na, self.with_aj, N, values_only=True).map(n)(Y, PK, GL))
+        # slot i reads c_i .. c_i+2 and its parameters (tau, x_s, x_ss, x_sss per axis: one block of n each)
+        s_r, s_i = (a.ravel() for a in np.meshgrid(np.arange(R), np.arange(s_idx.shape[1]), indexing="ij"))
+        s_rows = s_idx.ravel()
+        nout_s = 4 * R + 9
+        s_out: Any = ca.MX(0, 1)
+        s_fg: Any = ca.MX(0, 1)
+        if self.slotted:
+            X3 = ca.reshape(x[(np.arange(n)[None, :] + np.arange(3)[:, None]).ravel(order="F").tolist()], 3, n)
+            ps0 = 2 + npk * K + 8 * na
+            PS = ca.reshape(P[ps0 : ps0 + n * (1 + 3 * na)], n, 1 + 3 * na).T
+            LS = ca.reshape(lam[s_idx.ravel(order="F").tolist()], R, n)
+            s_out = ca.vec(_slot_function(na, self.with_aj).map(n)(X3, PS, GL, LS))
+            s_fg = ca.vec(_slot_function(na, self.with_aj, values_only=True).map(n)(X3, PS, GL))
         kk = np.flatnonzero(~own)
         # the other rows and the rest intervals' term, in v (SX; a plain window has none)
         v_sx = ca.vertcat(lf["y"], lf["x"])
@@ -754,16 +814,18 @@ class _Shape:
             ns_val, ns_grad, ns_jac, ns_hess = ns(ca.vertcat(y, x), P, lam[ns_rows.tolist()])
             ns_fg = ca.Function("ns_rows_fg", [v_sx, lf["p"]], [ca.vertcat(rest_obj, g_ns)])(ca.vertcat(y, x), P)
 
-        def values(outv: Any, per_k: int, o_term: int, nsv: Any) -> tuple[Any, Any]:
-            """(f, g) from the map's values (per_k a checkpoint, the term at o_term) and the other rows'."""
+        def values(outv: Any, per_k: int, o_term: int, sv: Any, per_s: int, nsv: Any) -> tuple[Any, Any]:
+            """(f, g) from the map's values (per_k a checkpoint, the term at o_term), the slots' (per_s a slot)
+            and the other rows'."""
             src = np.empty(m0, dtype=np.int64)
             src[mr] = row_k[mr] * per_k + row_t[mr]
-            src[ns_rows] = int(outv.size1()) + 1 + np.arange(ns_rows.size)
-            vals = ca.vertcat(outv, nsv)
+            src[s_rows] = int(outv.size1()) + s_i * per_s + s_r
+            src[ns_rows] = int(outv.size1()) + int(sv.size1()) + 1 + np.arange(ns_rows.size)
+            vals = ca.vertcat(outv, sv, nsv)
             return ca.sum1(vals[(kk * per_k + o_term).tolist()]) + nsv[0], vals[src.tolist()]
 
-        f_fg, g_fg = values(out_fg, R + 1, R, ns_fg)
-        f_d, g_d = values(out, nout, 4 * R, ns_val)
+        f_fg, g_fg = values(out_fg, R + 1, R, s_fg, R, ns_fg)
+        f_d, g_d = values(out, nout, 4 * R, s_out, nout_s, ns_val)
         o_grad, o_hess = 4 * R + 1, 4 * R + 4
         # grad f in v: the map's in y, plus the others' (dense)
         gy = np.full(ny, int(out.size1()), dtype=np.int64)
@@ -775,20 +837,35 @@ class _Shape:
         ji = [mr, mr, mr]
         jc = [c * K + row_k[mr] for c in range(3)]
         js = [row_k[mr] * nout + R + c * R + row_t[mr] for c in range(3)]
+        # a slot's row (r of slot i) reads c_i .. c_i+2 (entry (r, c) of its R x 3 block at R + c R + r)
+        n_o, n_s = int(out.size1()), int(s_out.size1())
+        ji += [s_rows] * 3
+        jc += [ny + s_i + c for c in range(3)]
+        js += [n_o + s_i * nout_s + R + c * R + s_r for c in range(3)]
         nr, nc = (np.asarray(a, dtype=np.int64) for a in jac_ns.sparsity().get_triplet())
         jac = _gathered(m0, nv, np.concatenate([*ji, ns_rows[nr]]), np.concatenate([*jc, nc]),
-                        np.concatenate([*js, int(out.size1()) + np.arange(nr.size)]),
-                        ca.vertcat(out, ns_jac.nz[:]))
+                        np.concatenate([*js, n_o + n_s + np.arange(nr.size)]),
+                        ca.vertcat(out, s_out, ns_jac.nz[:]))
         # H_v: the map's 3 x 3 blocks in y (entry (a, b) at o_hess + a + 3 b), plus ns_hess
         a3, b3 = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
         hess = _gathered(nv, nv, (a3.ravel()[:, None] * K + kk[None, :]).ravel(),
                          (b3.ravel()[:, None] * K + kk[None, :]).ravel(),
                          (kk[None, :] * nout + o_hess + (a3 + 3 * b3).ravel()[:, None]).ravel(), out)
+        if self.slotted:
+            # the slots' 3 x 3 blocks at c_i .. c_i+2 (entry (a, b) at 4 R + a + 3 b): neighbouring slots share
+            # control points, so every third slot's blocks at a time (no position twice in one gather)
+            for m in range(3):
+                si = np.arange(m, n, 3)
+                hess = hess + _gathered(
+                    nv, nv, (ny + si[None, :] + a3.ravel()[:, None]).ravel(),
+                    (ny + si[None, :] + b3.ravel()[:, None]).ravel(),
+                    (si[None, :] * nout_s + 4 * R + (a3 + 3 * b3).ravel()[:, None]).ravel(), s_out)
         if others:
             grad = grad + ns_grad
             hess = hess + ns_hess
         lin = np.zeros(m0, dtype=bool)
         lin[mr] = row_t[mr] == R - 1   # the scaled feed rows
+        lin[s_rows] = s_r == R - 1   # the slots' feed rows
         lin[ns_rows] = linear_ns
         return {"x": x, "y": y, "L": self._L, "p": P, "f": f_fg, "g": g_fg,
                 "derivatives": {"f": f_d, "g": g_d, "lam": lam, "grad": grad, "jac": jac, "hess": hess,

@@ -6,6 +6,7 @@ points, for every kind of shape: plain, with cut slots, from and to rest, with t
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -59,3 +60,14 @@ def test_mapped_derivatives_equal_the_whole_windows_automatic_ones(
             assert np.all(np.isfinite(got)), name
             err = np.max(np.abs(got - want) / np.maximum(1.0, np.abs(want)))
             assert err <= REL_TOL, (name, err)
+
+
+@pytest.mark.parametrize("with_aj", [False, True])
+@pytest.mark.parametrize("head", [False, True])
+@pytest.mark.parametrize("tail", [False, True])
+def test_mapped_cut_slots_equal_the_automatic_ones(with_aj: bool, head: bool, tail: bool) -> None:
+    """The cut slots' rows by the mapped slot function (``nlp.slot_sx``: neighbouring slots share two control
+    points, so their Hessian blocks overlap) against the whole window's automatic derivatives, every kind of
+    slotted window with three axes."""
+    inner = test_mapped_derivatives_equal_the_whole_windows_automatic_ones.hypothesis.inner_test  # type: ignore[attr-defined]
+    inner(seed=7, n=9, N=3, axes=(0, 1, 2), with_aj=with_aj, slotted=True, head=head, tail=tail)
