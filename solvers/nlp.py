@@ -737,10 +737,12 @@ class _Shape:
         the n intervals, is built once per (axes, rows, N) for every window length.  Automatic
         differentiation over the whole window (SX) took ~2/3 of a shape's 0.2-0.45 s build.
 
-        The rows of the rest intervals' checkpoints (``own``), the cut slots' and the rest ends' rows and the
-        rest intervals' travel time (``rest_obj``) are differentiated as before (SX), then gathered with the
-        map's into g (m0), grad f, J_v (m0 x n_v) and H_v (n_v x n_v) in v = (y, x); ``DenseIpm`` carries
-        them to x with L."""
+        The cut slots' rows are mapped alike (``slot_sx``: a slot reads its interval's 3 control points, and
+        neighbouring slots' Hessian blocks overlap, so they are gathered every third slot at a time; session
+        44: slotted shapes 0.072 -> 0.034 s at 69 intervals).  The rows of the rest intervals' checkpoints
+        (``own``), the rest ends' rows and the rest intervals' travel time (``rest_obj``) are differentiated
+        as before (SX), then gathered with the maps' into g (m0), grad f, J_v (m0 x n_v) and H_v (n_v x n_v)
+        in v = (y, x); ``DenseIpm`` carries them to x with L."""
         K, n, N = self.K, self.n, self.N
         lf = self._lifted
         nx = int(lf["x"].size1())
