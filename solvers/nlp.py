@@ -546,15 +546,151 @@ def slot_sx(na: int, with_aj: bool, values_only: bool) -> Any:
                        [ca.vertcat(r, ca.vec(ca.densify(ca.jacobian(r, c3))), ca.vec(ca.densify(h)))])
 
 
+def _rest_end(p_rest: Any, p_in: Any, p_out: Any, rise: Sequence[Any], Fs: Any, inv_d: Any, ck: list[list[Any]],
+              coef: list[Any], with_aj: bool, head: bool, N: int, pts: list[list[Any]] | None,
+              scale: Any) -> tuple[Any, list[Any], Any, Any, list[Any]]:
+    r"""The rows of one rest end of a window (``_Shape._rest_rows``, whose docstring has the formulas), in
+    CasADi SX.
+
+    From the f spline's control points at the end: p_rest (p_0 or p_n+1: the bump's amplitude, ``_rest_g``),
+    p_in and p_out (either side of the inner knot: ``rest_cps``) and the end's ``rise`` variables; at the rest
+    interval's N + 1 checkpoints ``ck`` = [x_s, x_ss, x_sss_hi, x_sss_lo][axis] (columns of N + 1) and its rest
+    points ``pts`` = [x_s, x_ss, x_sss][axis] (columns of M; None: none), with the window's Fs, 1/d and the
+    axes' coefficients ``coef``.
+
+    Returns (the row next to rest c_rest + g / 2, the checkpoints' rows per block (``_Shape._axis_rows_t``:
+    per axis u, e_hi, e_lo, [a, j_hi, j_lo]; columns of N + 1), the scaled feed sqrt(q) there (N + 1), the
+    travel time ``scale`` (2 / n) times the Gauss-Legendre sum, the rest points' rows per block
+    (``_exact_rows``)).  ``_Shape._rest_rows`` calls it with the window's symbols (the whole-window problem:
+    Ipopt's, and the tests' oracle), ``rest_end_sx`` with the end's own (what the dense method evaluates)."""
+    wq, xq = REST_GL
+    c0, c1, c2 = _rest_cp_values(p_in, p_out, head)
+    c_rest, c_in = (c1, c2) if head else (c1, c0)   # next to rest, and the inner one
+    # the bump's amplitude (REST_BUMP; p_rest, unused otherwise, is fixed at 0 without it) and the rises'
+    # (REST_RISE; their variables fixed at 0 where the bump is)
+    g = _rest_g(p_rest, p_in, p_out) if REST_BUMP else None
+    h = [_rest_g(r, p_in, p_out) for r in rise]
+    extra = c_rest if g is None else c_rest + 0.5 * g
+    travel = scale * sum(
+        float(wi) / ca.sqrt(ca.fmax(
+            2.0 * c_rest + 0.5 * (c_in - 3.0 * c_rest) * float(xi) ** 2
+            + (0.0 if g is None else bspline.rest_bump_quotient(float(xi) ** 2, g, h)), REST_Q_FLOOR))
+        for wi, xi in zip(wq, xq, strict=True)
+    )
+    r, sd, sdd, sddd = _rest_point(np.linspace(0.0, 1.0, N + 1), (c0, c1, c2), g, h, head, Fs, inv_d)
+    vals = _Shape._axis_rows_t(sd, sdd, sddd, ck[0], ck[1], ck[2], ck[3], coef, with_aj)
+    point_vals: list[Any] = []
+    if pts is not None:
+        # (x_sss exact: e_hi = e_lo and j_hi = j_lo, one row each with both bounds: ``_exact_rows``)
+        _, sd, sdd, sddd = _rest_point(rest_point_taus(N), (c0, c1, c2), g, h, head, Fs, inv_d)
+        point_vals = _exact_rows(_Shape._axis_rows_t(sd, sdd, sddd, pts[0], pts[1], pts[2], pts[2], coef, with_aj),
+                                 with_aj)
+    return extra, vals, r, travel, point_vals
+
+
+def _rest_settings() -> tuple[Any, ...]:
+    """The module settings a rest end's rows are built with (tests switch them): part of the key of
+    ``_rest_end_function``'s cache, as of ``_cached_shape``'s."""
+    return (REST_BUMP, REST_RISE, REST_SUBDIV, REST_Q_FLOOR, DELTA_F, bspline.REST_BUMP_POWER,
+            bspline.REST_RISE_POWERS, REST_GL[0].tobytes(), REST_GL[1].tobytes())
+
+
+@dataclass(frozen=True)
+class RestEnd:
+    """One rest end's rows as functions of its own variables (``rest_end_sx``), compiled, and their layout.
+
+    Inputs: z = (p_rest, p_in, p_out, rise_1 .. rise_nr) (3 + nr,), the rest interval's checkpoint parameters
+    PK (4 na + 2, N + 1: x_s, x_ss, x_sss_hi, x_sss_lo per moving axis, w_time, w_feed: ``_Shape``'s order),
+    its rest points' RP (3 na, M: x_s, x_ss, x_sss of axis 0, then of axis 1, ...), the window's (2 + 8 na),
+    the travel time's factor 2 / n (1,)[, the rows' multipliers lam (R (N + 1) + 1 + B M)].
+    Rows, ``rows`` in all: the checkpoints' (template row r of checkpoint c at r (N + 1) + c: ``_Shape``'s R
+    rows, the scaled feed last), the row next to rest, the rest points' (block b of point j at
+    R (N + 1) + 1 + b M + j).
+    ``values``: (rows, term) with the term the travel time plus the checkpoints' w_time / (f^ + DELTA_F) -
+    w_feed f^; ``derivatives``: the same, the rows' Jacobian in z (sparse, ``jac``'s pattern), the term's
+    gradient (dense) and the Hessian of term + lam^T rows in z (sparse, ``hess``' pattern)."""
+
+    values: Any
+    derivatives: Any
+    rows: int
+    #: rows (rows,) whose second derivatives in z vanish
+    linear: NDArray[np.bool_]
+    #: (row, column) of the Jacobian's entries in its nonzero order
+    jac: tuple[NDArray[np.int64], NDArray[np.int64]]
+    #: (row, column) of the Hessian's entries in its nonzero order
+    hess: tuple[NDArray[np.int64], NDArray[np.int64]]
+
+
+def _rest_end_exprs(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int) -> tuple[list[Any], Any, Any]:
+    """``RestEnd``'s inputs (without lam), rows and term: ``_rest_end`` at symbols of the end's own (SX)."""
+    z = ca.SX.sym("z", 3 + nr)
+    npk = 4 * na + 2
+    pk = ca.SX.sym("pk", npk, N + 1)
+    rp = ca.SX.sym("rp", 3 * na, M)
+    gl = ca.SX.sym("gl", 2 + 8 * na)
+    scale = ca.SX.sym("scale")
+    col = [pk[i, :].T for i in range(npk)]
+    ck = [col[b * na : (b + 1) * na] for b in range(4)]
+    pts = [[rp[3 * i + j, :].T for i in range(na)] for j in range(3)] if M else None
+    coef = [gl[2 + 8 * i : 10 + 8 * i] for i in range(na)]
+    extra, vals, r, travel, point_vals = _rest_end(z[0], z[1], z[2], [z[3 + i] for i in range(nr)], gl[0], gl[1],
+                                                   ck, coef, with_aj, head, N, pts, scale)
+    rows = ca.vertcat(*vals, r, extra, *point_vals)
+    term = travel + ca.sum1(col[npk - 2] / (r + DELTA_F)) - ca.sum1(col[npk - 1] * r)
+    return [z, pk, rp, gl, scale], rows, term
+
+
+def rest_end_sx(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int, values_only: bool) -> Any:
+    """``RestEnd``'s function (its values, or with ``values_only`` False its derivatives too) as one SX
+    function of the end's own variables, differentiated by CasADi."""
+    ins, rows, term = _rest_end_exprs(na, with_aj, N, head, nr, M)
+    name = (f"nlp_rest{'' if values_only else '_d'}_{na}{'aj' if with_aj else ''}_{N}_{'head' if head else 'tail'}"
+            f"_{nr}_{M}")
+    if values_only:
+        return ca.Function(name, ins, [ca.vertcat(rows, term)])
+    z = ins[0]
+    lam = ca.SX.sym("lam", rows.size1())
+    h, _ = ca.hessian(term + ca.dot(lam, rows), z)
+    return ca.Function(name, [*ins, lam],
+                       [ca.vertcat(rows, term), ca.jacobian(rows, z), ca.densify(ca.gradient(term, z)), h])
+
+
+def _rest_end_function(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int) -> RestEnd:
+    """``_rest_end_functions`` (cached by its arguments given in full and by the module's rest settings)."""
+    return _rest_end_functions(int(na), bool(with_aj), int(N), bool(head), int(nr), int(M), _rest_settings())
+
+
+@functools.cache
+def _rest_end_functions(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int,
+                        settings: tuple[Any, ...]) -> RestEnd:
+    """``RestEnd`` of ``rest_end_sx``, evaluated by CasADi's virtual machine: with the Hessian in z the
+    derivatives are ~34,000 instructions (2 axes), which gcc -O1 took 3-8 s to compile (-O0 1.3 s) for an
+    evaluation of 111 us (-O0 144 us) against the machine's 258 us, ~2 ms of a rest window's solve."""
+    del settings  # (the key of the cache only)
+    ins, rows, _ = _rest_end_exprs(na, with_aj, N, head, nr, M)
+    linear = ~np.asarray(ca.which_depends(rows, ins[0], 2, True), dtype=bool)
+    d = rest_end_sx(na, with_aj, N, head, nr, M, values_only=False)
+    jr, jc = (np.asarray(a, dtype=np.int64) for a in d.sparsity_out(1).get_triplet())
+    hr, hc = (np.asarray(a, dtype=np.int64) for a in d.sparsity_out(3).get_triplet())
+    return RestEnd(values=rest_end_sx(na, with_aj, N, head, nr, M, values_only=True), derivatives=d,
+                   rows=int(rows.size1()), linear=linear, jac=(jr, jc), hess=(hr, hc))
+
+
 def warm_interval_functions(N: int = 4, axes: Sequence[int] = (1, 2, 3)) -> None:
     """Build (and compile: ``solvers.ccompile``) the interval functions of windows moving ``axes`` axes at N
-    checkpoints an interval and the cut slots' (``slot_sx``), without the kinematic rows (the defaults), so
-    that processes forked afterwards start with them: the service's forkserver, whose every job would
-    otherwise generate their C again (~50 ms for 2 axes)."""
+    checkpoints an interval and the cut slots' (``slot_sx``), and build the rest ends' (``RestEnd``: ~70 ms
+    each, two per axis count), without the kinematic rows (the defaults), so that processes forked afterwards
+    start with them: the service's forkserver, whose every job would otherwise generate their C again (~50 ms
+    for 2 axes) and build its rest ends' functions (session 45, fresh processes: flower lp+nlp 0.50 ->
+    0.35 s with them warm, square corner 0.35 -> 0.20 s)."""
+    nr = len(bspline.REST_RISE_POWERS) if REST_BUMP and REST_RISE else 0
+    M = rest_point_taus(N).size if REST_ENDS else 0
     for na in axes:
         for values_only in (False, True):
             _interval_function(na, False, N, values_only)
             _slot_function(na, False, values_only)
+        for head in (True, False):
+            _rest_end_function(na, False, N, head, nr, M)
 
 
 def _splice(col: Any, rep: dict[int, Any]) -> Any:
@@ -601,6 +737,9 @@ class _Shape:
     With ``head`` / ``tail`` (a rest interval: ``_rest_rows``): the rise variables after p_n+1, the rest
     points' parameters last (x_s, x_ss, x_sss over all of them, per moving axis in turn) and their rows
     after every other (one per rest end for its step, then u, e, [a, j] per axis at the rest points).
+    A shape is built with the dense method's problem (``_mapped_problem``: functions built once per kind of
+    window, mapped and gathered); the whole window as one SX problem (``_lifted``) is built only when Ipopt's
+    problem or a test asks for it (since session 45: ~2/3 of a rest window's build was its SX).
     """
 
     def __init__(self, n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool = False,
@@ -616,11 +755,64 @@ class _Shape:
         #: variables past p_n+1: the rise factors of each rest end (``REST_RISE``, one per
         #: ``bspline.REST_RISE_POWERS``: first the head's, then the tail's)
         self.n_rise = (int(head) + int(tail)) * len(bspline.REST_RISE_POWERS) if REST_BUMP and REST_RISE else 0
-        xx = ca.SX.sym("p", ncols + self.n_rise)
-        x = xx[:ncols]
         #: the rest points (``rest_point_taus``) of each rest end: first the head's, then the tail's
         self.n_rest_points = (int(head) + int(tail)) * rest_point_taus(N).size if REST_ENDS else 0
-        n_base = 2 + 4 * na * K + 2 * K + 8 * na + (n * (1 + 3 * na) if slotted else 0)
+        #: parameters before the rest points' (``_lifted``'s order)
+        self._n_base = 2 + 4 * na * K + 2 * K + 8 * na + (n * (1 + 3 * na) if slotted else 0)
+        # the rows read x through (B0 x, B1 x, B2 x) at the checkpoints: lifted variables y = L x of their own
+        # (``_lifted``, ``_mapped_problem``)
+        self._L = sp.hstack([sp.vstack([self.B0, B1, B2]), sp.csr_matrix((3 * K, self.n_rise))], format="csr")
+        kept, _, _ = knot_twins(n, N)
+        # row_index[block, checkpoint]: the row of that block at that checkpoint (-1: none)
+        reduced = ([True, False, False] + ([True, False, False] if with_aj else [])) * na + [True]
+        self.row_index = np.full((len(reduced), K), -1, dtype=np.int64)
+        nxt = 0
+        for blk, red in enumerate(reduced):
+            cols = kept if red else np.arange(K)
+            self.row_index[blk, cols] = nxt + np.arange(cols.size)
+            nxt += cols.size
+        self.base_rows = nxt
+        #: rows after the slots (``_rest_rows``): one per rest end, then the rest points' (per moving axis u,
+        #: e, [a, j], each over the rest points: ``_exact_rows``, ``_exact_bounds``)
+        self.n_rest = (int(head) + int(tail)) + (4 if with_aj else 2) * na * self.n_rest_points
+        self.rows = nxt + (n * len(reduced) if slotted else 0) + self.n_rest
+        self._lifted_sx: dict[str, Any] | None = None
+        #: the first solver of every solve (``DENSE_IPM``); Ipopt's are built on first use
+        self.ipm: DenseIpm | None = None
+        if DENSE_IPM:
+            self.ipm = DenseIpm(self._mapped_problem(na))
+        self._problem_x: dict[str, Any] | None = None
+        self._solver: Any = None
+        self._safe_solver: Any = None
+        # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
+        Pm = sp.triu(self.B0.T @ self.B0, format="csc")
+        A = sp.vstack([sp.eye(ncols), self.B0], format="csc")
+        self.fit = osqp.OSQP()
+        self.fit.setup(
+            Pm, np.zeros(ncols), A, np.full(ncols + K, -np.inf), np.full(ncols + K, np.inf),
+            verbose=False, eps_abs=1e-6, eps_rel=1e-6, polishing=True,
+            # no warm start from the previous fit: shapes are reused across schedules (_cached_shape)
+            # and a result must not depend on what this thread solved before
+            warm_starting=False,
+        )
+
+    @property
+    def _lifted(self) -> dict[str, Any]:
+        """The window's NLP as one SX problem in x and the lifted y = L x (x, y, L, p, f, g): Ipopt's
+        (``_problem``) and the tests' oracle of ``_mapped_problem``; built on first use (``_build_lifted``)."""
+        if self._lifted_sx is None:
+            self._lifted_sx = self._build_lifted()
+        return self._lifted_sx
+
+    def _build_lifted(self) -> dict[str, Any]:
+        """``_lifted``: the parameters in their order (``take``), the rows in theirs (``row_index``, the slots',
+        the rest ends')."""
+        n, N, K, axes, with_aj, slotted = self.n, self.N, self.K, self.axes, self.with_aj, self.slotted
+        na = len(axes)
+        ncols = n + 2
+        xx = ca.SX.sym("p", ncols + self.n_rise)
+        x = xx[:ncols]
+        n_base = self._n_base
         P = ca.SX.sym("P", n_base + 3 * na * self.n_rest_points)
         Fs, inv_d = P[0], P[1]
         off = 2
@@ -638,11 +830,9 @@ class _Shape:
         wt = take(K)
         wf = take(K)
         coef = [take(8) for _ in axes]
-        # the rows read x through (B0 x, B1 x, B2 x) at the checkpoints: symbols y of their own, so that the
-        # dense method takes derivatives per checkpoint (``DenseIpm``'s lifted variables, y = L x); Ipopt's
+        # the dense method takes derivatives per checkpoint (``DenseIpm``'s lifted variables, y = L x); Ipopt's
         # problem has L x substituted (``_problem``)
         y = ca.SX.sym("y", 3 * K)
-        self._L = sp.hstack([sp.vstack([self.B0, B1, B2]), sp.csr_matrix((3 * K, self.n_rise))], format="csr")
         fh = y[:K]
         f = Fs * fh
         f1 = Fs * inv_d * y[K : 2 * K]
@@ -651,7 +841,7 @@ class _Shape:
         sel = [int(i) for i in kept]
         rest_time: Any = 0.0
         rest_rows: list[Any] = []
-        if head or tail:
+        if self.head or self.tail:
             # the rest intervals in q (``rest_cps``): their checkpoints' rows, feed and travel time from the
             # q the state at the inner knot gives; interval 0's f (p_0) and interval n-1's (p_n+1) are unused;
             # the rest points' x_s, x_ss, x_sss per moving axis are the last parameters
@@ -662,14 +852,6 @@ class _Shape:
         else:
             rows = self._axis_rows(f, f1, f2, xs, xss, xsss_hi, xsss_lo, coef, with_aj, sel)
         rows.append(fh[sel])
-        # row_index[block, checkpoint]: the row of that block at that checkpoint (-1: none)
-        reduced = ([True, False, False] + ([True, False, False] if with_aj else [])) * na + [True]
-        self.row_index = np.full((len(reduced), K), -1, dtype=np.int64)
-        nxt = 0
-        for blk, red in enumerate(reduced):
-            cols = kept if red else np.arange(K)
-            self.row_index[blk, cols] = nxt + np.arange(cols.size)
-            nxt += cols.size
         if slotted:
             # cut slots, one per knot interval at a tau given per call, with the path's exact derivatives
             # there (no envelope); unused slots have unbounded rows
@@ -688,44 +870,16 @@ class _Shape:
         # rows, after every other row
         rows += rest_rows
         g = ca.vertcat(*rows)
+        if int(g.size1()) != self.rows or off != n_base:
+            raise ValueError(f"the window's problem has {int(g.size1())} rows and {off} parameters before the rest "
+                             f"points', its layout {self.rows} and {n_base}")
         obj = ca.sum1(wt / (fh + DELTA_F)) - ca.sum1(wf * fh) + rest_time
-        self._lifted = {"x": xx, "y": y, "L": self._L, "p": P, "f": obj, "g": g}
-        self.rows = int(g.size1())
-        self.base_rows = nxt
-        #: rows after the slots (``_rest_rows``): one per rest end, then the rest points' (per moving axis u,
-        #: e, [a, j], each over the rest points: ``_exact_rows``, ``_exact_bounds``)
-        self.n_rest = int(ca.vertcat(*rest_rows).size1()) if rest_rows else 0
-        #: the first solver of every solve (``DENSE_IPM``); Ipopt's are built on first use
-        self.ipm: DenseIpm | None = None
-        if DENSE_IPM:
-            # checkpoints of a rest interval: their rows and feed are the rest's (``_rest_rows``), not the map's
-            own = np.zeros(K, dtype=bool)
-            for is_rest, kk in ((head, 0), (tail, n - 1)):
-                if is_rest:
-                    own[kk * (N + 1) : (kk + 1) * (N + 1)] = True
-            oi = np.flatnonzero(own).tolist()
-            rest_obj = (ca.sum1(wt[oi] / (fh[oi] + DELTA_F)) - ca.sum1(wf[oi] * fh[oi]) + rest_time
-                        if oi else ca.SX(0.0))
-            self.ipm = DenseIpm(self._mapped_problem(g, rest_obj, own, na))
-        self._problem_x: dict[str, Any] | None = None
-        self._solver: Any = None
-        self._safe_solver: Any = None
-        # hand-over least squares: min |B0 p - y|^2 s.t. B0 p >= 0, fixed ends (OSQP, built once)
-        Pm = sp.triu(self.B0.T @ self.B0, format="csc")
-        A = sp.vstack([sp.eye(ncols), self.B0], format="csc")
-        self.fit = osqp.OSQP()
-        self.fit.setup(
-            Pm, np.zeros(ncols), A, np.full(ncols + K, -np.inf), np.full(ncols + K, np.inf),
-            verbose=False, eps_abs=1e-6, eps_rel=1e-6, polishing=True,
-            # no warm start from the previous fit: shapes are reused across schedules (_cached_shape)
-            # and a result must not depend on what this thread solved before
-            warm_starting=False,
-        )
+        return {"x": xx, "y": y, "L": self._L, "p": P, "f": obj, "g": g}
 
-    def _mapped_problem(self, g: Any, rest_obj: Any, own: NDArray[np.bool_], na: int) -> dict[str, Any]:
+    def _mapped_problem(self, na: int) -> dict[str, Any]:
         r"""The window's NLP for ``DenseIpm`` with its derivatives given (MX): the rows of the checkpoints by one
-        function of a knot interval's checkpoints, mapped over the window's n intervals; only the other rows
-        by automatic differentiation.
+        function of a knot interval's checkpoints, mapped over the window's n intervals, the cut slots' and the
+        rest ends' alike; no automatic differentiation over the window.
 
         At checkpoint k the rows (``_axis_rows``: per moving axis u, e_hi, e_lo, [a, j_hi, j_lo]; then the
         scaled feed) and the travel-time term w_time / (f^ + DELTA_F) - w_feed f^ read the lifted variables
@@ -739,22 +893,28 @@ class _Shape:
 
         The cut slots' rows are mapped alike (``slot_sx``: a slot reads its interval's 3 control points, and
         neighbouring slots' Hessian blocks overlap, so they are gathered every third slot at a time; session
-        44: slotted shapes 0.072 -> 0.034 s at 69 intervals).  The rows of the rest intervals' checkpoints
-        (``own``), the rest ends' rows and the rest intervals' travel time (``rest_obj``) are differentiated
-        as before (SX), then gathered with the maps' into g (m0), grad f, J_v (m0 x n_v) and H_v (n_v x n_v)
-        in v = (y, x); ``DenseIpm`` carries them to x with L."""
+        44: slotted shapes 0.072 -> 0.034 s at 69 intervals).  A rest end's rows (its interval's checkpoints',
+        the row next to rest, its rest points') and its interval's term are one function of the end's z =
+        (p_rest, p_in, p_out, its rises) (``RestEnd``, built once per (axes, rows, N, end); session 45, 2
+        axes: a window from rest to rest with slots 0.118 -> 0.022 s at 64 intervals, from rest 0.083 -> 0.024 s
+        at 70).  All are gathered into g (m0), grad f, J_v (m0 x n_v) and H_v (n_v x n_v) in v = (y, x);
+        ``DenseIpm`` carries them to x with L."""
         K, n, N = self.K, self.n, self.N
-        lf = self._lifted
-        nx = int(lf["x"].size1())
+        nx = n + 2 + self.n_rise
         ny = 3 * K
         nv = ny + nx
-        m0 = int(g.size1())
+        m0 = self.rows
         tmpl = _interval_function(na, self.with_aj, N)
         R = int(tmpl.size1_in(3))
         nout = int(tmpl.size1_out(0))
         npk = 4 * na + 2
         if self.row_index.shape[0] != R:
             raise ValueError(f"checkpoint rows {self.row_index.shape[0]} != the map's {R}")
+        # the rest ends (head: interval 0, tail: n - 1): their checkpoints' rows and feed are the rest ends'
+        ends = [(hd, k) for hd, k, on in ((True, 0, self.head), (False, n - 1, self.tail)) if on]
+        own = np.zeros(K, dtype=bool)
+        for _, k in ends:
+            own[k * (N + 1) : (k + 1) * (N + 1)] = True
         # g row -> (template row, checkpoint) where the map gives it
         blk, cp = np.nonzero(self.row_index >= 0)
         at = self.row_index[blk, cp]
@@ -767,12 +927,9 @@ class _Shape:
         # of slot i
         s_idx = (self.base_rows + np.arange(R)[:, None] * n + np.arange(n)[None, :] if self.slotted
                  else np.zeros((R, 0), dtype=np.int64))
-        in_slot = np.zeros(m0, dtype=bool)
-        in_slot[s_idx.ravel()] = True
-        ns_rows = np.flatnonzero((row_t < 0) & ~in_slot)
         y = ca.MX.sym("y", ny)
         x = ca.MX.sym("x", nx)
-        P = ca.MX.sym("P", int(lf["p"].size1()))
+        P = ca.MX.sym("P", self._n_base + 3 * na * self.n_rest_points)
         lam = ca.MX.sym("lam", m0)
         Y = ca.reshape(y, K, 3).T
         PK = ca.reshape(P[2 : 2 + npk * K], K, npk).T
@@ -780,7 +937,8 @@ class _Shape:
         # the multipliers per (template row, checkpoint), 0 where the map's row is not in g
         lidx = np.full((K, R), m0, dtype=np.int64)
         lidx[row_k[mr], row_t[mr]] = mr
-        LK = ca.reshape(ca.vertcat(lam, ca.MX(1, 1))[lidx.ravel().tolist()], R, K)
+        lam0 = ca.vertcat(lam, ca.MX(1, 1))
+        LK = ca.reshape(lam0[lidx.ravel().tolist()], R, K)
         # entry o of checkpoint k at k nout + o (the map over intervals keeps the checkpoints' columns)
         out = ca.vec(tmpl.map(n)(Y, PK, GL, LK))
         out_fg = ca.vec(_interval_function(na, self.with_aj, N, values_only=True).map(n)(Y, PK, GL))
@@ -798,44 +956,58 @@ class _Shape:
             s_out = ca.vec(_slot_function(na, self.with_aj).map(n)(X3, PS, GL, LS))
             s_fg = ca.vec(_slot_function(na, self.with_aj, values_only=True).map(n)(X3, PS, GL))
         kk = np.flatnonzero(~own)
-        # the other rows and the rest intervals' term, in v (SX; a plain window has none)
-        v_sx = ca.vertcat(lf["y"], lf["x"])
-        g_ns = g[ns_rows.tolist()] if ns_rows.size else ca.SX(0, 1)
-        jac_ns = ca.jacobian(g_ns, v_sx)
-        linear_ns = (~np.asarray(ca.which_depends(g_ns, v_sx, 2, True), dtype=bool) if ns_rows.size
-                     else np.zeros(0, dtype=bool))
-        others = bool(ns_rows.size) or bool(own.any())
-        ns_val: Any = ca.MX.zeros(1, 1)
-        ns_fg: Any = ns_val
-        ns_jac: Any = ca.MX(jac_ns.sparsity())
-        if others:
-            lam_ns = ca.SX.sym("lam_ns", ns_rows.size)
-            h_ns, _ = ca.hessian(rest_obj + ca.dot(lam_ns, g_ns), v_sx)
-            ns = ca.Function("ns_rows", [v_sx, lf["p"], lam_ns],
-                             [ca.vertcat(rest_obj, g_ns), ca.densify(ca.gradient(rest_obj, v_sx)), jac_ns, h_ns])
-            ns_val, ns_grad, ns_jac, ns_hess = ns(ca.vertcat(y, x), P, lam[ns_rows.tolist()])
-            ns_fg = ca.Function("ns_rows_fg", [v_sx, lf["p"]], [ca.vertcat(rest_obj, g_ns)])(ca.vertcat(y, x), P)
+        # each rest end: its z in x, its rows in g (-1: a row the window leaves out, a knot twin's), its
+        # function's outputs (values; values, J, grad, H)
+        M = self.n_rest_points // len(ends) if ends else 0
+        nr = len(bspline.REST_RISE_POWERS) if self.n_rise else 0
+        nb = (4 if self.with_aj else 2) * na
+        rest0 = m0 - self.n_rest
+        e_spec: list[tuple[RestEnd, NDArray[np.int64], NDArray[np.int64]]] = []
+        e_fg: list[Any] = []
+        e_d: list[list[Any]] = []
+        for e, (hd, k) in enumerate(ends):
+            fun = _rest_end_function(na, self.with_aj, N, hd, nr, M)
+            zx = np.array(([0, 1, 2] if hd else [n + 1, n - 1, n]) + [n + 2 + e * nr + i for i in range(nr)],
+                          dtype=np.int64)
+            i0 = k * (N + 1)
+            pts = rest0 + len(ends) + np.arange(nb)[:, None] * (len(ends) * M) + e * M + np.arange(M)[None, :]
+            g_rows = np.concatenate([self.row_index[:, i0 : i0 + N + 1].ravel(), [rest0 + e], pts.ravel()])
+            if g_rows.size != fun.rows:
+                raise ValueError(f"a rest end's rows {g_rows.size} != its function's {fun.rows}")
+            p_rp = self._n_base + np.arange(3 * na)[:, None] * self.n_rest_points + e * M + np.arange(M)[None, :]
+            args = [x[zx.tolist()], PK[:, i0 : i0 + N + 1], ca.reshape(P[p_rp.ravel(order="F").tolist()], 3 * na, M),
+                    GL, ca.MX(2.0 / n)]
+            e_spec.append((fun, zx, g_rows))
+            e_fg.append(fun.values(*args))
+            e_d.append(list(fun.derivatives(*args, lam0[np.where(g_rows >= 0, g_rows, m0).tolist()])))
 
-        def values(outv: Any, per_k: int, o_term: int, sv: Any, per_s: int, nsv: Any) -> tuple[Any, Any]:
+        def values(outv: Any, per_k: int, o_term: int, sv: Any, per_s: int, ev: list[Any]) -> tuple[Any, Any]:
             """(f, g) from the map's values (per_k a checkpoint, the term at o_term), the slots' (per_s a slot)
-            and the other rows'."""
-            src = np.empty(m0, dtype=np.int64)
+            and the rest ends' (their rows, then their term)."""
+            src = np.full(m0, -1, dtype=np.int64)
             src[mr] = row_k[mr] * per_k + row_t[mr]
             src[s_rows] = int(outv.size1()) + s_i * per_s + s_r
-            src[ns_rows] = int(outv.size1()) + int(sv.size1()) + 1 + np.arange(ns_rows.size)
-            vals = ca.vertcat(outv, sv, nsv)
-            return ca.sum1(vals[(kk * per_k + o_term).tolist()]) + nsv[0], vals[src.tolist()]
+            terms = (kk * per_k + o_term).tolist()
+            base = int(outv.size1()) + int(sv.size1())
+            for (_, _, g_rows), ve in zip(e_spec, ev, strict=True):
+                inside = np.flatnonzero(g_rows >= 0)
+                src[g_rows[inside]] = base + inside
+                terms.append(base + g_rows.size)
+                base += int(ve.size1())
+            if (src < 0).any():
+                raise ValueError(f"{int((src < 0).sum())} of the window's rows have no value")
+            vals = ca.vertcat(outv, sv, *ev)
+            return ca.sum1(vals[terms]), vals[src.tolist()]
 
-        f_fg, g_fg = values(out_fg, R + 1, R, s_fg, R, ns_fg)
-        f_d, g_d = values(out, nout, 4 * R, s_out, nout_s, ns_val)
+        f_fg, g_fg = values(out_fg, R + 1, R, s_fg, R, e_fg)
+        f_d, g_d = values(out, nout, 4 * R, s_out, nout_s, [d[0] for d in e_d])
         o_grad, o_hess = 4 * R + 1, 4 * R + 4
-        # grad f in v: the map's in y, plus the others' (dense)
+        # grad f in v: the map's in y, plus the rest ends' in their z
         gy = np.full(ny, int(out.size1()), dtype=np.int64)
         for c in range(3):
             gy[c * K + kk] = kk * nout + o_grad + c
         grad = ca.vertcat(ca.vertcat(out, ca.MX(1, 1))[gy.tolist()], ca.MX.zeros(nx, 1))
-        # J_v: a map's row reads y at its checkpoint (entry (r, c) of its R x 3 block at R + c R + r); the
-        # other rows are ns_jac's
+        # J_v: a map's row reads y at its checkpoint (entry (r, c) of its R x 3 block at R + c R + r)
         ji = [mr, mr, mr]
         jc = [c * K + row_k[mr] for c in range(3)]
         js = [row_k[mr] * nout + R + c * R + row_t[mr] for c in range(3)]
@@ -844,11 +1016,18 @@ class _Shape:
         ji += [s_rows] * 3
         jc += [ny + s_i + c for c in range(3)]
         js += [n_o + s_i * nout_s + R + c * R + s_r for c in range(3)]
-        nr, nc = (np.asarray(a, dtype=np.int64) for a in jac_ns.sparsity().get_triplet())
-        jac = _gathered(m0, nv, np.concatenate([*ji, ns_rows[nr]]), np.concatenate([*jc, nc]),
-                        np.concatenate([*js, n_o + n_s + np.arange(nr.size)]),
-                        ca.vertcat(out, s_out, ns_jac.nz[:]))
-        # H_v: the map's 3 x 3 blocks in y (entry (a, b) at o_hess + a + 3 b), plus ns_hess
+        # a rest end's rows read its z (its Jacobian's entries in their order, where the row is in g)
+        base = n_o + n_s
+        for fun, zx, g_rows in e_spec:
+            jr, jcz = fun.jac
+            inside = np.flatnonzero(g_rows[jr] >= 0)
+            ji.append(g_rows[jr[inside]])
+            jc.append(ny + zx[jcz[inside]])
+            js.append(base + inside)
+            base += jr.size
+        jac = _gathered(m0, nv, np.concatenate(ji), np.concatenate(jc), np.concatenate(js),
+                        ca.vertcat(out, s_out, *[d[1].nz[:] for d in e_d]))
+        # H_v: the map's 3 x 3 blocks in y (entry (a, b) at o_hess + a + 3 b)
         a3, b3 = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
         hess = _gathered(nv, nv, (a3.ravel()[:, None] * K + kk[None, :]).ravel(),
                          (b3.ravel()[:, None] * K + kk[None, :]).ravel(),
@@ -862,13 +1041,18 @@ class _Shape:
                     nv, nv, (ny + si[None, :] + a3.ravel()[:, None]).ravel(),
                     (ny + si[None, :] + b3.ravel()[:, None]).ravel(),
                     (si[None, :] * nout_s + 4 * R + (a3 + 3 * b3).ravel()[:, None]).ravel(), s_out)
-        if others:
-            grad = grad + ns_grad
-            hess = hess + ns_hess
+        # the rest ends' gradient and Hessian in their z, one end at a time (two ends of a short window may
+        # share a control point)
+        for (fun, zx, _), d in zip(e_spec, e_d, strict=True):
+            grad = grad + _gathered(nv, 1, ny + zx, np.zeros(zx.size, dtype=np.int64), np.arange(zx.size), d[2])
+            hr, hc = fun.hess
+            hess = hess + _gathered(nv, nv, ny + zx[hr], ny + zx[hc], np.arange(hr.size), d[3].nz[:])
         lin = np.zeros(m0, dtype=bool)
         lin[mr] = row_t[mr] == R - 1   # the scaled feed rows
         lin[s_rows] = s_r == R - 1   # the slots' feed rows
-        lin[ns_rows] = linear_ns
+        for fun, _, g_rows in e_spec:
+            in_g = g_rows >= 0
+            lin[g_rows[in_g]] = fun.linear[in_g]
         return {"x": x, "y": y, "L": self._L, "p": P, "f": f_fg, "g": g_fg,
                 "derivatives": {"f": f_d, "g": g_d, "lam": lam, "grad": grad, "jac": jac, "hess": hess,
                                 "linear": lin}}
@@ -931,46 +1115,30 @@ class _Shape:
         full_rep: list[dict[int, Any]] = [{} for _ in full]
         rest_time: Any = 0.0
         extra: list[Any] = []
-        wq, xq = REST_GL
-        tau = np.linspace(0.0, 1.0, N + 1)
-        taus_p = rest_point_taus(N)
-        point_rows: list[list[Any]] = []  # [row block][rest point]
+        M = rest_point_taus(N).size if self.n_rest_points else 0
+        nr = len(bspline.REST_RISE_POWERS) if self.n_rise else 0
+        point_rows: list[list[Any]] = []  # [row block][rest end]
         n_end = 0
         for is_rest, k, inner in ((self.head, 0, 1), (self.tail, n - 1, n - 1)):
             if not is_rest:
                 continue
-            c0, c1, c2 = _rest_cp_values(x[inner], x[inner + 1], k == 0)
-            c_rest, c_in = (c1, c2) if k == 0 else (c1, c0)   # next to rest, and the inner one
-            # the bump's amplitude (REST_BUMP; p_0 or p_n+1, unused otherwise, is fixed at 0 without it) and
-            # the rise's (REST_RISE; its variable fixed at 0 where the bump is)
-            g = _rest_g(x[0] if k == 0 else x[n + 1], x[inner], x[inner + 1]) if REST_BUMP else None
-            nr = len(bspline.REST_RISE_POWERS) if self.n_rise else 0
-            h = [_rest_g(rise[n_end * nr + i], x[inner], x[inner + 1]) for i in range(nr)]
-            n_end += 1
-            extra.append(c_rest if g is None else c_rest + 0.5 * g)
-            rest_time = rest_time + (2.0 / n) * sum(
-                float(wi) / ca.sqrt(ca.fmax(
-                    2.0 * c_rest + 0.5 * (c_in - 3.0 * c_rest) * float(xi) ** 2
-                    + (0.0 if g is None else bspline.rest_bump_quotient(float(xi) ** 2, g, h)), REST_Q_FLOOR))
-                for wi, xi in zip(wq, xq, strict=True)
-            )
-            # the interval's checkpoints k (N + 1) .. k (N + 1) + N
+            # the interval's checkpoints k (N + 1) .. k (N + 1) + N, and the end's rest points
             i0, i1 = k * (N + 1), (k + 1) * (N + 1)
-            r, sd, sdd, sddd = _rest_point(tau, (c0, c1, c2), g, h, k == 0, Fs, inv_d)
-            vals = self._axis_rows_t(sd, sdd, sddd, [v[i0:i1] for v in xs], [v[i0:i1] for v in xss],
-                                     [v[i0:i1] for v in xsss_hi], [v[i0:i1] for v in xsss_lo], coef, with_aj)
+            p0, p1 = n_end * M, (n_end + 1) * M
+            ck = [[v[i0:i1] for v in blk] for blk in (xs, xss, xsss_hi, xsss_lo)]
+            pts = [[v[p0:p1] for v in rp_j] for rp_j in rp] if M else None
+            row, vals, r, travel, point_vals = _rest_end(
+                x[0] if k == 0 else x[n + 1], x[inner], x[inner + 1], [rise[n_end * nr + i] for i in range(nr)],
+                Fs, inv_d, ck, coef, with_aj, k == 0, N, pts, 2.0 / n)
+            n_end += 1
+            extra.append(row)
+            rest_time = rest_time + travel
             for rep, val in zip(full_rep, vals, strict=True):
                 rep[i0] = val
             fh_rep[i0] = r
-            # its rest points
-            p0, p1 = (n_end - 1) * taus_p.size, n_end * taus_p.size
-            _, sd, sdd, sddd = _rest_point(taus_p, (c0, c1, c2), g, h, k == 0, Fs, inv_d)
-            px = [[v[p0:p1] for v in rp_j] for rp_j in rp]
-            # (x_sss exact: e_hi = e_lo and j_hi = j_lo, one row each with both bounds: ``_exact_rows``)
-            vals = _exact_rows(self._axis_rows_t(sd, sdd, sddd, px[0], px[1], px[2], px[2], coef, with_aj), with_aj)
             if not point_rows:
-                point_rows = [[] for _ in vals]
-            for blk, val in zip(point_rows, vals, strict=True):
+                point_rows = [[] for _ in point_vals]
+            for blk, val in zip(point_rows, point_vals, strict=True):
                 blk.append(val)
         reduced = ([True, False, False] + ([True, False, False] if with_aj else [])) * len(xs)
         spliced = [_splice(col, rep) for col, rep in zip(full, full_rep, strict=True)]
@@ -2416,7 +2584,7 @@ def _rest_fine(fine: FloatArray, s_head: float | None, s_tail: float | None, d: 
 
 def _rest_point(ts: FloatArray, cps: tuple[Any, Any, Any], g: Any, h: list[Any], head: bool, Fs: Any,
                 inv_d: Any) -> tuple[Any, Any, Any, Any]:
-    """(sqrt(q), sdot, sddot, sdddot) at the unit taus ``ts`` (T,) of a rest interval (``_Shape._rest_rows``;
+    """(sqrt(q), sdot, sddot, sdddot) at the unit taus ``ts`` (T,) of a rest interval (``_rest_end``;
     CasADi columns of T, q scaled by Fs^2): the quadratic of control points ``cps``, plus g b (None: no bump)
     and sum_k h_k e_k (``bspline.rest_bump``).  sdot = Fs sqrt(q), sddot = q' / 2, sdddot = sqrt(q) q'' / 2.
     The constants are taken tau by tau, in floats, and the expressions are column operations: entry by

@@ -71,3 +71,27 @@ def test_mapped_cut_slots_equal_the_automatic_ones(with_aj: bool, head: bool, ta
     slotted window with three axes."""
     inner = test_mapped_derivatives_equal_the_whole_windows_automatic_ones.hypothesis.inner_test  # type: ignore[attr-defined]
     inner(seed=7, n=9, N=3, axes=(0, 1, 2), with_aj=with_aj, slotted=True, head=head, tail=tail)
+
+
+@pytest.mark.parametrize(("bump", "rise"), [(True, True), (True, False), (False, False)])
+@pytest.mark.parametrize("n", [3, 8])
+def test_mapped_rest_ends_equal_the_automatic_ones(monkeypatch: pytest.MonkeyPatch, bump: bool, rise: bool,
+                                                   n: int) -> None:
+    """The rest ends' rows by their own functions (``nlp.RestEnd``: derivatives in the end's z, gathered into
+    the window's) against the whole window's automatic derivatives, with and without the bump and the rises
+    (the functions are cached by these settings too), on a window whose two ends share a control point (n = 3:
+    the head reads p_0 .. p_2, the tail p_2 .. p_4) and on a longer one."""
+    monkeypatch.setattr(nlp, "REST_BUMP", bump)
+    monkeypatch.setattr(nlp, "REST_RISE", rise)
+    inner = test_mapped_derivatives_equal_the_whole_windows_automatic_ones.hypothesis.inner_test  # type: ignore[attr-defined]
+    inner(seed=n, n=n, N=3, axes=(0, 1), with_aj=False, slotted=False, head=True, tail=True)
+    inner(seed=n + 1, n=n, N=2, axes=(0, 1, 2), with_aj=True, slotted=True, head=True, tail=True)
+
+
+def test_a_shape_builds_its_whole_window_problem_only_when_asked() -> None:
+    """The dense method's problem comes from the functions built once per kind of window; the whole window's
+    SX problem (Ipopt's, ``_Shape._lifted``) is built on first use, with the rows the shape was laid out with."""
+    shape = nlp._Shape(6, 3, (0, 1), False, True, True, True)
+    assert shape.ipm is not None and shape._lifted_sx is None
+    assert int(shape._problem["g"].size1()) == shape.rows
+    assert shape._lifted_sx is not None
