@@ -597,7 +597,7 @@ def _rest_settings() -> tuple[Any, ...]:
 
 @dataclass(frozen=True)
 class RestEnd:
-    """One rest end's rows as functions of its own variables (``rest_end_sx``), compiled, and their layout.
+    """One rest end's rows as functions of its own variables (``_rest_end_mx``), and their layout.
 
     Inputs: z = (p_rest, p_in, p_out, rise_1 .. rise_nr) (3 + nr,), the rest interval's checkpoint parameters
     PK (4 na + 2, N + 1: x_s, x_ss, x_sss_hi, x_sss_lo per moving axis, w_time, w_feed: ``_Shape``'s order),
@@ -642,7 +642,9 @@ def _rest_end_exprs(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int)
 
 def rest_end_sx(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int, values_only: bool) -> Any:
     """``RestEnd``'s function (its values, or with ``values_only`` False its derivatives too) as one SX
-    function of the end's own variables, differentiated by CasADi."""
+    function of the end's own variables, differentiated by CasADi: the tests' reference for ``_rest_end_mx``
+    (evaluated in its stead it took 258 us against 25 us, 2 axes: ~34,000 instructions; gcc -O1 compiled them
+    in 3-8 s to an evaluation of 111 us)."""
     ins, rows, term = _rest_end_exprs(na, with_aj, N, head, nr, M)
     name = (f"nlp_rest{'' if values_only else '_d'}_{na}{'aj' if with_aj else ''}_{N}_{'head' if head else 'tail'}"
             f"_{nr}_{M}")
@@ -655,6 +657,188 @@ def rest_end_sx(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int, val
                        [ca.vertcat(rows, term), ca.jacobian(rows, z), ca.densify(ca.gradient(term, z)), h])
 
 
+def _rest_point_sx(na: int, with_aj: bool, values_only: bool) -> Any:
+    r"""One point of a rest interval (``RestEnd``) as a function of u = (q^, q^', q^'') there (q scaled by Fs^2,
+    in unit tau), its parameters pk (4 na + 2: x_s, x_ss, x_sss_hi, x_sss_lo per moving axis, w_time, w_feed),
+    the window's gl (2 + 8 na)[, the rows' multipliers lam (R)].
+
+    sdot = Fs sqrt(q^), sddot = Fs^2 / d q^' / 2, sdddot = sdot Fs^2 / d^2 q^'' / 2 (``_rest_point``).  Out
+    (one column): the R rows (``_Shape._axis_rows_t``, then sqrt(q^)) and the term w_time / (sqrt(q^) +
+    DELTA_F) - w_feed sqrt(q^); unless ``values_only`` then the rows' Jacobian in u (R x 3, column by column),
+    the term's gradient in u (3), that of term + lam^T rows (3) and its Hessian (3 x 3, column by column)."""
+    u = ca.SX.sym("u", 3)
+    pk = ca.SX.sym("pk", 4 * na + 2)
+    gl = ca.SX.sym("gl", 2 + 8 * na)
+    Fs, inv_d = gl[0], gl[1]
+    r = ca.sqrt(ca.fmax(u[0], REST_Q_FLOOR))
+    sd = Fs * r
+    axes = range(na)
+    rows = _Shape._axis_rows_t(sd, 0.5 * Fs * Fs * inv_d * u[1], 0.5 * sd * Fs * Fs * inv_d * inv_d * u[2],
+                               [pk[i] for i in axes], [pk[na + i] for i in axes], [pk[2 * na + i] for i in axes],
+                               [pk[3 * na + i] for i in axes], [gl[2 + 8 * i : 10 + 8 * i] for i in axes], with_aj)
+    rr = ca.vertcat(*rows, r)
+    term = pk[4 * na] / (r + DELTA_F) - pk[4 * na + 1] * r
+    name = f"nlp_rest_point{'' if values_only else '_d'}_{na}{'aj' if with_aj else ''}"
+    if values_only:
+        return ca.Function(name, [u, pk, gl], [ca.vertcat(rr, term)])
+    lam = ca.SX.sym("lam", rr.size1())
+    lag = term + ca.dot(lam, rr)
+    h, _ = ca.hessian(lag, u)
+    return ca.Function(name, [u, pk, gl, lam],
+                       [ca.vertcat(rr, ca.vec(ca.densify(ca.jacobian(rr, u))), term, ca.densify(ca.gradient(term, u)),
+                                   ca.densify(ca.gradient(lag, u)), ca.vec(ca.densify(h)))])
+
+
+@functools.cache
+def _rest_point_functions(na: int, with_aj: bool, values_only: bool, settings: tuple[Any, ...]) -> Any:
+    """``_rest_point_sx`` compiled to C (``solvers.ccompile``)."""
+    del settings  # (the key of the cache only)
+    return ccompile.compiled(_rest_point_sx(na, with_aj, values_only))
+
+
+def _rest_node_function() -> Any:
+    """A rest interval's travel-time integrand at one Gauss-Legendre node: tau(s) = w / sqrt(max(s, REST_Q_FLOOR))
+    and its first two derivatives in s (``_rest_end``; one column of 3 per (s, w))."""
+    s, wi = ca.SX.sym("s"), ca.SX.sym("w")
+    tau = wi / ca.sqrt(ca.fmax(s, REST_Q_FLOOR))
+    d1 = ca.gradient(tau, s)
+    return ca.Function("nlp_rest_node", [s, wi], [ca.vertcat(tau, d1, ca.gradient(d1, s))])
+
+
+def _rest_end_matrices(N: int, head: bool, nr: int, M: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """A rest end's constant maps from w = (c_0, c_1, c_2[, g, h_1 .. h_nr]) (``rest_cps``, ``_rest_g``, with
+    REST_BUMP): A (3 P, nw), (q^, q^', q^'') at each of the P = N + 1 + M points (the checkpoints, then the rest
+    points: ``_rest_point``'s quadratic plus g b + sum h_k e_k); An (REST_GL nodes, nw), the travel time's
+    integrand under the root at each node (``_rest_end``); e (nw,), the row next to rest c_1 + g / 2."""
+    ts = np.concatenate([np.linspace(0.0, 1.0, N + 1), rest_point_taus(N)[:M]])
+    cols = [np.stack([0.5 * (1.0 - ts) ** 2, 0.5 * (1.0 + 2.0 * ts - 2.0 * ts * ts), 0.5 * ts * ts]),
+            np.stack([ts - 1.0, 1.0 - 2.0 * ts, ts]),
+            np.stack([np.ones_like(ts), -2.0 * np.ones_like(ts), np.ones_like(ts)])]  # [derivative](3, P)
+    _, xq = REST_GL
+    r = xq**2
+    rest_n = 2.0 - 1.5 * r  # c_rest = c_1; c_in = c_2 at the head, c_0 at the tail
+    an = [0.5 * r if not head else np.zeros_like(r), rest_n, 0.5 * r if head else np.zeros_like(r)]
+    e = [0.0, 1.0, 0.0]
+    if REST_BUMP:
+        shapes = [bspline.rest_bump(ts, 1.0, 0, head, 1.0)]
+        shapes += [bspline.rest_bump(ts, 1.0, 0, head, 0.0, tuple(float(i == k) for i in range(nr))) for k in range(nr)]
+        cols = [np.vstack([c, *[s[j] for s in shapes]]) for j, c in enumerate(cols)]
+        an.append(np.asarray(bspline.rest_bump_quotient(r, 1.0), dtype=np.float64))
+        an += [np.asarray(bspline.rest_bump_quotient(r, 0.0, [float(i == k) for i in range(nr)]), dtype=np.float64)
+               for k in range(nr)]
+        e += [0.5] + [0.0] * nr
+    A = np.stack(cols, axis=1)  # (nw, 3, P)
+    nw = A.shape[0]
+    return A.transpose(2, 1, 0).reshape(3 * ts.size, nw), np.stack(an, axis=1), np.asarray(e)
+
+
+def _rest_w_function(head: bool, nr: int) -> Any:
+    """w(z) = (c_0, c_1, c_2[, g, h_1 .. h_nr]) of a rest end's z = (p_rest, p_in, p_out, rise_1 .. rise_nr)
+    (``_rest_cp_values``, ``_rest_g``; g and h with REST_BUMP), its Jacobian W (nw x nz) and, for given mu (nw),
+    sum_k mu_k d2 w_k / dz2 (nz x nz)."""
+    z = ca.SX.sym("z", 3 + nr)
+    c0, c1, c2 = _rest_cp_values(z[1], z[2], head)
+    w = [c0, c1, c2]
+    if REST_BUMP:
+        w += [_rest_g(z[0], z[1], z[2])] + [_rest_g(z[3 + i], z[1], z[2]) for i in range(nr)]
+    wv = ca.vertcat(*w)
+    mu = ca.SX.sym("mu", wv.size1())
+    h, _ = ca.hessian(ca.dot(mu, wv), z)
+    return ca.Function("nlp_rest_w", [z, mu], [wv, ca.densify(ca.jacobian(wv, z)), ca.densify(h)])
+
+
+def _rest_end_mx(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int, values_only: bool) -> Any:
+    r"""``RestEnd``'s function by the chain rule through w (``_rest_w_function``) and the points' u = A w
+    (``_rest_end_matrices``): each point's rows and derivatives in its own u (``_rest_point_sx``, mapped), the
+    nodes' in their s = An w (``_rest_node_function``), then (MX)
+
+        J_z = J_u A W,   grad_z = W^T (A^T g_u + An^T (k tau')),
+        H_z = W^T (A^T blockdiag(H_u) A + An^T diag(k tau'') An) W + sum_k G_k d2 w_k / dz2,
+        G = A^T gL_u + An^T (k tau') + lam_rest e
+
+    (k = 2 / n, gL_u the gradient of term + lam^T rows in u): what CasADi's automatic derivatives of the same
+    rows in z gave (``_rest_end``; session 45: 34,000 SX instructions for 2 axes, 258 us an evaluation)."""
+    npk = 4 * na + 2
+    z = ca.MX.sym("z", 3 + nr)
+    PK = ca.MX.sym("pk", npk, N + 1)
+    RP = ca.MX.sym("rp", 3 * na, M)
+    GL = ca.MX.sym("gl", 2 + 8 * na)
+    scale = ca.MX.sym("scale")
+    settings = _rest_settings()
+    A, An, e = _rest_end_matrices(N, head, nr, M)
+    P = N + 1 + M
+    wf = _rest_w_function(head, nr)
+    w, W, _ = wf(z, ca.DM.zeros(A.shape[1]))
+    Ad = ca.DM(A)
+    U = ca.reshape(ca.mtimes(Ad, w), 3, P)
+    if M:
+        xsss = [3 * i + 2 for i in range(na)]
+        PKr = ca.vertcat(RP[[3 * i for i in range(na)], :], RP[[3 * i + 1 for i in range(na)], :], RP[xsss, :],
+                         RP[xsss, :], ca.MX.zeros(2, M))
+        PKall = ca.horzcat(PK, PKr)
+    else:
+        PKall = PK
+    per_axis = 6 if with_aj else 3
+    keep = (0, 1, 3, 4) if with_aj else (0, 1)
+    R = per_axis * na + 1
+    # local rows: checkpoint c's template row r at r (N + 1) + c; the row next to rest; the rest points' (block b
+    # of point j at R (N + 1) + 1 + b M + j, block b = axis i's keep[q] at b = i len(keep) + q)
+    ck_r, ck_p = np.repeat(np.arange(R), N + 1), np.tile(np.arange(N + 1), R)  # (template, point) of each
+    ck_row = ck_r * (N + 1) + ck_p                                             # checkpoint row, in order
+    nb = na * len(keep)
+    pt_b, pt_j = np.repeat(np.arange(nb), M), np.tile(np.arange(M), nb)
+    pt_p = N + 1 + pt_j
+    pt_r = (pt_b // len(keep)) * per_axis + np.asarray(keep)[pt_b % len(keep)]
+    n_rows = R * (N + 1) + 1 + nb * M
+    pt_row = R * (N + 1) + 1 + pt_b * M + pt_j
+    rest_row = R * (N + 1)
+    node = _rest_node_function().map(An.shape[0])
+    s = ca.mtimes(ca.DM(An), w)
+    nd = node(s.T, ca.DM(REST_GL[0]).T)  # (3, nodes)
+    name = f"nlp_rest_mx{'' if values_only else '_d'}_{na}{'aj' if with_aj else ''}_{N}_{'head' if head else 'tail'}"
+    if values_only:
+        pf = _rest_point_functions(na, with_aj, True, settings)
+        out = ca.vec(pf.map(P)(U, PKall, GL))
+        nout = R + 1
+        vals = ca.vertcat(out[(ck_p * nout + ck_r).tolist()], ca.dot(ca.DM(e), w), out[(pt_p * nout + pt_r).tolist()])
+        term = ca.sum1(out[(np.arange(N + 1) * nout + R).tolist()]) + scale * ca.sum2(nd[0, :])
+        return ca.Function(name, [z, PK, RP, GL, scale], [ca.vertcat(vals, term)])
+    lam = ca.MX.sym("lam", n_rows)
+    # each point's multipliers per template row (0: a row the end does not have: a rest point's e_lo, j_lo, feed)
+    lidx = np.full((P, R), n_rows, dtype=np.int64)
+    lidx[ck_p, ck_r] = ck_row
+    lidx[pt_p, pt_r] = pt_row
+    LP = ca.reshape(ca.vertcat(lam, ca.MX(1, 1))[lidx.ravel().tolist()], R, P)
+    pf = _rest_point_functions(na, with_aj, False, settings)
+    out = ca.vec(pf.map(P)(U, PKall, GL, LP))
+    nout = 4 * R + 16
+    o_j, o_t, o_gt, o_gl, o_h = R, 4 * R, 4 * R + 1, 4 * R + 4, 4 * R + 7
+    vals = ca.vertcat(out[(ck_p * nout + ck_r).tolist()], ca.dot(ca.DM(e), w), out[(pt_p * nout + pt_r).tolist()])
+    term = ca.sum1(out[(np.arange(N + 1) * nout + o_t).tolist()]) + scale * ca.sum2(nd[0, :])
+    # J_z = S B: S (rows x 3 P) holds each row's J_u at its point's u; B = A W; the row next to rest e^T W
+    B = ca.mtimes(Ad, W)
+    rp_, rr_ = np.concatenate([ck_p, pt_p]), np.concatenate([ck_r, pt_r])
+    rows_l = np.concatenate([ck_row, pt_row])
+    S = _gathered(n_rows, 3 * P, np.repeat(rows_l, 3), (3 * rp_[:, None] + np.arange(3)[None, :]).ravel(),
+                  (rp_[:, None] * nout + o_j + np.arange(3)[None, :] * R + rr_[:, None]).ravel(), out)
+    E = np.zeros((n_rows, e.size))
+    E[rest_row] = e
+    jac = ca.mtimes(S, B) + ca.mtimes(ca.DM(E), W)
+    pidx = (np.arange(P)[:, None] * nout + np.arange(3)[None, :]).ravel()
+    k_d1 = scale * nd[1, :].T
+    Ant = ca.DM(An.T)
+    grad = ca.mtimes(W.T, ca.mtimes(Ad.T, out[(pidx + o_gt).tolist()]) + ca.mtimes(Ant, k_d1))
+    G = ca.mtimes(Ad.T, out[(pidx + o_gl).tolist()]) + ca.mtimes(Ant, k_d1) + lam[rest_row] * ca.DM(e)
+    a3, b3 = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+    BD = _gathered(3 * P, 3 * P, (3 * np.arange(P)[:, None] + a3.ravel()[None, :]).ravel(),
+                   (3 * np.arange(P)[:, None] + b3.ravel()[None, :]).ravel(),
+                   (np.arange(P)[:, None] * nout + o_h + (a3 + 3 * b3).ravel()[None, :]).ravel(), out)
+    Bn = ca.mtimes(ca.DM(An), W)
+    _, _, Cw = wf(z, G)
+    hess = (ca.mtimes(B.T, ca.mtimes(BD, B)) + ca.mtimes(Bn.T, Bn * ca.repmat(scale * nd[2, :].T, 1, 3 + nr)) + Cw)
+    return ca.Function(name, [z, PK, RP, GL, scale, lam], [ca.vertcat(vals, term), jac, grad, hess])
+
+
 def _rest_end_function(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int) -> RestEnd:
     """``_rest_end_functions`` (cached by its arguments given in full and by the module's rest settings)."""
     return _rest_end_functions(int(na), bool(with_aj), int(N), bool(head), int(nr), int(M), _rest_settings())
@@ -663,22 +847,20 @@ def _rest_end_function(na: int, with_aj: bool, N: int, head: bool, nr: int, M: i
 @functools.cache
 def _rest_end_functions(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int,
                         settings: tuple[Any, ...]) -> RestEnd:
-    """``RestEnd`` of ``rest_end_sx``, evaluated by CasADi's virtual machine: with the Hessian in z the
-    derivatives are ~34,000 instructions (2 axes), which gcc -O1 took 3-8 s to compile (-O0 1.3 s) for an
-    evaluation of 111 us (-O0 144 us) against the machine's 258 us, ~2 ms of a rest window's solve."""
+    """``RestEnd`` of ``_rest_end_mx`` (its rows' linearity from ``_rest_end``'s SX)."""
     del settings  # (the key of the cache only)
     ins, rows, _ = _rest_end_exprs(na, with_aj, N, head, nr, M)
     linear = ~np.asarray(ca.which_depends(rows, ins[0], 2, True), dtype=bool)
-    d = rest_end_sx(na, with_aj, N, head, nr, M, values_only=False)
+    d = _rest_end_mx(na, with_aj, N, head, nr, M, values_only=False)
     jr, jc = (np.asarray(a, dtype=np.int64) for a in d.sparsity_out(1).get_triplet())
     hr, hc = (np.asarray(a, dtype=np.int64) for a in d.sparsity_out(3).get_triplet())
-    return RestEnd(values=rest_end_sx(na, with_aj, N, head, nr, M, values_only=True), derivatives=d,
+    return RestEnd(values=_rest_end_mx(na, with_aj, N, head, nr, M, values_only=True), derivatives=d,
                    rows=int(rows.size1()), linear=linear, jac=(jr, jc), hess=(hr, hc))
 
 
 def warm_interval_functions(N: int = 4, axes: Sequence[int] = (1, 2, 3)) -> None:
     """Build (and compile: ``solvers.ccompile``) the interval functions of windows moving ``axes`` axes at N
-    checkpoints an interval and the cut slots' (``slot_sx``), and build the rest ends' (``RestEnd``: ~70 ms
+    checkpoints an interval and the cut slots' (``slot_sx``), and build the rest ends' (``RestEnd``: ~0.1 s
     each, two per axis count), without the kinematic rows (the defaults), so that processes forked afterwards
     start with them: the service's forkserver, whose every job would otherwise generate their C again (~50 ms
     for 2 axes) and build its rest ends' functions (session 45, fresh processes: flower lp+nlp 0.50 ->

@@ -5,6 +5,7 @@ points, for every kind of shape: plain, with cut slots, from and to rest, with t
 
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -95,3 +96,33 @@ def test_a_shape_builds_its_whole_window_problem_only_when_asked() -> None:
     assert shape.ipm is not None and shape._lifted_sx is None
     assert int(shape._problem["g"].size1()) == shape.rows
     assert shape._lifted_sx is not None
+
+
+@pytest.mark.parametrize(("na", "with_aj", "N", "head"), [(1, False, 4, True), (2, False, 3, False),
+                                                          (3, True, 2, True), (2, True, 5, False)])
+@pytest.mark.parametrize(("bump", "rise", "points"), [(True, True, True), (True, False, True), (False, False, False)])
+def test_rest_end_chain_rule_equals_the_automatic_derivatives(
+    monkeypatch: pytest.MonkeyPatch, na: int, with_aj: bool, N: int, head: bool, bump: bool, rise: bool,
+    points: bool,
+) -> None:
+    """A rest end's values and derivatives by the chain rule through w and the points' (q, q', q'')
+    (``nlp._rest_end_mx``, what the dense method evaluates) against CasADi's automatic derivatives of the same
+    rows in z (``nlp.rest_end_sx``), at random inputs, with the bump and the rises on and off and with and
+    without rest points."""
+    monkeypatch.setattr(nlp, "REST_BUMP", bump)
+    nr = len(nlp.bspline.REST_RISE_POWERS) if bump and rise else 0
+    M = nlp.rest_point_taus(N).size if points else 0
+    end = nlp._rest_end_function(na, with_aj, N, head, nr, M)
+    rng = np.random.default_rng(na * 1000 + N)
+    for values_only, got_fn in ((False, end.derivatives), (True, end.values)):
+        ref = nlp.rest_end_sx(na, with_aj, N, head, nr, M, values_only)
+        assert got_fn.n_out() == ref.n_out()
+        for _ in range(3):
+            args = [rng.uniform(0.2, 1.5, ref.sparsity_in(i).shape) for i in range(ref.n_in())]
+            if not values_only:
+                args[-1] = rng.uniform(-1.0, 1.0, args[-1].shape)
+            got, want = got_fn.call(args), ref.call(args)
+            for k, (g, w) in enumerate(zip(got, want, strict=True)):
+                g, w = np.asarray(ca.DM(g).full()), np.asarray(ca.DM(w).full())
+                err = np.max(np.abs(g - w) / np.maximum(1.0, np.abs(w)))
+                assert err <= REL_TOL, (values_only, k, err)
