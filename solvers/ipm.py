@@ -89,6 +89,8 @@ from scipy.linalg.lapack import dpotrf as _potrf
 from scipy.linalg.lapack import dpotrs as _potrs
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
+from solvers import csr
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
@@ -245,6 +247,13 @@ class DenseIpm:
         #: H's non-zeros (its lower triangle) as flat positions in an n x n matrix
         self._h_at: IntArray = hr_a * n + hc_a
         self._nj = self._jr.size
+        #: J's non-zeros are in CasADi's column-major order: with its column pointers they are J^T in CSR, whose
+        #: products (``_jt``, ``_jx``) sum each entry's terms in the order np.bincount over the non-zeros did
+        #: (bit for bit), ~4x faster (session 45: 120 -> 28 us for J^T y at 3,500 rows)
+        self._jptr: NDArray[np.int32] | None = None
+        if self._nj < np.iinfo(np.int32).max and np.all(np.diff(self._jc) >= 0):
+            self._jptr = np.searchsorted(self._jc, np.arange(n + 1)).astype(np.int32)
+        self._jr32: NDArray[np.int32] = self._jr.astype(np.int32)
         ia, ib = self._pairs(m)
         self._kkt: _DenseKkt | _BandKkt = _choose_kkt(n, self._jc[ia], self._jc[ib], hr_a, hc_a, banded)
         if self._kkt.pair_keep is not None:  # (the band reads one of each symmetric pair: the others are not formed)
@@ -294,6 +303,18 @@ class DenseIpm:
         """v = L x."""
         return np.asarray(self._L @ x, dtype=np.float64)
 
+    def _jt(self, jv: FloatArray, y: FloatArray) -> FloatArray:
+        """J^T y (n,) for J's non-zeros jv."""
+        if self._jptr is None:
+            return _bincount(self._jc, jv * y[self._jr], self.n)
+        return np.asarray(csr.make(jv, self._jr32, self._jptr, (self.n, self.m)) @ y, dtype=np.float64)
+
+    def _jx(self, jv: FloatArray, x: FloatArray) -> FloatArray:
+        """J x (m,) for J's non-zeros jv."""
+        if self._jptr is None:
+            return _bincount(self._jr, jv * x[self._jc], self.m)
+        return np.asarray(csr.make(jv, self._jr32, self._jptr, (self.n, self.m)).T @ x, dtype=np.float64)
+
     def _fg(self, x: FloatArray) -> tuple[float, FloatArray]:
         """f and the extended g at x; g is a view of the output buffer, valid until the next evaluation."""
         self._v[:] = self._lx(x)
@@ -315,7 +336,6 @@ class DenseIpm:
                every_row: bool = False) -> IpmResult:
         n, m, m0 = self.n, self.m, self.m0
         max_iter = MAX_ITER if max_iter is None else max_iter
-        jr, jc = self._jr, self._jc
         nv = self._v.size
         fixed = lbx == ubx
         lo_x = np.where(fixed, -np.inf, lbx)
@@ -385,7 +405,7 @@ class DenseIpm:
                 rp[ela.el] += ela.r
                 rr = ela.rho - z[ela.el] - ela.zeta
             zg = -self._lam  # the rows' z summed over their two bounds, signed
-            rd = gf - np.bincount(jc, jv * zg[jr], minlength=n)
+            rd = gf - self._jt(jv, zg)
             rd[fixed] = 0.0
             mu = float(w @ z) / mi if ela is None else (float(w @ z) + float(ela.r @ ela.zeta)) / (mi + ne)
             s_d = max(100.0, float(z.sum()) / mi) / 100.0
@@ -475,7 +495,7 @@ class DenseIpm:
         lam_x = lam_all[m0:].copy()
         if status == "Solve_Succeeded":
             # the fixed variables' multipliers close grad f + J^T lam_g + lam_x = 0 (gf, jv: at this x and z)
-            lam_x[fixed] = -(gf + np.bincount(jc, jv * lam_all[jr], minlength=n))[fixed]
+            lam_x[fixed] = -(gf + self._jt(jv, lam_all))[fixed]
         return IpmResult(x, lam_g, lam_x, it, status)
 
     def _line_search(self, x: FloatArray, w: FloatArray, rp: FloatArray, fv: float, gf: FloatArray,
@@ -712,11 +732,11 @@ class _Step:
             el, r, q = ela.el, ela.r, ela.zeta
             s_el = (t[el] / self.z[el] - self.w[el]) - (tr / q - r - r * self.rr / q)
             val[el] = self.z[el] - self.D[el] * (self.rp[el] - s_el)
-        y = np.bincount(idx, sgn * val, minlength=ipm.m)
-        rhs = -self.gf + np.bincount(ipm._jc, self.jv * y[ipm._jr], minlength=ipm.n)
+        y = _bincount(idx, sgn * val, ipm.m)
+        rhs = -self.gf + ipm._jt(self.jv, y)
         rhs[self.fixed] = 0.0
         dx = ipm._kkt.solve(rhs)
-        jdx = np.bincount(ipm._jr, self.jv * dx[ipm._jc], minlength=ipm.m)
+        jdx = ipm._jx(self.jv, dx)
         dc = sgn * jdx[idx]
         dw = dc + self.rp
         dz = t / self.w - self.z - self.D * dw

@@ -477,3 +477,23 @@ def test_an_elastic_solve_from_a_start_inside_the_rows_does_not_run() -> None:
     res = ipm.solve(**args, elastic=True)
     assert (res.status, res.iterations, res.success) == ("No_Elastic_Rows", 0, False)
     np.testing.assert_array_equal(res.x, args["x0"])
+
+
+@pytest.mark.parametrize(("n", "m"), [(6, 20), (12, 5)])
+def test_j_products_equal_the_dense_jacobians(n: int, m: int) -> None:
+    """``DenseIpm._jt`` / ``_jx`` (J^T y and J x from J's non-zeros as CSR, the column pointers built once)
+    against the dense Jacobian: every column, also those with no entry of g (n = 12, m = 5: rows
+    read only the first 5 control points; the variables' own rows complete the extended J), bit for bit
+    against ``np.bincount`` over the non-zeros, the order of the sums they replace."""
+    prob, _ = _random_problem(3, n, m, convex=True)
+    d = DenseIpm(prob)
+    assert d._jptr is not None
+    rng = np.random.default_rng(n)
+    jv = rng.normal(size=d._nj)
+    J = np.zeros((d.m, d.n))
+    J[d._jr, d._jc] = jv
+    y, x = rng.normal(size=d.m), rng.normal(size=d.n)
+    np.testing.assert_allclose(d._jt(jv, y), J.T @ y, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(d._jx(jv, x), J @ x, rtol=1e-13, atol=1e-13)
+    np.testing.assert_array_equal(d._jt(jv, y), np.bincount(d._jc, jv * y[d._jr], minlength=d.n))
+    np.testing.assert_array_equal(d._jx(jv, x), np.bincount(d._jr, jv * x[d._jc], minlength=d.m))
