@@ -562,7 +562,8 @@ def _rest_end(p_rest: Any, p_in: Any, p_out: Any, rise: Sequence[Any], Fs: Any, 
     per axis u, e_hi, e_lo, [a, j_hi, j_lo]; columns of N + 1), the scaled feed sqrt(q) there (N + 1), the
     travel time ``scale`` (2 / n) times the Gauss-Legendre sum, the rest points' rows per block
     (``_exact_rows``)).  ``_Shape._rest_rows`` calls it with the window's symbols (the whole-window problem:
-    Ipopt's, and the tests' oracle), ``rest_end_sx`` with the end's own (what the dense method evaluates)."""
+    Ipopt's, and the tests' oracle), ``_rest_end_exprs`` with the end's own (its rows' linearity, and
+    ``rest_end_sx``: the reference of ``_rest_end_mx``, which the dense method evaluates)."""
     wq, xq = REST_GL
     c0, c1, c2 = _rest_cp_values(p_in, p_out, head)
     c_rest, c_in = (c1, c2) if head else (c1, c0)   # next to rest, and the inner one
@@ -863,8 +864,8 @@ def warm_interval_functions(N: int = 4, axes: Sequence[int] = (1, 2, 3)) -> None
     checkpoints an interval and the cut slots' (``slot_sx``), and build the rest ends' (``RestEnd``: ~0.1 s
     each, two per axis count), without the kinematic rows (the defaults), so that processes forked afterwards
     start with them: the service's forkserver, whose every job would otherwise generate their C again (~50 ms
-    for 2 axes) and build its rest ends' functions (session 45, fresh processes: flower lp+nlp 0.50 ->
-    0.35 s with them warm, square corner 0.35 -> 0.20 s)."""
+    for 2 axes) and build its rest ends' functions (session 45, fresh processes with them warm: flower lp+nlp
+    0.47 -> 0.36 s, square corner 0.35 -> 0.19 s, with the rest ends' functions and their chain rule)."""
     nr = len(bspline.REST_RISE_POWERS) if REST_BUMP and REST_RISE else 0
     M = rest_point_taus(N).size if REST_ENDS else 0
     for na in axes:
