@@ -17,7 +17,7 @@ the attributes a scipy-built one has (so a scipy version that sets more falls ba
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import scipy.sparse as sp
@@ -27,26 +27,28 @@ _INDEX = np.dtype(np.int32)
 _DATA = np.dtype(np.float64)
 
 
-def _build(data: NDArray[Any], indices: NDArray[Any], indptr: NDArray[Any], shape: tuple[int, int]) -> sp.csr_matrix:
-    A = sp.csr_matrix.__new__(sp.csr_matrix)
+def _build(data: NDArray[Any], indices: NDArray[Any], indptr: NDArray[Any], shape: tuple[int, int],
+           cls: type[Any] = sp.csr_matrix) -> Any:
+    A = cast(Any, cls).__new__(cls)
     A._shape = (int(shape[0]), int(shape[1]))
     A.maxprint = _MAXPRINT
     A.data, A.indices, A.indptr = data, indices, indptr
     return A
 
 
-def _reference() -> tuple[NDArray[np.float64], NDArray[np.int32], NDArray[np.int32], tuple[int, int]]:
-    return (np.array([1.0, 2.0, 3.0]), np.array([0, 2, 1], dtype=np.int32), np.array([0, 2, 2, 3], dtype=np.int32),
-            (3, 4))
+def _reference(cls: type[Any] = sp.csr_matrix) -> tuple[NDArray[np.float64], NDArray[np.int32], NDArray[np.int32],
+                                                       tuple[int, int]]:
+    indptr = [0, 2, 2, 3] if cls is sp.csr_matrix else [0, 2, 2, 3, 3]  # (3 rows or 4 columns)
+    return (np.array([1.0, 2.0, 3.0]), np.array([0, 2, 1], dtype=np.int32), np.array(indptr, dtype=np.int32), (3, 4))
 
 
-def _fast_agrees() -> bool:
+def _fast_agrees(cls: type[Any] = sp.csr_matrix) -> bool:
     """Whether the fast path builds, for a small matrix, the object scipy's constructor builds: the same
     attributes (names, values, types) and the same matrix."""
     try:
-        data, indices, indptr, shape = _reference()
-        ref = sp.csr_matrix((data, indices, indptr), shape=shape)
-        got = _build(*_reference())
+        data, indices, indptr, shape = _reference(cls)
+        ref = cls((data, indices, indptr), shape=shape)
+        got = _build(*_reference(cls), cls=cls)
         same = set(vars(ref)) == set(vars(got)) and ref.shape == got.shape and ref.maxprint == got.maxprint
         for name in ("data", "indices", "indptr"):
             a, b = getattr(ref, name), getattr(got, name)
@@ -59,21 +61,37 @@ def _fast_agrees() -> bool:
 #: what scipy's constructor sets ``maxprint`` to (its default)
 _MAXPRINT = sp.csr_matrix((1, 1)).maxprint
 _FAST = _fast_agrees()
+#: the same for ``make_csc`` (column pointers)
+_FAST_CSC = _fast_agrees(sp.csc_matrix)
+
+
+def _kept(data: NDArray[Any], indices: NDArray[Any], indptr: NDArray[Any], major: int, shape: tuple[int, int]) -> bool:
+    """Whether scipy's constructor would keep these arrays as they are (``major``: rows of a CSR, columns of a
+    CSC)."""
+    return (
+        data.dtype == _DATA
+        and indices.dtype == _INDEX
+        and indptr.dtype == _INDEX
+        and data.ndim == indices.ndim == indptr.ndim == 1
+        and indptr.size == major + 1
+        and data.size == indices.size == int(indptr[-1])
+        and int(indptr[0]) == 0
+        and max(shape) < 2**31
+    )
 
 
 def make(data: NDArray[Any], indices: NDArray[Any], indptr: NDArray[Any], shape: tuple[int, int]) -> sp.csr_matrix:
     """``scipy.sparse.csr_matrix((data, indices, indptr), shape=shape)``, sharing the arrays as scipy does
     (no copies), without its checks where the arrays are as scipy would keep them (module docstring)."""
-    if (
-        _FAST
-        and data.dtype == _DATA
-        and indices.dtype == _INDEX
-        and indptr.dtype == _INDEX
-        and data.ndim == indices.ndim == indptr.ndim == 1
-        and indptr.size == shape[0] + 1
-        and data.size == indices.size == int(indptr[-1])
-        and int(indptr[0]) == 0
-        and max(shape) < 2**31
-    ):
+    if _FAST and _kept(data, indices, indptr, shape[0], shape):
         return _build(data, indices, indptr, shape)
     return sp.csr_matrix((data, indices, indptr), shape=shape)
+
+
+def make_csc(data: NDArray[Any], indices: NDArray[Any], indptr: NDArray[Any],
+             shape: tuple[int, int]) -> sp.csc_matrix:
+    """``scipy.sparse.csc_matrix((data, indices, indptr), shape=shape)`` as ``make`` builds a CSR (the dense
+    interior point's J x: ``solvers.ipm.DenseIpm._jx``)."""
+    if _FAST_CSC and _kept(data, indices, indptr, shape[1], shape):
+        return _build(data, indices, indptr, shape, sp.csc_matrix)
+    return sp.csc_matrix((data, indices, indptr), shape=shape)

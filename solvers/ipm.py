@@ -313,7 +313,7 @@ class DenseIpm:
         """J x (m,) for J's non-zeros jv."""
         if self._jptr is None:
             return _bincount(self._jr, jv * x[self._jc], self.m)
-        return np.asarray(csr.make(jv, self._jr32, self._jptr, (self.n, self.m)).T @ x, dtype=np.float64)
+        return np.asarray(csr.make_csc(jv, self._jr32, self._jptr, (self.m, self.n)) @ x, dtype=np.float64)
 
     def _fg(self, x: FloatArray) -> tuple[float, FloatArray]:
         """f and the extended g at x; g is a view of the output buffer, valid until the next evaluation."""

@@ -1,6 +1,7 @@
-"""``solvers.csr.make`` against scipy's own constructor: the same object (attributes, types, values) and the
-same matrix, for random CSR arrays on the fast path and off it (the types scipy would change), and scipy's
-constructor whenever the module found its fast path disagreeing with scipy's (``_FAST`` off)."""
+"""``solvers.csr.make`` (and ``make_csc``) against scipy's own constructor: the same object (attributes, types,
+values) and the same matrix, for random CSR (CSC) arrays on the fast path and off it (the types scipy would
+change), and scipy's constructor whenever the module found its fast path disagreeing with scipy's (``_FAST``,
+``_FAST_CSC`` off)."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ def _random_csr(seed: int, rows: int, cols: int, itype: type) -> tuple[np.ndarra
     return data, indices.astype(itype), indptr
 
 
-def _same(got: sp.csr_matrix, ref: sp.csr_matrix) -> None:
+def _same(got: sp.spmatrix, ref: sp.spmatrix) -> None:
     assert type(got) is type(ref)
     assert set(vars(got)) == set(vars(ref))
     assert got.shape == ref.shape and got.maxprint == ref.maxprint
@@ -80,3 +81,31 @@ def test_a_scipy_setting_other_attributes_turns_the_fast_path_off(monkeypatch: p
 
     monkeypatch.setattr(sp.csr_matrix, "__init__", init)
     assert not csr._fast_agrees()
+
+
+def test_the_csc_fast_path_is_taken_on_this_scipy() -> None:
+    """(Otherwise the dense interior point's J x builds through scipy's constructor.)"""
+    assert csr._FAST_CSC
+    data, indices, indptr = _random_csr(0, 7, 5, np.int32)  # (7 columns of 5 rows)
+    A = csr.make_csc(data, indices, indptr, (5, 7))
+    assert isinstance(A, sp.csc_matrix)
+    assert A.data is data and A.indices is indices and A.indptr is indptr
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(1, 30), cols=st.integers(0, 30),
+       itype=st.sampled_from([np.int32, np.int64]))
+def test_make_csc_builds_what_scipy_builds(seed: int, rows: int, cols: int, itype: type) -> None:
+    data, indices, indptr = _random_csr(seed, cols, rows, itype)  # (column pointers, row indices)
+    ref = sp.csc_matrix((data.copy(), indices.copy(), indptr.copy()), shape=(rows, cols))
+    _same(csr.make_csc(data, indices, indptr, (rows, cols)), ref)
+
+
+def test_without_the_csc_fast_path_it_is_scipys_constructor(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(csr, "_FAST_CSC", False)
+    monkeypatch.setattr(csr, "_build", lambda *a: pytest.fail("fast path taken with _FAST_CSC off"))
+    data, indices, indptr = _random_csr(4, 9, 6, np.int32)
+    _same(csr.make_csc(data, indices, indptr, (6, 9)), sp.csc_matrix((data, indices, indptr), shape=(6, 9)))
+    with pytest.raises(ValueError):  # indptr of the wrong length: scipy's own error
+        monkeypatch.undo()
+        csr.make_csc(data, indices, indptr[:-1], (6, 9))
