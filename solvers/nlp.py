@@ -779,8 +779,7 @@ def _rest_end_mx(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int, va
         PKall = ca.horzcat(PK, PKr)
     else:
         PKall = PK
-    per_axis = 6 if with_aj else 3
-    keep = (0, 1, 3, 4) if with_aj else (0, 1)
+    per_axis, keep = _exact_layout(with_aj)
     R = per_axis * na + 1
     # local rows: checkpoint c's template row r at r (N + 1) + c; the row next to rest; the rest points' (block b
     # of point j at R (N + 1) + 1 + b M + j, block b = axis i's keep[q] at b = i len(keep) + q)
@@ -797,13 +796,16 @@ def _rest_end_mx(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int, va
     s = ca.mtimes(ca.DM(An), w)
     nd = node(s.T, ca.DM(REST_GL[0]).T)  # (3, nodes)
     name = f"nlp_rest_mx{'' if values_only else '_d'}_{na}{'aj' if with_aj else ''}_{N}_{'head' if head else 'tail'}"
+
+    def values(out: Any, nout: int, o_term: int) -> Any:
+        """(rows, term) from the points' outputs (nout a point, the term at o_term)."""
+        vals = ca.vertcat(out[(ck_p * nout + ck_r).tolist()], ca.dot(ca.DM(e), w), out[(pt_p * nout + pt_r).tolist()])
+        term = ca.sum1(out[(np.arange(N + 1) * nout + o_term).tolist()]) + scale * ca.sum2(nd[0, :])
+        return ca.vertcat(vals, term)
+
     if values_only:
         pf = _rest_point_functions(na, with_aj, True, settings)
-        out = ca.vec(pf.map(P)(U, PKall, GL))
-        nout = R + 1
-        vals = ca.vertcat(out[(ck_p * nout + ck_r).tolist()], ca.dot(ca.DM(e), w), out[(pt_p * nout + pt_r).tolist()])
-        term = ca.sum1(out[(np.arange(N + 1) * nout + R).tolist()]) + scale * ca.sum2(nd[0, :])
-        return ca.Function(name, [z, PK, RP, GL, scale], [ca.vertcat(vals, term)])
+        return ca.Function(name, [z, PK, RP, GL, scale], [values(ca.vec(pf.map(P)(U, PKall, GL)), R + 1, R)])
     lam = ca.MX.sym("lam", n_rows)
     # each point's multipliers per template row (0: a row the end does not have: a rest point's e_lo, j_lo, feed)
     lidx = np.full((P, R), n_rows, dtype=np.int64)
@@ -814,8 +816,6 @@ def _rest_end_mx(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int, va
     out = ca.vec(pf.map(P)(U, PKall, GL, LP))
     nout = 4 * R + 16
     o_j, o_t, o_gt, o_gl, o_h = R, 4 * R, 4 * R + 1, 4 * R + 4, 4 * R + 7
-    vals = ca.vertcat(out[(ck_p * nout + ck_r).tolist()], ca.dot(ca.DM(e), w), out[(pt_p * nout + pt_r).tolist()])
-    term = ca.sum1(out[(np.arange(N + 1) * nout + o_t).tolist()]) + scale * ca.sum2(nd[0, :])
     # J_z = S B: S (rows x 3 P) holds each row's J_u at its point's u; B = A W; the row next to rest e^T W
     B = ca.mtimes(Ad, W)
     rp_, rr_ = np.concatenate([ck_p, pt_p]), np.concatenate([ck_r, pt_r])
@@ -837,7 +837,7 @@ def _rest_end_mx(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int, va
     Bn = ca.mtimes(ca.DM(An), W)
     _, _, Cw = wf(z, G)
     hess = (ca.mtimes(B.T, ca.mtimes(BD, B)) + ca.mtimes(Bn.T, Bn * ca.repmat(scale * nd[2, :].T, 1, 3 + nr)) + Cw)
-    return ca.Function(name, [z, PK, RP, GL, scale, lam], [ca.vertcat(vals, term), jac, grad, hess])
+    return ca.Function(name, [z, PK, RP, GL, scale, lam], [values(out, nout, o_t), jac, grad, hess])
 
 
 def _rest_end_function(na: int, with_aj: bool, N: int, head: bool, nr: int, M: int) -> RestEnd:
@@ -1446,7 +1446,7 @@ def _cached_shape(n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted:
     if cache is None:
         cache = _SHAPE_CACHE.shapes = OrderedDict()
     # (with the module's rest settings a rest window's shape is built with: tests switch them)
-    rest = (REST_ENDS, REST_BUMP, REST_RISE, bspline.REST_RISE_POWERS, REST_SUBDIV) if head or tail else None
+    rest = (REST_ENDS, *_rest_settings()) if head or tail else None
     key = (n, N, axes, with_aj, slotted, head, tail, rest)
     shape = cache.get(key)
     if shape is None:
@@ -2834,21 +2834,24 @@ def _tighten_points(util: dict[str, FloatArray], fine: FloatArray, s_pts: FloatA
     fac[hit] = np.maximum(MIN_BOUND_FACTOR, fac[hit] * _tighten_scale(worst[hit]))
 
 
+def _exact_layout(with_aj: bool) -> tuple[int, tuple[int, ...]]:
+    """(rows per axis of ``_Shape._axis_rows_t``, the ones ``_exact_rows`` keeps: u, e_hi, [a, j_hi])."""
+    return (6, (0, 1, 3, 4)) if with_aj else (3, (0, 1))
+
+
 def _exact_rows(rows: list[Any], with_aj: bool) -> list[Any]:
     """``_Shape._axis_rows_t``'s rows at a point with one x_sss (no envelope: e_hi = e_lo, j_hi = j_lo) without
     the duplicates: per axis u, e, [a, j].  (Two equal rows make Ipopt's KKT matrix rank-deficient: a rest
     window's solve took twice as long with them.)"""
-    per_axis = 6 if with_aj else 3
-    keep = (0, 1, 3, 4) if with_aj else (0, 1)
+    per_axis, keep = _exact_layout(with_aj)
     return [r for i, r in enumerate(rows) if i % per_axis in keep]
 
 
 def _exact_bounds(lo: FloatArray, hi: FloatArray, with_aj: bool) -> tuple[FloatArray, FloatArray]:
     """``_point_bounds``' (lo, hi) for ``_exact_rows``: e's bounds from e_hi's upper and e_lo's lower, j's alike."""
-    per_axis = 6 if with_aj else 3
+    per_axis, keep = _exact_layout(with_aj)
     row = np.arange(lo.shape[0]) % per_axis
-    return (lo[np.isin(row, (0, 2, 3, 5) if with_aj else (0, 2))],
-            hi[np.isin(row, (0, 1, 3, 4) if with_aj else (0, 1))])
+    return (lo[np.isin(row, (0, 2, 3, 5) if with_aj else (0, 2))], hi[np.isin(row, keep)])
 
 
 def _point_bounds(
