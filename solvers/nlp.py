@@ -176,6 +176,16 @@ HANDOVER_MAX_STEPS = 30
 #: at most 0.17 and 0.015 of their limits; 1,376 NLP windows took 178 s of CPU to return Fmax).
 LP_KEPT_FEED_GAP = 1e-4
 LP_KEPT_UTIL = 0.9
+#: Inside a chain that is not kept whole, a stretch of knot intervals where the LP's feed is kept by the same
+#: rules keeps it unsolved too (``kept_parts``): the chain is solved as the parts either side of it, each from
+#: and to the LP's state at the stretch's ends.  Without it the NLP's work grew with the LP's windows, whose
+#: joins cut the chains: cam-bench seed 132 with LP windows of 200 / 400 / 800 intervals took 1,873 / 3,585 /
+#: 6,674 NLP windows (cam seed 4: 76 / 24 / 6 chains kept whole, 173 / 251 / 337 windows).
+#: A solved part takes this share of the NLP overlap (at least one interval) from the stretch next to it: the
+#: NLP's feed may leave (reach) the bound earlier (later) than the LP's, within its stopping distance ...
+LP_KEPT_MARGIN_PER_OVERLAP = 1.0
+#: ... and a stretch is kept only if what is left of it is at least this many NLP overlaps long.
+LP_KEPT_MIN_RUN_PER_OVERLAP = 1.0
 
 
 #: CPU seconds one Ipopt solve may take (its own clock, all threads).  Normal solves take 0.02-0.5 s; on a
@@ -1418,6 +1428,10 @@ class NlpStats:
     safe_retries: int = 0
     #: chains not solved: the LP's feed sits at the feed bound, well inside the other limits (LP_KEPT_*)
     lp_kept_chains: int = 0
+    #: stretches inside solved chains that kept the LP's feed by the same rules (LP_KEPT_MIN_RUN_PER_OVERLAP),
+    #: and their knot intervals
+    lp_kept_spans: int = 0
+    lp_kept_intervals: int = 0
     #: worst fine-grid utilisation of any accepted window (<= 1 + ACCEPT_TOL)
     worst_verified: float = 0.0
     #: refined spans slower than the LP's feed that kept the NLP's feed: the LP's is over an NLP limit there
@@ -1570,54 +1584,94 @@ class NlpRefiner:
         n_int = c.size - 2
         p = np.zeros(n_int + 2)
         mask = np.zeros(n_int, dtype=bool)
-        chains = chain_spans(n_int, joins)
-        # chains whose LP feed is already the NLP's answer keep it (mask False, no spans)
-        kept = [self._lp_at_bound(geometry, c, d, A, B, breaks) for A, B in chains]
-        self.stats.lp_kept_chains += sum(kept)
-        solve = [ch for ch, k in zip(chains, kept, strict=True) if not k]
+        # the chains' parts: those whose LP feed is already the NLP's answer keep it (mask False, no spans)
+        parts = [part for A, B in chain_spans(n_int, joins) for part in self._chain_parts(geometry, c, d, A, B, breaks)]
+        solve = [(A, B) for A, B, k in parts if not k]
         results: Iterator[list[Span]]
         if workers > 1 and len(solve) > 1:
             results = iter(_parallel_spans(self, geometry, c, d, breaks, solve, workers))
         else:
             results = (self._spans(geometry, c, d, A, B, breaks) for A, B in solve)
         rise: list[Rise] = [(), ()]
-        for (_, B), k in zip(chains, kept, strict=True):
+        for _, B, k in parts:
             spans = [] if k else next(results)
             _place(spans, p, mask, rise)
             if on_chain is not None:
                 on_chain(B * d)
         return p, mask, (rise[0], rise[1])
 
+    def _chain_parts(
+        self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray
+    ) -> list[tuple[int, int, bool]]:
+        """The chain over knots [A, B) as consecutive parts (a, b, kept): kept parts keep the LP's feed, the
+        others are solved as chains of their own, from and to the LP's state at their ends.  The whole chain
+        is one kept part if the LP's feed is kept on all of it (``_kept_intervals``; the rest intervals are
+        not looked at, as LP_KEPT_FEED_GAP says), else ``kept_parts`` of its kept intervals."""
+        ok = self._kept_intervals(geometry, c, d, A, B, breaks)
+        if ok.size and ok.all():
+            self.stats.lp_kept_chains += 1
+            return [(A, B, True)]
+        n_int = c.size - 2
+        flags = np.zeros(B - A, dtype=bool)
+        A1 = max(A, 1)
+        flags[A1 - A : A1 - A + ok.size] = ok
+        parts = kept_parts(flags, A, n_int, max(1, math.ceil(LP_KEPT_MARGIN_PER_OVERLAP * self.overlap)),
+                           math.ceil(LP_KEPT_MIN_RUN_PER_OVERLAP * self.overlap), self.window)
+        for a, b, k in parts:
+            if k:
+                self.stats.lp_kept_spans += 1
+                self.stats.lp_kept_intervals += b - a
+        return parts
+
+    def _kept_intervals(
+        self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray
+    ) -> NDArray[np.bool_]:
+        """Whether the LP's feed is kept as it is (``LP_KEPT_FEED_GAP``, ``LP_KEPT_UTIL``) on each knot interval
+        of [max(A, 1), min(B, n_int - 1)) (the rest intervals: the LP's feed is not at a bound there): on the
+        chain's fine grid (and the verified points in it) it is within LP_KEPT_FEED_GAP of the NLP's feed
+        bound, over it (or the axis speeds over theirs) by at most VERIFY_TOL, every other limit of the NLP
+        (model and sampled) is used at most LP_KEPT_UTIL, and no break with a step cap is in the interval or
+        next to it.  A fine point on a knot (to 1e-9 of an interval) counts for both intervals there."""
+        A, B = max(A, 1), min(B, c.size - 3)
+        if B <= A:
+            return np.zeros(0, dtype=bool)
+        s0, s1 = A * d, B * d
+        fine = self._fine_points(s0, s1, d, breaks)
+        g = geometry(fine)
+        ub = self._feed_bound(g)
+        fd = kinematics.from_q(*bspline.evaluate(c, fine, d))
+        with np.errstate(invalid="ignore"):
+            good = np.isfinite(ub) & (fd[0] >= (1.0 - LP_KEPT_FEED_GAP) * ub)
+        x = (fine - s0) / d
+        n = B - A
+        lo = np.clip(np.floor(x - 1e-9).astype(np.int64), 0, n - 1)
+        hi = np.clip(np.floor(x + 1e-9).astype(np.int64), 0, n - 1)
+
+        def intervals(point_ok: NDArray[np.bool_]) -> NDArray[np.bool_]:
+            bad = ~point_ok
+            out: NDArray[np.bool_] = (np.bincount(lo[bad], minlength=n) + np.bincount(hi[bad], minlength=n)) == 0
+            return out
+
+        ok = intervals(good)
+        min_run = min(ok.size, math.ceil(LP_KEPT_MIN_RUN_PER_OVERLAP * self.overlap))
+        if all(j - i < min_run for i, j in _true_runs(ok)):  # (no stretch to keep, whatever the other limits)
+            return ok
+        util = self.lim.utilisation(g, fd)
+        self._sampled(fine, g, fd, util)
+        # (the feed and axis-speed rows are the feed bound itself)
+        for k, u in util.items():
+            cap = 1.0 + VERIFY_TOL if k in ("feed", "velocity") else LP_KEPT_UTIL
+            good &= (u.max(axis=1) if u.ndim == 2 else u) <= cap
+        ok = intervals(good)
+        br, _ = self._step_caps(geometry, s0, s1, breaks)
+        for k in np.floor((br - s0) / d).astype(np.int64):
+            ok[max(k - 1, 0) : k + 2] = False
+        return ok
+
     def _rise_free(self, tail: bool) -> bool:
         """Whether the piece's first (last, ``tail``) rest interval's rise is free in the current chain: with
         REST_BUMP and REST_RISE, where its bump is (``bump``) and no retry took it off (``rise``)."""
         return REST_BUMP and REST_RISE and self.bump[int(tail)] and self.rise[int(tail)]
-
-    def _lp_at_bound(
-        self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray
-    ) -> bool:
-        """Whether the LP's feed over knots [A, B) is kept as it is (``LP_KEPT_FEED_GAP``, ``LP_KEPT_UTIL``):
-        on the chain's fine grid (and the verified points in it) it is within LP_KEPT_FEED_GAP of the NLP's
-        feed bound, over it (or the axis speeds over theirs) by at most VERIFY_TOL, every other limit of the
-        NLP (model and sampled) is used at most LP_KEPT_UTIL, and no break in the chain has a step cap."""
-        A, B = max(A, 1), min(B, c.size - 3)  # (the rest intervals: the LP's feed is not at a bound there)
-        s0, s1 = A * d, B * d
-        if B <= A or self._step_caps(geometry, s0, s1, breaks)[0].size:
-            return False
-        fine = self._fine_points(s0, s1, d, breaks)
-        g = geometry(fine)
-        ub = self._feed_bound(g)
-        if not np.all(np.isfinite(ub)):
-            return False
-        fd = kinematics.from_q(*bspline.evaluate(c, fine, d))
-        if np.any(fd[0] < (1.0 - LP_KEPT_FEED_GAP) * ub):
-            return False
-        util = self.lim.utilisation(g, fd)
-        self._sampled(fine, g, fd, util)
-        # (the feed and axis-speed rows are the feed bound itself)
-        if any(float(np.max(util.pop(k))) > 1.0 + VERIFY_TOL for k in ("feed", "velocity") if k in util):
-            return False
-        return all(float(np.max(u)) <= LP_KEPT_UTIL for u in util.values())
 
     def lp_worst(self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray) -> float:
         """The LP feed's worst utilisation of the NLP's limits over knots [A, B): verified as a window's feed
@@ -2535,6 +2589,45 @@ def _split_rise(sol: FloatArray, a: int, b: int, n_int: int) -> tuple[FloatArray
     return sol[: n + 2], (head, tail)
 
 
+def kept_parts(
+    flags: NDArray[np.bool_], A: int, n_int: int, margin: int, min_run: int, window: int
+) -> list[tuple[int, int, bool]]:
+    """The parts (a, b, kept) of a chain over knots [A, A + flags.size) of a piece of n_int intervals, given
+    which of its knot intervals may keep the LP's feed (``flags``).
+
+    The intervals that may not are solved.  Each solved stretch takes ``margin`` intervals from the kept
+    ones on either side (not past the chain's ends: there the LP's state is the join anyway), and then, while
+    its grid (knots 1 .. n_int - 1, as ``NlpRefiner._chain`` walks it) spans fewer than ``window`` intervals,
+    one more on either side, so that it is solved in windows of the chain's usual shape (a shorter one would
+    need a shape of its own length); kept stretches shorter than ``min_run`` are solved too.  Solved parts
+    then have at least 2 intervals."""
+    n = flags.size
+    solved = ~flags
+    runs = _true_runs(solved)
+    grown = np.zeros(n, dtype=bool)
+    for i, j in runs:
+        i, j = max(0, i - margin), min(n, j + margin)
+        while _grid_span(A + i, A + j, n_int) < window and (i > 0 or j < n):
+            i, j = max(0, i - 1), min(n, j + 1)
+        grown[i:j] = True
+    for i, j in _true_runs(~grown):
+        if j - i < min_run:
+            grown[i:j] = True
+    edges = [0] + [int(k) for k in np.flatnonzero(np.diff(grown.astype(np.int8))) + 1] + [n]
+    return [(A + i, A + j, not bool(grown[i])) for i, j in itertools.pairwise(edges)]
+
+
+def _grid_span(a: int, b: int, n_int: int) -> int:
+    """Knot intervals of [a, b) between the piece's rest intervals (knots 1 .. n_int - 1)."""
+    return min(b, n_int - 1) - max(a, 1)
+
+
+def _true_runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """The runs [i, j) of True in ``flags``."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[False], flags, [False]]).astype(np.int8)))
+    return [(int(i), int(j)) for i, j in zip(edges[::2], edges[1::2], strict=True)]
+
+
 def chain_spans(n_int: int, joins: list[int]) -> list[tuple[int, int]]:
     """The NLP chains (A, B) of a piece on n_int knot intervals whose LP windows meet at ``joins``: knot
     intervals [A, B) from the LP's state at knot A to its state at B, or from and to the piece's rest ends
@@ -3322,6 +3415,8 @@ def _merge_stats(into: NlpStats, st: NlpStats) -> None:
     into.handover_scaled += st.handover_scaled
     into.handover_unscaled += st.handover_unscaled
     into.lp_kept_chains += st.lp_kept_chains
+    into.lp_kept_spans += st.lp_kept_spans
+    into.lp_kept_intervals += st.lp_kept_intervals
     into.slower_kept += st.slower_kept
     into.rest_retries += st.rest_retries
     into.ipm_iterations += st.ipm_iterations
@@ -3349,10 +3444,9 @@ def _pipe_task(task: _PipeTask) -> tuple[bool | None, list[Span], NlpStats]:
     refiner.stats = NlpStats()
     refiner.c_final = c_final
     try:
-        if refiner._lp_at_bound(geometry, c, d, A, B, breaks):
-            refiner.stats.lp_kept_chains += 1
-            return True, [], refiner.stats
-        return False, refiner._spans(geometry, c, d, A, B, breaks), refiner.stats
+        parts = refiner._chain_parts(geometry, c, d, A, B, breaks)
+        spans = [sp for a, b, k in parts if not k for sp in refiner._spans(geometry, c, d, a, b, breaks)]
+        return all(k for _, _, k in parts), spans, refiner.stats
     except LpNotFinal:
         return None, [], NlpStats()
     finally:

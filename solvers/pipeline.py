@@ -1963,6 +1963,9 @@ def _schedule_stream(
             "nlp_handover_unscaled": nlp_stats.handover_unscaled,
             # chains whose LP feed was kept unsolved: at the feed bound, well inside the other limits
             "nlp_lp_kept_chains": nlp_stats.lp_kept_chains,
+            # ... and stretches inside solved chains that kept it, and their knot intervals
+            "nlp_lp_kept_spans": nlp_stats.lp_kept_spans,
+            "nlp_lp_kept_intervals": nlp_stats.lp_kept_intervals,
             "nlp_slower_kept_spans": nlp_stats.slower_kept,
             # windows that solved a rest interval and failed, solved again from (to) the LP's state next to it
             "nlp_rest_retries": nlp_stats.rest_retries,

@@ -539,7 +539,7 @@ def test_refined_span_slower_than_the_lp_keeps_the_lp_feed(monkeypatch: pytest.M
     without the guard): 4.48 s over the chain against the LP feed's 3.17 s, motion 13.83 -> 15.14 s.  That chain
     alone must fall back (one "slower than lp" fallback over exactly its knots), the samples there must be
     the LP's feed, the chains either side keep the NLP's, and the samples pass the checks."""
-    from solvers import bspline
+    from solvers import bspline, nlp
     from solvers.nlp import NlpRefiner, chain_spans
 
     refine = NlpRefiner.refine
@@ -559,6 +559,8 @@ def test_refined_span_slower_than_the_lp_keeps_the_lp_feed(monkeypatch: pytest.M
         return p, mask, rise
 
     monkeypatch.setattr(NlpRefiner, "refine", slowing)
+    # (every chain solved whole: a stretch of the LP's feed kept inside a chain would split the run)
+    monkeypatch.setattr(nlp, "LP_KEPT_MIN_RUN_PER_OVERLAP", 1e9)
     case = gen.case(6, "bench")
     sch = schedule(case.toolpath(), case.machine, Options(method="lp+nlp", sample_period=harness.TS))
     assert slowed
@@ -598,7 +600,7 @@ def test_chain_whose_lp_feed_sits_at_fmax_keeps_it_unsolved() -> None:
     over the bench's 120 s of CPU (~200 s; lp: ~20 s).  Not a loop: 1,376 NLP windows at ~24 Ipopt
     iterations each (178 s in Ipopt, one shape), every one returning Fmax, where the LP's feed already
     was on 99.9 % of the path (u <= 0.17, e <= 0.015 of their limits).  Such a chain now keeps the LP's
-    feed unsolved (``NlpRefiner._lp_at_bound``): 349 of 357 chains, 27 NLP windows, ~25 s of CPU, motion
+    feed unsolved (``NlpRefiner._chain_parts``): 349 of 357 chains, 27 NLP windows, ~25 s of CPU, motion
     15.0372 -> 15.0348 s."""
     row = _in_worker(3714, "lp+nlp", AT_FMAX_CASE_CPU_S)  # killed if every chain is solved again
     assert row["ok"], row
