@@ -137,7 +137,10 @@ OVERLAP_SAFETY = 2.0
 #: 1 worker: default knots (7,945 intervals) 1.54-1.70 -> 1.29-1.37 s, 4.63 mm 1.05-1.21 -> 0.90 s, the motion
 #: within 4e-6.  At least LP_WINDOWS_PER_PIECE windows keep a long piece's two chains (``_chain_split``).  Not
 #: under lp+nlp, whose NLP chains end at the LP's joins: random program cam 4 ran 286 NLP windows instead of
-#: 173 on longer chains (CPU 1.3x).  Nor with Clarabel, whose time per window grows with it (18.35 m at 4.63 mm,
+#: 173 on longer chains (CPU 1.3x).  Since stretches of a chain at the feed bound are kept unsolved
+#: (``nlp.kept_parts``) cam-bench seed 132 would gain (218 -> 170 s of CPU), but the 18.35 m path at 4.63 mm
+#: knots, on ~880-interval chains instead of ~340, has 2 NLP fallbacks and +0.38 % motion (session 46).  Nor
+#: with Clarabel, whose time per window grows with it (18.35 m at 4.63 mm,
 #: v+a: 23 windows of ~80 ms, 10 of ~200 ms; CPU 1.80-1.90 vs 1.78-1.82 s on 1 worker, and `make bench` with 2
 #: read 0.99 -> 1.20 s: no gain to have).
 DEFAULT_LP_WINDOW = 200
