@@ -138,14 +138,17 @@ OVERLAP_SAFETY = 2.0
 #: within 4e-6.  At least LP_WINDOWS_PER_PIECE windows keep a long piece's two chains (``_chain_split``).  Not
 #: under lp+nlp, whose NLP chains end at the LP's joins: random program cam 4 ran 286 NLP windows instead of
 #: 173 on longer chains (CPU 1.3x).  Since stretches of a chain at the feed bound are kept unsolved
-#: (``nlp.kept_parts``) cam-bench seed 132 would gain (218 -> 170 s of CPU), but the 18.35 m path at 4.63 mm
-#: knots, on ~880-interval chains instead of ~340, has 2 NLP fallbacks and +0.38 % motion (session 46).  Nor
+#: (``nlp.kept_parts``), lp+nlp grows them too, but only on pieces of over LP_NLP_WINDOWS_PER_PIECE default
+#: windows: its NLP chains run beside the LP's later windows (``nlp.ChainPipeline``), and at n_int / 8 the
+#: 18.35 m path at 4.63 mm knots (~500-interval windows) took 2 NLP fallbacks and +0.38 % motion, compute
+#: 2.50 -> 3.49 s; cam-bench seed 132 (pieces of up to 211,595 intervals) 218 -> 170 s of CPU (session 46).  Nor
 #: with Clarabel, whose time per window grows with it (18.35 m at 4.63 mm,
 #: v+a: 23 windows of ~80 ms, 10 of ~200 ms; CPU 1.80-1.90 vs 1.78-1.82 s on 1 worker, and `make bench` with 2
 #: read 0.99 -> 1.20 s: no gain to have).
 DEFAULT_LP_WINDOW = 200
 LP_WINDOWS_PER_PIECE = 8
 LP_WINDOW_MAX = 800
+LP_NLP_WINDOWS_PER_PIECE = 64
 #: Default NLP window as a multiple of its overlap.
 NLP_WINDOW_PER_OVERLAP = 3
 #: ... and in a chain that holds at least one window this long (``NlpRefiner.chain_window``): the share
@@ -264,8 +267,9 @@ class Options:
         sample_period: Ts of the output, s.
         knot_spacing: feed-profile knot spacing d, mm; default 0.1 x stopping distance (2.3 mm on the router).
         checkpoints_per_interval: N, constraint checkpoints per knot interval.
-        lp_window: LP window size in knot intervals; default DEFAULT_LP_WINDOW, and on a long piece of method
-            lp with HiGHS up to LP_WINDOW_MAX (at least LP_WINDOWS_PER_PIECE windows a piece: ``lp_window``).
+        lp_window: LP window size in knot intervals; default DEFAULT_LP_WINDOW, and on a long piece with HiGHS
+            up to LP_WINDOW_MAX (at least LP_WINDOWS_PER_PIECE windows a piece, LP_NLP_WINDOWS_PER_PIECE under
+            lp+nlp: ``lp_window``).
         lp_overlap: LP window overlap in knot intervals; default from the stopping distance.
         jerk: include the pseudo-jerk stage.
         solver: "highs" or "clarabel".
@@ -503,10 +507,12 @@ def plan_piece(
 
 
 def lp_window(n_int: int, opt: Options) -> int:
-    """The default LP window (knot intervals) of a piece of n_int intervals (``LP_WINDOWS_PER_PIECE``)."""
-    if opt.method != "lp" or opt.solver != "highs":
+    """The default LP window (knot intervals) of a piece of n_int intervals (``LP_WINDOWS_PER_PIECE``, under
+    lp+nlp ``LP_NLP_WINDOWS_PER_PIECE``)."""
+    if opt.solver != "highs":
         return DEFAULT_LP_WINDOW
-    return min(LP_WINDOW_MAX, max(DEFAULT_LP_WINDOW, math.ceil(n_int / LP_WINDOWS_PER_PIECE)))
+    per = LP_WINDOWS_PER_PIECE if opt.method == "lp" else LP_NLP_WINDOWS_PER_PIECE
+    return min(LP_WINDOW_MAX, max(DEFAULT_LP_WINDOW, math.ceil(n_int / per)))
 
 
 def phase_intervals(toolpath: Toolpath, piece: Piece, n0: int) -> int:
