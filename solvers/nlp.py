@@ -118,8 +118,13 @@ MAX_CUT_ROUNDS = 4
 #: plans (818095d).  With 8e-3 the NLP's feed is kept and passes (0.60 s of motion).
 ACCEPT_TOL = 8e-3
 #: A window's limits are verified this many knot intervals past its commit (the next window
-#: inherits the first of them whole and the second's start state).
-VERIFY_PAST_COMMIT = 2
+#: inherits the first of them whole and the second's start state; the rest are its first free intervals).
+#: With 2, the 18.35 m path at 4.63 mm knots in 496-interval LP windows had two NLP fallbacks: a window
+#: committed a deceleration 0.6 of an interval short of a curvature jump it had not verified, whose sampled
+#: step the next window, from those inherited control points, could not bring under emax (1.21 x, then
+#: infeasible once tightened).  With 4: none, and bench seeds 10900-10999 and cam seeds 500-539 lp+nlp the
+#: same motion (session 46).
+VERIFY_PAST_COMMIT = 4
 #: Retries with half the tightening when a tightened window is infeasible.
 MAX_SOFTER_RETRIES = 2
 #: Row bounds start at this fraction of each limit (fewer tightening rounds).

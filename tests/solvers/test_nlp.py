@@ -85,6 +85,18 @@ def test_long_chain_across_many_windows() -> None:
     _assert_seams_continuous(sch)
 
 
+def test_a_window_verifies_past_its_commit_up_to_the_next_curvature_jump() -> None:
+    """The 18.35 m path at 4.63 mm knots in 496-interval LP windows: with windows verified only 2 intervals
+    past their commit (``nlp.VERIFY_PAST_COMMIT``), two windows committed a deceleration that stopped 0.6
+    of an interval short of a curvature jump, and the next one could not pass its sampled step (1.21 x emax,
+    infeasible once tightened): two fallbacks to the LP's feed.  None now, and the samples hold u and e."""
+    tp = ex.flower(45)
+    m = router()
+    sch = schedule(tp, m, Options(method="lp+nlp", knot_spacing=4.63, lp_window=496, nlp_workers=1))
+    assert sch.diagnostics["nlp_fallbacks"] == []
+    _check_drive(m, sch)
+
+
 def _assert_seams_continuous(sch: Schedule) -> None:
     """Feed and tangential acceleration agree from both sides of every knot (NLP and LP seams are knots)."""
     for prof in sch.profiles:
@@ -597,6 +609,8 @@ def test_tightening_rounds_the_dense_method_finds_infeasible_are_not_handed_to_i
     from solvers import ipm, nlp
 
     made = _capture_stats(monkeypatch)
+    # (those rounds follow commits verified 2 intervals past: with VERIFY_PAST_COMMIT = 4 this path has none)
+    monkeypatch.setattr(nlp, "VERIFY_PAST_COMMIT", 2)
     m = router()
     runs: dict[str, Schedule] = {}
     for name, r_min, dense in (("verdict", ipm.ELASTIC_INFEASIBLE_R, True), ("ipopt", np.inf, True),
