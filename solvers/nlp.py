@@ -22,8 +22,9 @@ at checkpoints next to a reversal of x_s (or with |x_s| < SIGN_EPS) both
 signs are taken (conservative: upper with +d, lower with -d).
 
 Objective: travel time over the window's committed intervals,
-sum_k w_k / (f_k + delta), minus a small reward LAMBDA_TAIL sum f_k over
-the overlap (which the next window solves again).  The travel-time integral
+sum_k w_k / (f_k + delta), plus TAIL_TIME_WEIGHT times the travel time over
+the overlap (which the next window solves again), minus a small reward
+LAMBDA_TAIL sum f_k over the overlap.  The travel-time integral
 is singular at rest (spec §10); rest intervals never enter an NLP window.
 
 Window: knot intervals [a, b) -> control points p_a .. p_{b+1}.  p_a, p_{a+1}
@@ -141,6 +142,14 @@ TIGHTEN_SPREAD = np.arange(-1, 3)
 ENVELOPE_SUBDIV = 2
 #: Reward on sum f over a window's overlap, relative to the time weights.
 LAMBDA_TAIL = 1e-2
+#: Weight of the overlap's travel time against the committed intervals'.  With none (only LAMBDA_TAIL's
+#: reward on f there), a window whose commit fell just before a petal's valley kept its feed high up to the
+#: commit and braked past it into the valley at 6.7 mm/s (the LP's: 37 mm/s), and the next window inherited
+#: that braking: the 18.35 m path at 4.63 mm knots in 496-interval LP windows took 3.61 s for one of its
+#: identical loops against a median 3.18 s.  Measured on that path (200-interval windows / 496 / default knots):
+#: 0 -> 143.666 / 144.140 / 135.461 s of motion, 0.1 -> 143.619 / 143.306 / 135.331, 0.3 -> 143.615 / 143.110 /
+#: 135.315, 1.0 -> 143.617 / 143.100 / 135.316, and 5-10 % fewer NLP iterations (session 46).
+TAIL_TIME_WEIGHT = 0.3
 #: Offset added to f in 1/f of the time objective (scaled units).
 DELTA_F = 1e-3
 #: Offset (mm) used to evaluate either side of a geometry knot (at the knot's own s the path may be
@@ -1969,7 +1978,7 @@ class NlpRefiner:
         # (a rest interval's travel time is its own term of the objective: ``_Shape._rest_rows``)
         rest_chk = (head & (k_loc == 0)) | (tail & (k_loc == n - 1))
         L = n * d
-        wt = np.where(in_commit & ~rest_chk, ds / L, 0.0)
+        wt = np.where(rest_chk, 0.0, np.where(in_commit, ds / L, TAIL_TIME_WEIGHT * ds / L))
         wf = np.where(in_commit, 0.0, LAMBDA_TAIL * ds / L)
         coefs = []
         for ax in moving:
