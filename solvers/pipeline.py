@@ -135,20 +135,19 @@ OVERLAP_SAFETY = 2.0
 #: solved twice: cam-bench seed 71 (method lp, 1.13 M knot intervals of 0.22 um in 169 pieces) ran 6,677
 #: windows of 200 in 99 s of CPU, 2,166 of up to 800 in 75 s, the motion 275.90721 vs 275.90736 s.  18.35 m path,
 #: 1 worker: default knots (7,945 intervals) 1.54-1.70 -> 1.29-1.37 s, 4.63 mm 1.05-1.21 -> 0.90 s, the motion
-#: within 4e-6.  At least LP_WINDOWS_PER_PIECE windows keep a long piece's two chains (``_chain_split``).  Not
-#: under lp+nlp, whose NLP chains end at the LP's joins: random program cam 4 ran 286 NLP windows instead of
-#: 173 on longer chains (CPU 1.3x).  Since stretches of a chain at the feed bound are kept unsolved
-#: (``nlp.kept_parts``), lp+nlp grows them too, but only on pieces of over LP_NLP_WINDOWS_PER_PIECE default
-#: windows: its NLP chains run beside the LP's later windows (``nlp.ChainPipeline``), and at n_int / 8 the
-#: 18.35 m path at 4.63 mm knots (~500-interval windows) took 2 NLP fallbacks and +0.38 % motion, compute
-#: 2.50 -> 3.49 s; cam-bench seed 132 (pieces of up to 211,595 intervals) 218 -> 170 s of CPU (session 46).  Nor
-#: with Clarabel, whose time per window grows with it (18.35 m at 4.63 mm,
-#: v+a: 23 windows of ~80 ms, 10 of ~200 ms; CPU 1.80-1.90 vs 1.78-1.82 s on 1 worker, and `make bench` with 2
-#: read 0.99 -> 1.20 s: no gain to have).
+#: within 4e-6.  At least LP_WINDOWS_PER_PIECE windows keep a long piece's two chains (``_chain_split``).  Under
+#: lp+nlp too since session 46: its NLP chains end at the LP's joins, and longer chains had more NLP windows
+#: (random program cam 4: 286 instead of 173, CPU 1.3x) until stretches at the feed bound were kept unsolved
+#: inside a chain (``nlp.kept_parts``), and the 18.35 m path at 4.63 mm knots had 2 NLP fallbacks and +0.38 %
+#: motion until windows verified further past their commit and timed their overlap (``nlp.VERIFY_PAST_COMMIT``,
+#: ``nlp.TAIL_TIME_WEIGHT``).  Now that path: 143.615 -> 143.110 s of motion at 4.63 mm knots (compute 2.54 ->
+#: 2.50 s on 2 workers), 135.315 -> 134.778 s at the default knots (CPU 7.4 -> 7.0 s); cam-bench seed 132
+#: (pieces of up to 211,595 intervals) ~218 -> ~170 s of CPU; cam 4 4.46 -> 4.22 s.  Not with Clarabel, whose
+#: time per window grows with it (18.35 m at 4.63 mm, v+a: 23 windows of ~80 ms, 10 of ~200 ms; CPU 1.80-1.90
+#: vs 1.78-1.82 s on 1 worker, and `make bench` with 2 read 0.99 -> 1.20 s: no gain to have).
 DEFAULT_LP_WINDOW = 200
 LP_WINDOWS_PER_PIECE = 8
 LP_WINDOW_MAX = 800
-LP_NLP_WINDOWS_PER_PIECE = 64
 #: Default NLP window as a multiple of its overlap.
 NLP_WINDOW_PER_OVERLAP = 3
 #: ... and in a chain that holds at least one window this long (``NlpRefiner.chain_window``): the share
@@ -268,8 +267,7 @@ class Options:
         knot_spacing: feed-profile knot spacing d, mm; default 0.1 x stopping distance (2.3 mm on the router).
         checkpoints_per_interval: N, constraint checkpoints per knot interval.
         lp_window: LP window size in knot intervals; default DEFAULT_LP_WINDOW, and on a long piece with HiGHS
-            up to LP_WINDOW_MAX (at least LP_WINDOWS_PER_PIECE windows a piece, LP_NLP_WINDOWS_PER_PIECE under
-            lp+nlp: ``lp_window``).
+            up to LP_WINDOW_MAX (at least LP_WINDOWS_PER_PIECE windows a piece: ``lp_window``).
         lp_overlap: LP window overlap in knot intervals; default from the stopping distance.
         jerk: include the pseudo-jerk stage.
         solver: "highs" or "clarabel".
@@ -507,12 +505,10 @@ def plan_piece(
 
 
 def lp_window(n_int: int, opt: Options) -> int:
-    """The default LP window (knot intervals) of a piece of n_int intervals (``LP_WINDOWS_PER_PIECE``, under
-    lp+nlp ``LP_NLP_WINDOWS_PER_PIECE``)."""
+    """The default LP window (knot intervals) of a piece of n_int intervals (``LP_WINDOWS_PER_PIECE``)."""
     if opt.solver != "highs":
         return DEFAULT_LP_WINDOW
-    per = LP_WINDOWS_PER_PIECE if opt.method == "lp" else LP_NLP_WINDOWS_PER_PIECE
-    return min(LP_WINDOW_MAX, max(DEFAULT_LP_WINDOW, math.ceil(n_int / per)))
+    return min(LP_WINDOW_MAX, max(DEFAULT_LP_WINDOW, math.ceil(n_int / LP_WINDOWS_PER_PIECE)))
 
 
 def phase_intervals(toolpath: Toolpath, piece: Piece, n0: int) -> int:

@@ -213,17 +213,14 @@ WINDOW_MOTION_RTOL = 1e-4
 
 
 def test_default_lp_windows_grow_on_long_pieces() -> None:
-    """With HiGHS: n_int / LP_WINDOWS_PER_PIECE intervals a window under method lp, n_int /
-    LP_NLP_WINDOWS_PER_PIECE under lp+nlp (whose NLP chains run beside the LP's later windows), from
-    DEFAULT_LP_WINDOW up to LP_WINDOW_MAX; Clarabel and a given ``lp_window`` as before."""
+    """With HiGHS, either method: n_int / LP_WINDOWS_PER_PIECE intervals a window, from DEFAULT_LP_WINDOW up to
+    LP_WINDOW_MAX; Clarabel and a given ``lp_window`` as before."""
     m = router()
     long = ex.flower(45).pieces[0]
-    for method, knots in (("lp", None), ("lp", 4.63), ("lp+nlp", None), ("lp+nlp", 4.63), ("lp+nlp", 0.3)):
+    for method, knots in (("lp", None), ("lp", 4.63), ("lp+nlp", None), ("lp+nlp", 4.63)):
         plan = pipeline.plan_piece(long, m, Options(method=method, knot_spacing=knots))
-        per = pipeline.LP_WINDOWS_PER_PIECE if method == "lp" else pipeline.LP_NLP_WINDOWS_PER_PIECE
-        want = min(pipeline.LP_WINDOW_MAX, max(pipeline.DEFAULT_LP_WINDOW, -(-plan.n_int // per)))
-        # (lp+nlp on the 18.35 m path keeps the default window up to ~12,800 intervals, then grows: 0.3 mm knots)
-        assert (want > pipeline.DEFAULT_LP_WINDOW) == (method == "lp" or knots == 0.3)
+        want = min(pipeline.LP_WINDOW_MAX, -(-plan.n_int // pipeline.LP_WINDOWS_PER_PIECE))
+        assert want > pipeline.DEFAULT_LP_WINDOW
         assert plan.window == want
         assert pipeline.plan_piece(long, m, Options(method=method, knot_spacing=knots, lp_window=60)).window == max(
             60, 3 * plan.overlap)
