@@ -1630,12 +1630,16 @@ class NlpRefiner:
         A1 = max(A, 1)
         flags[A1 - A : A1 - A + ok.size] = ok
         parts = kept_parts(flags, A, n_int, max(1, math.ceil(LP_KEPT_MARGIN_PER_OVERLAP * self.overlap)),
-                           math.ceil(LP_KEPT_MIN_RUN_PER_OVERLAP * self.overlap), self.window)
+                           self._kept_min_run(), self.window)
         for a, b, k in parts:
             if k:
                 self.stats.lp_kept_spans += 1
                 self.stats.lp_kept_intervals += b - a
         return parts
+
+    def _kept_min_run(self) -> int:
+        """Knot intervals a kept stretch needs at least (LP_KEPT_MIN_RUN_PER_OVERLAP)."""
+        return math.ceil(LP_KEPT_MIN_RUN_PER_OVERLAP * self.overlap)
 
     def _kept_intervals(
         self, geometry: GeometryFn, c: FloatArray, d: float, A: int, B: int, breaks: FloatArray
@@ -1667,7 +1671,7 @@ class NlpRefiner:
             return out
 
         ok = intervals(good)
-        min_run = min(ok.size, math.ceil(LP_KEPT_MIN_RUN_PER_OVERLAP * self.overlap))
+        min_run = min(ok.size, self._kept_min_run())
         if all(j - i < min_run for i, j in _true_runs(ok)):  # (no stretch to keep, whatever the other limits)
             return ok
         util = self.lim.utilisation(g, fd)
