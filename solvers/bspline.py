@@ -130,6 +130,20 @@ REST_BUMP_POWER = 2
 #: further power adds a degree.  Flower lp+nlp with the rest points (``solvers.nlp.REST_SUBDIV`` 4):
 #: (2,) 2.9945 s, (2, 3) 2.9908, (2, 3, 4) 2.9843, (2, 3, 4, 5) 2.9810, (2, ..., 6) 2.9815 s.
 REST_RISE_POWERS: tuple[int, ...] = (2, 3, 4, 5)
+#: The powers of the rises the LP of method lp (with jerk) adds to its rest intervals (``rest_shapes``): those of
+#: REST_RISE_POWERS first (a rise amplitude list h of length R reads the first R of these: ``rest_bump``), then
+#: steeper ones, the rise of power j peaking at r = 2 / (j + 2) from rest.  A jerk-limited start from rest has
+#: q ~ s^(4/3) over a few micrometres (on the router's x, amax / jmax = 7.9 ms, 5 um) and q' ~ 2 amax after it;
+#: with the quartic-to-septic shapes alone q' rose from 2 a_rest (``solvers.lp``) over much of the rest interval,
+#: and each rest end cost 15 / 35 / 47 ms at 0.31 / 1.56 / 2.30 mm knots against Ruckig's jerk-limited optimum
+#: on rest-to-rest lines (session 47).  Lines of 1-500 mm / the square corner / the flower, method lp, motion:
+#: (2, 3, 4, 5) 0.1051 0.2194 0.4384 1.0519 3.7368 s / 1.1252 / 4.2304 s; + (8, 12, 16, 24) 0.1044 0.2156 0.4184
+#: 1.0075 3.6830 / 1.0900 / 4.2217; + (8, 16, 32, 64) ... 0.9943 3.6670 / 1.0796 / 4.2202; + (8, 16, 32, 64, 128)
+#: 0.1042 0.2149 0.4161 0.9863 3.6573 / 1.0768 / 4.2170 (CPU 1.5x on these nine short cases, most of it the
+#: time table's quadrature over the steeper rest intervals and a cut round more); + (8, 16, 32, 64, 128, 256)
+#: ... 0.9841 3.6504 / 1.0761 / 4.2178.  The NLP's rises stay REST_RISE_POWERS: with these its rest windows
+#: were slower and no faster in motion (flower lp+nlp 2.9797 -> 3.0025 s with (.., 32, 48, 64)).
+LP_REST_RISE_POWERS: tuple[int, ...] = (*REST_RISE_POWERS, 8, 16, 32, 64, 128)
 
 
 def rest_bump(
@@ -137,8 +151,9 @@ def rest_bump(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     r"""What the rest interval's extra shapes add to its q (``solvers.nlp.REST_BUMP``, ``REST_RISE``),
     g b + sum_k h_k e_k, and their s-derivatives, at piece-local s on knot interval k (the piece's first,
-    ``head``, or last), with m = REST_BUMP_POWER, the k of REST_RISE_POWERS (h: one amplitude each, or
-    none) and r the unit distance from rest (tau = s / d - k at the head, 1 - tau at the tail), u = 1 - r:
+    ``head``, or last), with m = REST_BUMP_POWER, the k of the first len(h) of LP_REST_RISE_POWERS (h: one
+    amplitude each, or none; the NLP's rises are those of REST_RISE_POWERS) and r the unit distance from rest
+    (tau = s / d - k at the head, 1 - tau at the tail), u = 1 - r:
 
         b = r u^m,      db/dr = u^(m-1) (1 - (m+1) r),     d2b/dr2 = -m u^(m-2) (2 - (m+1) r)
         e_k = r^2 u^k,  de_k/dr = r u^(k-1) (2 - (2+k) r),  d2e_k/dr2 = u^(k-2) (2 u^2 - 4 k r u + k (k-1) r^2)
@@ -151,10 +166,11 @@ def rest_bump(
     t = np.asarray(s, dtype=np.float64) / d - k
     r = t if head else 1.0 - t
     sign = 1.0 if head else -1.0
-    up = _powers(1.0 - r)
+    powers = _rise_powers(len(h))
+    up = _powers(1.0 - r, max((REST_BUMP_POWER, *powers)))
     bb = _bump_shape(r, up)
     b = (g * bb[0], g * bb[1], g * bb[2])
-    for hk, j in zip(h, REST_RISE_POWERS, strict=True) if len(h) else ():
+    for hk, j in zip(h, powers, strict=True):
         if hk:
             e = _rise_shape(r, j, up)
             b = (b[0] + hk * e[0], b[1] + hk * e[1], b[2] + hk * e[2])
@@ -187,15 +203,18 @@ def on_rest_interval(s: FloatArray, d: float, k: int, head: bool) -> NDArray[np.
     return np.asarray(k_s <= k if head else k_s >= k)
 
 
-#: The highest power of u = 1 - r that the shapes read.
-_TOP_POWER = max(REST_BUMP_POWER, *REST_RISE_POWERS)
+def _rise_powers(n: int) -> tuple[int, ...]:
+    """The powers of n rise amplitudes: the first n of LP_REST_RISE_POWERS (REST_RISE_POWERS for the NLP's)."""
+    if n > len(LP_REST_RISE_POWERS):
+        raise ValueError(f"{n} rise amplitudes, at most {len(LP_REST_RISE_POWERS)} (LP_REST_RISE_POWERS)")
+    return LP_REST_RISE_POWERS[:n]
 
 
-def _powers(u: Any) -> list[Any]:
-    """[1, u, u^2, ..., u^_TOP_POWER] by products (floats, arrays or CasADi expressions): numpy's float
+def _powers(u: Any, top: int) -> list[Any]:
+    """[1, u, u^2, ..., u^top] by products (floats, arrays or CasADi expressions): numpy's float
     ``u ** j`` calls ``pow`` per element for j > 2 (the shapes' powers were ~5 % of a flower loop with jerk)."""
     out: list[Any] = [1.0, u]
-    for _ in range(2, _TOP_POWER + 1):
+    for _ in range(2, top + 1):
         out.append(out[-1] * u)
     return out
 
@@ -215,20 +234,20 @@ def _rise_shape(r: FloatArray, j: int, up: list[Any]) -> tuple[FloatArray, Float
             up[j - 2] * (2.0 * u * u - 4.0 * j * r * u + j * (j - 1) * r * r))
 
 
-#: Amplitudes of a rest interval's shapes in ``rest_shapes``: the bump, then one rise per REST_RISE_POWERS.
-REST_SHAPES = 1 + len(REST_RISE_POWERS)
+#: Amplitudes of a rest interval's shapes in ``rest_shapes``: the bump, then one rise per LP_REST_RISE_POWERS.
+REST_SHAPES = 1 + len(LP_REST_RISE_POWERS)
 
 
 def rest_shapes(s: FloatArray, d: float, k: int, head: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The rest interval's shapes one by one (``rest_bump`` with a unit amplitude each: the bump, then the rises of
-    REST_RISE_POWERS) and their s-derivatives at piece-local s on knot interval k (the piece's first, ``head``,
+    LP_REST_RISE_POWERS) and their s-derivatives at piece-local s on knot interval k (the piece's first, ``head``,
     or last): three (K, REST_SHAPES) arrays, 1, 1/mm, 1/mm^2 per unit amplitude.  What the LP of method lp
     adds to q in its rest intervals (``solvers.lp.WindowSpec.rest_shapes``)."""
     t = np.asarray(s, dtype=np.float64) / d - k
     r = t if head else 1.0 - t
     sign = 1.0 if head else -1.0
-    up = _powers(1.0 - r)
-    cols = [_bump_shape(r, up)] + [_rise_shape(r, j, up) for j in REST_RISE_POWERS]
+    up = _powers(1.0 - r, max((REST_BUMP_POWER, *LP_REST_RISE_POWERS)))
+    cols = [_bump_shape(r, up)] + [_rise_shape(r, j, up) for j in LP_REST_RISE_POWERS]
     return (np.column_stack([c[0] for c in cols]), np.column_stack([sign * c[1] / d for c in cols]),
             np.column_stack([c[2] / (d * d) for c in cols]))
 
@@ -237,8 +256,16 @@ def rest_shape_integrals(d: float) -> FloatArray:
     """Integral over the rest interval of each ``rest_shapes`` shape (REST_SHAPES,), mm per unit amplitude:
     d B(2, m + 1) for the bump, d B(3, j + 1) for the rise of power j (B the beta function)."""
     m = REST_BUMP_POWER
-    out = [1.0 / ((m + 1) * (m + 2))] + [2.0 / ((j + 1) * (j + 2) * (j + 3)) for j in REST_RISE_POWERS]
+    out = [1.0 / ((m + 1) * (m + 2))] + [2.0 / ((j + 1) * (j + 2) * (j + 3)) for j in LP_REST_RISE_POWERS]
     return np.asarray(out, dtype=np.float64) * d
+
+
+def rest_shape_peaks() -> FloatArray:
+    """The largest value on [0, 1] of each ``rest_shapes`` shape (REST_SHAPES,), per unit amplitude: the bump
+    r (1 - r)^m at r = 1 / (m + 1), the rise r^2 (1 - r)^j at r = 2 / (j + 2) (1.3e-4 for j = 128)."""
+    m = REST_BUMP_POWER
+    out = [m**m / (m + 1) ** (m + 1)] + [4.0 * j**j / (j + 2) ** (j + 2) for j in LP_REST_RISE_POWERS]
+    return np.asarray(out, dtype=np.float64)
 
 
 def rest_bump_quotient(r: Any, g: Any, h: Sequence[Any] = ()) -> Any:
@@ -246,8 +273,9 @@ def rest_bump_quotient(r: Any, g: Any, h: Sequence[Any] = ()) -> Any:
     from rest (floats, arrays or CasADi expressions): what the shapes add under the root of a rest interval's
     time integrand, where q / r is taken with r = w^2 (``timing.PieceProfile.h_local``,
     ``timing.rest_interval_times``, ``solvers.nlp._Shape._rest_rows``)."""
-    up = _powers(1.0 - r)
+    powers = _rise_powers(len(h))
+    up = _powers(1.0 - r, max((REST_BUMP_POWER, *powers)))
     out = g * up[REST_BUMP_POWER]
-    for hk, j in zip(h, REST_RISE_POWERS, strict=True) if len(h) else ():
+    for hk, j in zip(h, powers, strict=True):
         out = out + hk * (r * up[j])
     return out

@@ -71,6 +71,14 @@ VERIFY_TOL = 2e-3
 #: 2 0.0882 s, none 0.1006 s) but cost the flower with jerk, where x_ss q' cancels part of x_sss q: 1.0 +0.44 %
 #: at default knots, 1.5 +0.29 % at 1 and 0.5 mm knots; at 2 its samples are those of no cap at all three.
 QSTAR_JERK_CAP = 2.0
+#: With the rest shapes and ``WindowSpec.rest_step_floor`` the acceleration step leaving (reaching) rest is at
+#: least this share of its bound a_rest (q' >= 0 there without it).  The steep rises (``bspline.LP_REST_RISE_POWERS``)
+#: can lift q just past rest so far that the LP meets its integral of q with q' = 0 at rest, a feed that never
+#: leaves: the alternating-F zig-zag of ``tests/geometry/test_arc_blend.py`` (0.05 mm blends) ended so, and its
+#: piece was walked again without shapes, 5.4318 -> 5.6924 s.  Such a piece is now walked with this floor first
+#: (``pipeline._solve_windows``): with 0.25 / 0.5 / 0.9 5.3815 / 5.3792 / 5.3772 s.  Not on every walk: on bench
+#: seed 14 (a turn of 3.6 um radius 0.067 mm from a rest end) any floor > 0 left the feed stalling.
+REST_STEP_FLOOR_SHARE = 0.5
 #: Verification points between consecutive checkpoints.
 VERIFY_SUBDIV = 8
 #: Where the tangent turns by more than this (rad) between neighbouring verification points, VERIFY_SUBDIV - 1 more
@@ -273,6 +281,8 @@ class WindowSpec:
     #: shapes ``bspline.rest_shapes`` (a bump and rises) added to q, their amplitudes variables of the LP
     #: (method lp with jerk, ``pipeline._solve_windows``; see ``WindowLP``)
     rest_shapes: bool = False
+    #: with the rest shapes: the acceleration step at rest is at least REST_STEP_FLOOR_SHARE of its bound
+    rest_step_floor: bool = False
 
     @property
     def ncols(self) -> int:
@@ -1130,7 +1140,9 @@ class WindowLP:
         rows.add(B0, np.zeros(1), np.zeros(1))
         r = float(np.max(np.abs(g.d1[0]) / (2.0 * (self.lim.a_rest if a_rest is None else a_rest))))
         # (the feed leaves rest: q' >= 0 there, which c >= 0 gives without the rest shapes, whose bump moves it)
-        rows.add(B1 * (sign * Q * r), np.array([0.0 if self.shape_ends else -np.inf]), np.ones(1))
+        # (with ``WindowSpec.rest_step_floor``, at least REST_STEP_FLOOR_SHARE of its step)
+        lo = (REST_STEP_FLOOR_SHARE if self.spec.rest_step_floor else 0.0) if self.shape_ends else -np.inf
+        rows.add(B1 * (sign * Q * r), np.array([lo]), np.ones(1))
         return self.spec.d / (2.0 * r) if r > 0.0 else np.inf
 
     def _row_points(self, s_check: FloatArray) -> FloatArray:
@@ -1743,8 +1755,10 @@ class WindowLP:
         if spec.end_rest:
             sig[-1] = sig[-2]
         # the rest shapes' amplitudes: the reach of the rest interval's inner control point (the shapes are
-        # what q is made of there besides it)
-        ext = [np.full(bspline.REST_SHAPES, sig[2 if head else spec.ncols - 3]) for head, _, _ in self.shape_ends]
+        # what q is made of there besides it), over each shape's peak (the steepest rise peaks at 1.3e-4 of its
+        # amplitude)
+        peaks = bspline.rest_shape_peaks()
+        ext = [sig[2 if head else spec.ncols - 3] / peaks for head, _, _ in self.shape_ends]
         return np.asarray(np.concatenate([sig, *ext]), dtype=np.float64)
 
     def _implied_col_hi(

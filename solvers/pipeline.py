@@ -52,6 +52,7 @@ from solvers.errors import (
     InvalidOptionsError,
     LimitViolationError,
     OutputTooLargeError,
+    ScheduleError,
     SolverFailure,
 )
 from solvers.lp import (
@@ -82,8 +83,9 @@ from solvers.timing import (
 
 FloatArray = NDArray[np.float64]
 #: LP window results kept across the knot plans and repair rounds of one piece (``_solve_windows``): (n_int, k0,
-#: k1, rest_floor, rest_shapes) -> (what the window inherits, its extra verification points, its result)
-WindowCache = dict[tuple[int, int, int, bool, bool], tuple[Any, FloatArray, WindowResult]]
+#: k1, rest_floor, rest_shapes, rest_step_floor) -> (what the window inherits, its extra verification points, its
+#: result)
+WindowCache = dict[tuple[int, int, int, bool, bool, bool], tuple[Any, FloatArray, WindowResult]]
 
 METHODS = ("lp+nlp", "lp")
 SOLVERS = ("highs", "clarabel")
@@ -184,9 +186,13 @@ KNOT_REFINEMENTS = 3
 #: (q <= 0.019 there), still stalled at 128 intervals and moves at 512.
 STUCK_REFINE_MAX_INTERVALS = 1024
 #: A piece refined because the LP held control points at their q floor keeps refining only while
-#: each refinement shortens its motion to under this share of the best so far ...
+#: each refinement shortens its motion to under this share of the best so far or of the level before it ...
 FLOOR_REFINE_GAIN = 0.99
-#: ... or while at most this many refinements in a row have not
+#: ... or while at most this many refinements in a row have not.  (Against the best alone, bench seed 54 lp
+#: stopped at 128 intervals when its 16-interval profile (0.1558 s) was faster than 64's (0.1801) and 128's
+#: (0.1570): 0.1894 s of motion, where 256 and 512 reach 0.1009 / 0.0952 s and the whole path 0.1288 s.
+#: Session 47, method lp, bench seeds 0-149 / cam 0-59: 8 / 5 seeds shorter (46 -12 %, 126 -28 %), none
+#: longer, their wall time up to 2.3x.)
 FLOOR_REFINE_PATIENCE = 1
 #: ... and only up to this many knot intervals, and only on the default knot spacing (an explicit
 #: ``Options.knot_spacing`` is kept: the 45-loop flower at 4.63 mm went from 22 to 67 LP windows,
@@ -669,6 +675,7 @@ def _refined(
     joins: list[int] = []
     levels: list[tuple[float, PieceProfile, list[int]]] = []  # every level solved and not stuck (for ``plain``)
     attempt = misses = 0
+    prev_duration: float | None = None
     while True:
         plan = plan_piece(piece, machine, opt, n_int, toolpath)
         floor_refine = _floor_refines(opt) and 2 * plan.n_int <= _floor_refine_cap(opt)
@@ -697,12 +704,15 @@ def _refined(
             behind = first is not None and plan.n_int < first[1].n_int and duration >= first[0]
             if not floored and best is None and not behind:
                 break
-            if not behind and best is not None and duration > FLOOR_REFINE_GAIN * best[0]:
+            # (a level faster than the one before it by the gain is no miss, even if not the fastest yet)
+            if (not behind and best is not None and duration > FLOOR_REFINE_GAIN * best[0]
+                    and not (prev_duration is not None and duration <= FLOOR_REFINE_GAIN * prev_duration)):
                 misses += 1
                 if misses > FLOOR_REFINE_PATIENCE:
                     break  # finer knots no longer pay
             elif not behind and best is not None:
                 misses = 0
+            prev_duration = duration
             if best is None or duration < best[0]:
                 best = (duration, prof, joins)
             if not floored and not behind:
@@ -760,8 +770,9 @@ class _WindowWalk:
     rest_floor: bool
     a_rest_start: FloatArray | None
     a_rest_end: FloatArray | None
-    #: ``WindowSpec.rest_shapes``
+    #: ``WindowSpec.rest_shapes``, ``WindowSpec.rest_step_floor``
     rest_shapes: bool = False
+    rest_step_floor: bool = False
 
     def window(
         self, stats: dict[str, Any], k0: int, k1: int, start: tuple[float, float] | None,
@@ -774,7 +785,7 @@ class _WindowWalk:
         plan, N = self.plan, self.opt.checkpoints_per_interval
         spec = WindowSpec(stats["windows"], k0, k1, plan.d, plan.n_int, start, k1 == plan.n_int, prev_qstar, prev_c,
                           self.a_rest_start if k0 == 0 else None, self.a_rest_end, self.rest_floor,
-                          rest_shapes=self.rest_shapes)
+                          rest_shapes=self.rest_shapes, rest_step_floor=self.rest_step_floor)
         if end_fixed is not None:
             kn, cn, qn = end_fixed
             spec = replace(spec, end_fixed=(float(cn[k1 - kn]), float(cn[k1 - kn + 1])), next_c=(kn, cn),
@@ -790,7 +801,7 @@ class _WindowWalk:
         if end_fixed is not None:
             st += [end_fixed[1][k0 - end_fixed[0]: k1 + 2 - end_fixed[0]],
                    end_fixed[2][k0 - end_fixed[0]: k1 + 2 - end_fixed[0]]]
-        key = (plan.n_int, k0, k1, self.rest_floor, self.rest_shapes)
+        key = (plan.n_int, k0, k1, self.rest_floor, self.rest_shapes, self.rest_step_floor)
         stv = np.concatenate(st)
         cache = self.cache
         hit = cache.get(key) if cache is not None else None
@@ -938,34 +949,57 @@ def _solve_windows(
     Method lp with jerk adds the rest shapes to q in the piece's first and last knot intervals
     (``WindowSpec.rest_shapes``; not with ``rest_floor``, whose floor is on the control point next to rest, nor
     without jerk, where a quadratic leaves rest at amax already).  Should q dip to 0 inside such an interval
-    between the points the LP holds it at (``timing.rest_dips``), the piece is walked again without them
-    (counted in ``stats["rest_shape_fallbacks"]``)."""
+    between the points the LP holds it at (``timing.rest_dips``), the piece is walked again with a floor on the
+    acceleration step at rest (``lp.REST_STEP_FLOOR_SHARE``; counted in ``stats["rest_step_floor_walks"]``), and
+    should that dip, stall or fail too, without them (counted in ``stats["rest_shape_fallbacks"]``)."""
     shaped = LP_REST_SHAPES and opt.method == "lp" and opt.jerk and not rest_floor
     prof, joins = _walk_plan(toolpath, piece, plan, opt, lim, stats, on_window, verify, cache, rest_floor, floored,
                              on_lp, shaped)
     if shaped and rest_dips(prof):
-        stats["rest_shape_fallbacks"] = stats.get("rest_shape_fallbacks", 0) + 1
+        stats["rest_step_floor_walks"] = stats.get("rest_step_floor_walks", 0) + 1
         if floored is not None:
             floored.clear()
-        prof, joins = _walk_plan(toolpath, piece, plan, opt, lim, stats, None, verify, cache, rest_floor, floored,
-                                 on_lp, False)
+        try:
+            prof, joins = _walk_plan(toolpath, piece, plan, opt, lim, stats, None, verify, cache, rest_floor,
+                                     floored, on_lp, True, rest_step_floor=True)
+            # (stalls as the time table reads them: bench seed 14's second piece on 16 intervals, the step floored
+            # next to a turn of 3.6 um radius 0.067 mm from rest, passed ``stuck`` and stalled in the table)
+            fell = rest_dips(prof) or stuck(prof) or not _table_moves(prof)
+        except (InfeasibleError, SolverFailure):
+            fell = True
+        if fell:
+            stats["rest_shape_fallbacks"] = stats.get("rest_shape_fallbacks", 0) + 1
+            if floored is not None:
+                floored.clear()
+            prof, joins = _walk_plan(toolpath, piece, plan, opt, lim, stats, None, verify, cache, rest_floor,
+                                     floored, on_lp, False)
     return prof, joins
+
+
+def _table_moves(profile: PieceProfile) -> bool:
+    """Whether the time table of ``profile`` can be built (the feed neither stalls nor is stuck at rest)."""
+    try:
+        PieceTiming.build(profile, inverse=False)
+    except ScheduleError:
+        return False
+    return True
 
 
 def _walk_plan(
     toolpath: Toolpath, piece: Piece, plan: WindowPlan, opt: Options, lim: LimitSet, stats: dict[str, Any],
     on_window: Callable[[float], None] | None, verify: FloatArray | None, cache: WindowCache | None,
     rest_floor: bool, floored: list[int] | None, on_lp: Callable[[FloatArray, list[int]], None] | None,
-    rest_shapes: bool,
+    rest_shapes: bool, rest_step_floor: bool = False,
 ) -> tuple[PieceProfile, list[int]]:
-    """``_solve_windows``'s walk over the windows of one knot plan, with or without the rest shapes."""
+    """``_solve_windows``'s walk over the windows of one knot plan, with or without the rest shapes (and with
+    ``rest_step_floor``, ``WindowSpec.rest_step_floor``)."""
     # the step at a corner is shared by the pieces on both sides, under either method (until session 6
     # only under lp+nlp: bench seed 1723, lp, a 5.8 degree corner with x moving on through it, stepped by
     # 2 a_rest = jmax Ts and the third difference across it read 1.018 x jmax; sharing costs test-profile
     # lp cases with corners 1.4 % of motion time, geometric mean over 47)
     ww = _WindowWalk(_local(toolpath, piece), _breaks(toolpath, piece), plan, opt, lim, verify, cache, rest_floor,
                      _corner_rest(toolpath, piece, lim, at_end=False), _corner_rest(toolpath, piece, lim, at_end=True),
-                     rest_shapes)
+                     rest_shapes, rest_step_floor)
     c = np.zeros(plan.n_int + 2)
     shapes: list[FloatArray | None] = [None, None]
     split = _chain_split(plan, opt) if on_lp is None else None
@@ -1733,7 +1767,7 @@ def _schedule_stream(
     stats: dict[str, Any] = {
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
         "unverified": 0, "window_times": [], "sample_repairs": 0, "lp_chains": 0, "lp_seam_fallbacks": 0,
-        "rest_shape_fallbacks": 0,
+        "rest_shape_fallbacks": 0, "rest_step_floor_walks": 0,
     }
     if opt.method == "lp+nlp" and not machine.has_drives:
         raise InvalidMachineError(
@@ -1939,8 +1973,9 @@ def _schedule_stream(
         # those of them whose second chain or seam failed (the first chain then walked on alone)
         "lp_chains": stats["lp_chains"],
         "lp_seam_fallbacks": stats["lp_seam_fallbacks"],
-        # knot plans of method lp walked again without the rest shapes, whose q dipped to 0 next to rest
-        # (``_solve_windows``)
+        # knot plans of method lp walked again with a floor on the step at rest, whose q dipped to 0 next to rest
+        # with the rest shapes, and those walked without the shapes at last (``_solve_windows``)
+        "rest_step_floor_walks": stats["rest_step_floor_walks"],
         "rest_shape_fallbacks": stats["rest_shape_fallbacks"],
         # most rounds of re-solving a piece whose samples were over a limit (solvers.verify)
         "sample_repairs": stats["sample_repairs"],

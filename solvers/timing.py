@@ -68,8 +68,8 @@ class PieceProfile:
         p: (n_int + 2,) control points of f, mm/s, or None (LP only).
         f_mask: (n_int,) bool, intervals that use f, or None.
         rest_g: the bumps' amplitudes (first, last rest interval), mm^2/s^2.
-        rest_h: the rises' amplitudes (first, last rest interval), one per ``bspline.REST_RISE_POWERS``
-            (or none), mm^2/s^2.
+        rest_h: the rises' amplitudes (first, last rest interval), one per power of the first ones of
+            ``bspline.LP_REST_RISE_POWERS`` (``bspline.rest_bump``; or none), mm^2/s^2.
     """
 
     s_start: float

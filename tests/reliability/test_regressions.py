@@ -309,6 +309,11 @@ def test_stuck_small_piece_keeps_refining_its_knots(monkeypatch: pytest.MonkeyPa
     assert out.ok, out.describe()
 
 
+#: Bench seed 97's piece 2 (lp): the duration its refinements reach, at most (1.16 s on 128 intervals with the rest
+#: floor; 1.05 s on 16 since session 47; 2.51-4.00 s where the search ended early)
+SEED97_PIECE2_S = 1.2
+
+
 @pytest.mark.parametrize("warm", [True, False])
 def test_refinements_coarser_than_the_rest_plan_do_not_end_the_search(monkeypatch: pytest.MonkeyPatch,
                                                                       warm: bool) -> None:
@@ -317,8 +322,9 @@ def test_refinements_coarser_than_the_rest_plan_do_not_end_the_search(monkeypatc
     stopped ("finer knots no longer pay"); or, with stage 2 warm-started, a clean 2.51 s profile on 16 stopped them
     at once.  128 intervals with the rest floor give 1.16 s: 5.47-5.49 s of motion in all instead of 4.61 s.  Which
     way it went hung on which of equally good LP vertices stage 2 met (``lp.STAGE2_WARM``).  Now a plan coarser
-    than the first one and no faster ends nothing.  Truth: each plan's own duration (``PieceTiming``), recorded as
-    it is solved."""
+    than the first one and no faster ends nothing.  (Since session 47's steeper rest shapes the plan's 16 intervals
+    give a clean 1.05 s profile, faster than the first one, which ends the search where it should.)  Truth: each
+    plan's own duration (``PieceTiming``), recorded as it is solved."""
     monkeypatch.setattr(lp, "STAGE2_WARM", warm)
     tried: list[tuple[int, int, float]] = []
     solve = pipeline._solve_windows
@@ -336,7 +342,7 @@ def test_refinements_coarser_than_the_rest_plan_do_not_end_the_search(monkeypatc
     out = harness.run(case, "lp")
     assert out.ok, out.describe()
     piece2 = [(n, d) for i, n, d in tried if i == 2]
-    assert 128 in [n for n, _ in piece2], piece2
+    assert min(d for _, d in piece2) <= SEED97_PIECE2_S, piece2
     sch = schedule(case.toolpath(), case.lp_machine, Options(method="lp"))
     # the schedule keeps each piece's fastest plan: its motion is the sum of the pieces' best durations
     best = sum(min(d for i, _, d in tried if i == k) for k in range(3))
@@ -363,6 +369,29 @@ def test_refinements_go_on_over_a_plateau() -> None:
     fine = schedule(tp, case.lp_machine, Options(method="lp", knot_spacing=tp.length / PLATEAU_FINE_INTERVALS))
     ratio = float(sch.summary["motion_time"]) / float(fine.summary["motion_time"])
     assert ratio <= PLATEAU_MOTION_RATIO, (sch.summary["motion_time"], fine.summary["motion_time"])
+
+
+#: bench seed 54's motion with the default knots against its motion on REFINED_TREND_KNOT_MM explicit knots (no
+#: refinement): at most this ratio (0.1288 / 0.1280 s measured; 0.1894 s when the refinements stopped at 128
+#: intervals)
+REFINED_TREND_MOTION_RATIO = 1.05
+REFINED_TREND_KNOT_MM = 4.341
+
+
+def test_refinements_go_on_while_each_level_beats_the_one_before() -> None:
+    """Bench seed 54 (lp): its second piece (2.2 m) is held at a floor on every plan.  Its plan's 16 intervals gave
+    0.1558 s (with session 47's steeper rest shapes; 0.1612 s before), 32: 0.1961, 64: 0.1801, 128: 0.1570 s: 64 and
+    128 each missed FLOOR_REFINE_GAIN against 16's best, and the refinements stopped, where 256 and 512 reach
+    0.1009 / 0.0952 s.  A level that beats the one before it by the gain is no miss now.  Truth: the same path on
+    explicit knots of 512's spacing (``Options.knot_spacing``, not refined): 0.1280 s."""
+    case = gen.case(54, "bench")
+    tp = case.toolpath()
+    sch = schedule(tp, case.lp_machine, Options(method="lp"))
+    fine = schedule(tp, case.lp_machine, Options(method="lp", knot_spacing=REFINED_TREND_KNOT_MM))
+    ratio = float(sch.summary["motion_time"]) / float(fine.summary["motion_time"])
+    assert ratio <= REFINED_TREND_MOTION_RATIO, (sch.summary["motion_time"], fine.summary["motion_time"])
+    out = harness.run(case, "lp")
+    assert out.ok, out.describe()
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
@@ -674,6 +703,12 @@ PARAMETER_FAR_FROM_ZERO = {
 }
 
 
+#: The sampled utilisation of the limit these paths' tails read over (1.366 / 2.674 x before the rebasing), at most:
+#: 5004 read 1.0024 (its end) until session 47, 1.0069 since (its start: the LP's steeper rest rises,
+#: ``bspline.LP_REST_RISE_POWERS``, between its verification points; the issue's bound is 1.01).
+FAR_FROM_ZERO_UTILISATION = 1.0 + 8e-3
+
+
 @pytest.mark.parametrize("seed", sorted(PARAMETER_FAR_FROM_ZERO))
 def test_sampled_positions_resolve_a_parameter_domain_far_from_zero(seed: int) -> None:
     """Bench seeds 5004 and 5029 (lp; 'sampled acceleration 1.0931 x' and 'sampled jerk 2.6727 x after 2
@@ -701,7 +736,7 @@ def test_sampled_positions_resolve_a_parameter_domain_far_from_zero(seed: int) -
     assert Toolpath([seg]).subs[0].segment.domain[0] == 0.0
     rep = _check([seg], m, "lp")
     assert rep.ok, rep.violations
-    assert rep.utilisation[kind] <= 1.0 + 5e-3
+    assert rep.utilisation[kind] <= FAR_FROM_ZERO_UTILISATION
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")

@@ -79,6 +79,9 @@ def test_a_program_whose_f_words_alone_pass_the_budget_is_413_up_front(client: T
     assert r.status_code == 200, r.text
 
 
+#: The blended zig-zag's motion against stopping at its corners, at most (measured 1.9979 / 2.5263 s = 0.791 until
+#: session 47; 1.9403 / 2.4106 s = 0.805 since the LP leaves and reaches rest faster, ``bspline.LP_REST_RISE_POWERS``)
+BLEND_GAIN = 0.85
 #: A pocketing-style zig-zag of G01 moves at one feed: 8 legs turning 53 degrees.
 ZIGZAG = "G21 G90 G01 F6000\n" + "\n".join(f"X{10 * i} Y{5 * (i % 2)}" for i in range(1, 9)) + "\n"
 
@@ -90,7 +93,7 @@ def test_gcode_corner_blend_runs_through_corners(client: TestClient) -> None:
     assert blend.status_code == 200, blend.text
     b = blend.json()
     assert len(stop["diagnostics"]["corners"]) == 7 and b["diagnostics"]["corners"] == []
-    assert b["summary"]["motion_time"] < 0.8 * stop["summary"]["motion_time"]
+    assert b["summary"]["motion_time"] < BLEND_GAIN * stop["summary"]["motion_time"]
     # the blended path stays within the blend distance of the programmed corners' polyline
     x, y = np.array(b["samples"]["x"]), np.array(b["samples"]["y"])
     pts = np.array([[10.0 * i, 5.0 * (i % 2)] for i in range(9)])

@@ -27,8 +27,11 @@ from tests.solvers.highs_runs import watch_highs_runs
 TS = 1e-3
 #: Allowed overshoot of any limit in the sampled output (issue: 1.01 x).
 LIMIT_FACTOR = 1.01
-#: Motion time with the implied rows left out against all rows kept, relative (measured <= 3e-14 on these lines).
-MOTION_REL_TOL = 1e-9
+#: Motion time with the implied rows left out against all rows kept, relative: v + a measured <= 3e-14 on these
+#: lines; with jerk (the LP's rest shapes) 3e-14 until session 47, 7.5e-6 / 3.8e-7 since its steeper rises
+#: (``bspline.LP_REST_RISE_POWERS``; integral q within 3e-6: HiGHS meets the optimum of the larger model only to
+#: its tolerances, and the rows left out change the cut rounds' points).
+MOTION_REL_TOL = {False: 1e-9, True: 2e-5}
 #: ... on the flower with the held rows left out against all kept (v + a: the same to 1e-12; with jerk 2e-7,
 #: another optimal vertex of integral q).
 HELD_MOTION_REL_TOL = 1e-6
@@ -104,7 +107,8 @@ def test_lines_solve_on_fewer_rows_to_the_same_motion(monkeypatch: pytest.Monkey
     if jerk:  # stage 2 (v + a rows under q <= q*, and the jerk rows): within a few rows of one axis's (measured 0-2)
         assert abs(fewer[1] - one_axis[1]) <= 0.01 * one_axis[1] and fewer[1] < rows[1], (fewer, one_axis, rows)
     assert sum(fewer) < sum(rows)
-    assert float(sch.summary["motion_time"]) == pytest.approx(float(full.summary["motion_time"]), rel=MOTION_REL_TOL)
+    assert float(sch.summary["motion_time"]) == pytest.approx(float(full.summary["motion_time"]),
+                                                              rel=MOTION_REL_TOL[jerk])
     vmax, amax, jmax = router().limit_arrays()
     u = utilisation(sch.samples.position, TS, vmax, amax, jmax)
     assert max(v for k, v in u.items() if jerk or k[0] in "va") <= LIMIT_FACTOR, u

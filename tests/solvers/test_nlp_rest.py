@@ -63,12 +63,13 @@ def _bump_poly(head: bool) -> np.polynomial.Polynomial:
     return r * (1 - r) ** bspline.REST_BUMP_POWER
 
 
-def _rise_poly(head: bool, h: tuple[float, ...]) -> np.polynomial.Polynomial:
+def _rise_poly(head: bool, h: tuple[float, ...], powers: tuple[int, ...] | None = None) -> np.polynomial.Polynomial:
     """The rest interval's rises with amplitudes h as a polynomial in tau: sum_k h_k r^2 (1 - r)^k over the k of
-    ``bspline.REST_RISE_POWERS``, r = tau at the head, 1 - tau at the tail."""
+    ``powers`` (default ``bspline.REST_RISE_POWERS``, the NLP's), r = tau at the head, 1 - tau at the tail."""
     P = np.polynomial.Polynomial
     r = P([0.0, 1.0]) if head else P([1.0, -1.0])
-    return sum((hk * r * r * (1 - r) ** k for hk, k in zip(h, bspline.REST_RISE_POWERS, strict=True)), P([0.0]))
+    ks = bspline.REST_RISE_POWERS if powers is None else powers
+    return sum((hk * r * r * (1 - r) ** k for hk, k in zip(h, ks, strict=True)), P([0.0]))
 
 
 def _amps(a: float) -> tuple[float, ...]:
