@@ -14,6 +14,7 @@ consecutive control points fixes q and q' there.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -167,7 +168,7 @@ def rest_bump(
     r = t if head else 1.0 - t
     sign = 1.0 if head else -1.0
     powers = _rise_powers(len(h))
-    up = _powers(1.0 - r, max((REST_BUMP_POWER, *powers)))
+    up = _powers(1.0 - r, (REST_BUMP_POWER, *powers))
     bb = _bump_shape(r, up)
     b = (g * bb[0], g * bb[1], g * bb[2])
     for hk, j in zip(h, powers, strict=True):
@@ -210,23 +211,54 @@ def _rise_powers(n: int) -> tuple[int, ...]:
     return LP_REST_RISE_POWERS[:n]
 
 
-def _powers(u: Any, top: int) -> list[Any]:
-    """[1, u, u^2, ..., u^top] by products (floats, arrays or CasADi expressions): numpy's float
-    ``u ** j`` calls ``pow`` per element for j > 2 (the shapes' powers were ~5 % of a flower loop with jerk)."""
-    out: list[Any] = [1.0, u]
-    for _ in range(2, top + 1):
-        out.append(out[-1] * u)
+#: ``_powers`` builds u^k for k up to this by successive products (the NLP's rises, k <= 5, as they always were);
+#: a higher k as u^(k // 2) u^(k - k // 2).
+_PRODUCT_TOP = 8
+
+
+def _powers(u: Any, exps: Sequence[int], below: int = 2) -> dict[int, Any]:
+    """u^k for each k of ``exps`` and the ``below`` exponents under it (floats, arrays or CasADi expressions), as
+    {k: u^k}, by products (``_power_plan``): numpy's float ``u ** j`` calls ``pow`` per element for j > 2 (the
+    shapes' powers were ~5 % of a flower loop with jerk), and 127 successive products for u^128 took ~10 ms of the
+    1-loop flower's LP with jerk (session 47)."""
+    out: dict[int, Any] = {0: 1.0, 1: u}
+    for k, a, b in _power_plan(tuple(exps), below):
+        out[k] = out[a] * out[b]
     return out
 
 
-def _bump_shape(r: FloatArray, up: list[Any]) -> tuple[FloatArray, FloatArray, FloatArray]:
+@functools.lru_cache(maxsize=32)
+def _power_plan(exps: tuple[int, ...], below: int) -> tuple[tuple[int, int, int], ...]:
+    """The products (k, a, b), u^k = u^a u^b in this order, that ``_powers`` makes: up to _PRODUCT_TOP one after
+    the other (u^k = u^(k-1) u: the NLP's rises, k <= 5, as they always were), above it by halves."""
+    plan: list[tuple[int, int, int]] = []
+    have = {0, 1}
+
+    def make(k: int) -> None:
+        if k in have:
+            return
+        if k <= _PRODUCT_TOP:
+            make(k - 1)
+            plan.append((k, k - 1, 1))
+        else:
+            make(k // 2)
+            make(k - k // 2)
+            plan.append((k, k // 2, k - k // 2))
+        have.add(k)
+
+    for k in sorted({k - i for k in exps for i in range(below + 1)}):
+        make(k)
+    return tuple(plan)
+
+
+def _bump_shape(r: FloatArray, up: dict[int, Any]) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The bump b = r (1 - r)^m (m = REST_BUMP_POWER) and its first two r-derivatives (``rest_bump``); ``up`` the
     powers of 1 - r (``_powers``)."""
     m = REST_BUMP_POWER
     return r * up[m], up[m - 1] * (1.0 - (m + 1) * r), -m * up[m - 2] * (2.0 - (m + 1) * r)
 
 
-def _rise_shape(r: FloatArray, j: int, up: list[Any]) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _rise_shape(r: FloatArray, j: int, up: dict[int, Any]) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The rise e_j = r^2 (1 - r)^j and its first two r-derivatives (``rest_bump``); ``up`` the powers of 1 - r
     (``_powers``)."""
     u = up[1]
@@ -246,7 +278,7 @@ def rest_shapes(s: FloatArray, d: float, k: int, head: bool) -> tuple[FloatArray
     t = np.asarray(s, dtype=np.float64) / d - k
     r = t if head else 1.0 - t
     sign = 1.0 if head else -1.0
-    up = _powers(1.0 - r, max((REST_BUMP_POWER, *LP_REST_RISE_POWERS)))
+    up = _powers(1.0 - r, (REST_BUMP_POWER, *LP_REST_RISE_POWERS))
     cols = [_bump_shape(r, up)] + [_rise_shape(r, j, up) for j in LP_REST_RISE_POWERS]
     return (np.column_stack([c[0] for c in cols]), np.column_stack([sign * c[1] / d for c in cols]),
             np.column_stack([c[2] / (d * d) for c in cols]))
@@ -274,7 +306,7 @@ def rest_bump_quotient(r: Any, g: Any, h: Sequence[Any] = ()) -> Any:
     time integrand, where q / r is taken with r = w^2 (``timing.PieceProfile.h_local``,
     ``timing.rest_interval_times``, ``solvers.nlp._Shape._rest_rows``)."""
     powers = _rise_powers(len(h))
-    up = _powers(1.0 - r, max((REST_BUMP_POWER, *powers)))
+    up = _powers(1.0 - r, (REST_BUMP_POWER, *powers), below=0)
     out = g * up[REST_BUMP_POWER]
     for hk, j in zip(h, powers, strict=True):
         out = out + hk * (r * up[j])
