@@ -140,8 +140,8 @@ REST_RISE_POWERS: tuple[int, ...] = (2, 3, 4, 5)
 #: on rest-to-rest lines (session 47).  Lines of 1-500 mm / the square corner / the flower, method lp, motion:
 #: (2, 3, 4, 5) 0.1051 0.2194 0.4384 1.0519 3.7368 s / 1.1252 / 4.2304 s; + (8, 12, 16, 24) 0.1044 0.2156 0.4184
 #: 1.0075 3.6830 / 1.0900 / 4.2217; + (8, 16, 32, 64) ... 0.9943 3.6670 / 1.0796 / 4.2202; + (8, 16, 32, 64, 128)
-#: 0.1042 0.2149 0.4161 0.9863 3.6573 / 1.0768 / 4.2170 (CPU 1.5x on these nine short cases, most of it the
-#: time table's quadrature over the steeper rest intervals and a cut round more); + (8, 16, 32, 64, 128, 256)
+#: 0.1042 0.2149 0.4161 0.9863 3.6573 / 1.0768 / 4.2170 (short rest-to-rest pieces ~1.2-1.5x the CPU: a cut round
+#: more, HiGHS on more columns, the time table over the steeper rest intervals); + (8, 16, 32, 64, 128, 256)
 #: ... 0.9841 3.6504 / 1.0761 / 4.2178.  The NLP's rises stay REST_RISE_POWERS: with these its rest windows
 #: were slower and no faster in motion (flower lp+nlp 2.9797 -> 3.0025 s with (.., 32, 48, 64)).
 LP_REST_RISE_POWERS: tuple[int, ...] = (*REST_RISE_POWERS, 8, 16, 32, 64, 128)
