@@ -93,15 +93,13 @@ VERIFY_TURN_LEVELS = 6
 #: its rows besides the checkpoints (``WindowLP._row_points``).
 REST_SHAPE_POINTS = 32
 REST_SHAPE_ZOOM = 30
-#: Unit distances r from rest where the cut rounds also check a rest interval with shapes (``_check_geometry``):
-#: 2^(-j/8), j = 1 .. 80 (r from 0.917 to 1e-3).  The steepest rises (``bspline.LP_REST_RISE_POWERS``) bend within
-#: r ~ 0.005-0.05, where the rows sit at 2^-k and 1 / 33 apart: cam seed 668 (lp) read a_x 1.0135 x amax at
-#: r = 0.0107 of a 2.3 um rest interval, between the rows at 2^-6 and 2^-7, and the sampled 1.0113 x after two
-#: repair rounds was a 422.
-REST_CHECK_R = 2.0 ** -(np.arange(1, 81) / 8.0)
-#: ... and where its rows are too (``_row_points``), at a quarter of an octave: with the checks alone the cut rounds
-#: on cam seed 668's 2.3 um rest intervals ran out (6 rounds, 48-54 points added, 8-9 still over), each row moving
-#: the steep rises' overshoot to its neighbours.
+#: Unit distances r from rest where a rest interval with shapes has rows too (``_row_points``): 2^(-j/4), j = 1 .. 40
+#: (r from 0.84 to 1e-3).  The steepest rises (``bspline.LP_REST_RISE_POWERS``) bend within r ~ 0.005-0.05, where
+#: the other rows sit at 2^-k and 1 / 33 apart: cam seed 668 (lp) read a_x 1.0135 x amax at r = 0.0107 of a 2.3 um
+#: rest interval, between the rows at 2^-6 and 2^-7, and the sampled 1.0113 x after two repair rounds was a 422.
+#: Check points there at 2^(-j/8) instead (the cut rounds' grid) did not do it: the rounds ran out (6 rounds, 48-54
+#: points added, 8-9 still over), each row moving the overshoot to its neighbours; with these rows they are not
+#: needed (and cost the 1-loop flower with jerk ~15 ms of cut rounds).
 REST_ROW_R = 2.0 ** -(np.arange(1, 41) / 4.0)
 #: ... and below how much of Q a q of the verification grid counts as under 0 there.
 REST_SHAPE_Q_TOL = 1e-9
@@ -1648,20 +1646,10 @@ class WindowLP:
         (t_i . t_i+1 < cos VERIFY_TURN_RAD), again in the new gaps, VERIFY_TURN_LEVELS times at most (with
         ``LimitSet.check_turns``; else the grid itself)."""
         g = self._fine_geometry(s_check)
-        if not (self.lim.check_turns or self.shape_ends):
+        if not self.lim.check_turns:
             return g
         if self._check_g is not None and self._check_g[0] is s_check:
             return self._check_g[1]
-        if self.shape_ends:  # (REST_CHECK_R: where the steep rises bend, between the rows' points)
-            spec = self.spec
-            s_rest = np.concatenate([spec.d * REST_CHECK_R if head else (kr + 1 - REST_CHECK_R) * spec.d
-                                     for head, kr, _ in self.shape_ends])
-            s_rest = np.setdiff1d(s_rest[(s_rest > g.s[0]) & (s_rest < g.s[-1])], g.s)
-            g_rest = self.geometry(s_rest)
-            g = g.concat(g_rest).subset(np.argsort(np.concatenate([g.s, g_rest.s]), kind="stable"))
-        if not self.lim.check_turns:
-            self._check_g = (s_check, g)
-            return g
         frac = np.arange(1, VERIFY_SUBDIV) / VERIFY_SUBDIV
         cos_min = math.cos(VERIFY_TURN_RAD)
         for _ in range(VERIFY_TURN_LEVELS):
