@@ -294,9 +294,10 @@ def rest_shape_integrals(d: float) -> FloatArray:
 
 def rest_shape_peaks() -> FloatArray:
     """The largest value on [0, 1] of each ``rest_shapes`` shape (REST_SHAPES,), per unit amplitude: the bump
-    r (1 - r)^m at r = 1 / (m + 1), the rise r^2 (1 - r)^j at r = 2 / (j + 2) (1.3e-4 for j = 128)."""
+    r (1 - r)^m at r = 1 / (m + 1), the rise r^2 (1 - r)^j at r = 2 / (j + 2) (1.3e-4 for j = 128; as 4 (j / (j + 2))^j
+    / (j + 2)^2 in floats: j^j overflows a float from j = 144)."""
     m = REST_BUMP_POWER
-    out = [m**m / (m + 1) ** (m + 1)] + [4.0 * j**j / (j + 2) ** (j + 2) for j in LP_REST_RISE_POWERS]
+    out = [m**m / (m + 1) ** (m + 1)] + [4.0 * (j / (j + 2)) ** j / (j + 2) ** 2 for j in LP_REST_RISE_POWERS]
     return np.asarray(out, dtype=np.float64)
 
 

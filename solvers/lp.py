@@ -71,6 +71,19 @@ VERIFY_TOL = 2e-3
 #: 2 0.0882 s, none 0.1006 s) but cost the flower with jerk, where x_ss q' cancels part of x_sss q: 1.0 +0.44 %
 #: at default knots, 1.5 +0.29 % at 1 and 0.5 mm knots; at 2 its samples are those of no cap at all three.
 QSTAR_JERK_CAP = 2.0
+#: Next to a rest end stage 2's q* is at most this many times the q a feed leaving (reaching) rest can have
+#: there at all (``WindowLP._rest_reach``; 0: no such cap).  Stage 1 (v + a) leaves rest at amax, q* ~ 2 amax
+#: sigma at a distance sigma from rest, where a feed under jmax has q ~ sigma^(4/3): the pseudo-jerk rows,
+#: sqrt(q*) x ... <= jmax, over-read the jerk there by sqrt(q* / q), ~3x at the rest step's end and ~1.2x where
+#: the jerk ramp meets amax, and the feed left rest at 0.4-0.75 jmax (session 48).  Lines of 1 / 5 mm, the
+#: square corner, the flower (method lp): 0.10426 / 0.21504 / 1.07774 / 4.21709 s -> 0.09959 / 0.21279 / 1.07002
+#: / 4.21011 s (at a corner the cap is ``WindowLP._corner_reach_factor`` x the reach; at the reach 1.06210 s).
+#: The third differences of the samples see the acceleration step at rest on top of the jerk after it, which the
+#: over-read left room for: a piece solved again for its samples goes without the cap (``LimitSet.rest_reach``).
+#: Holding the step's share in the jerk rows within 3 Ts of rest instead cost the lines more than the cap gained
+#: (1 mm: 0.1034 s; 0.1003 s with the share at a path end derived for its kernel, 0.2 a_rest / Ts) and left two
+#: windows infeasible (bench seeds 10, 59).
+QSTAR_REST_REACH = 1.0
 #: With the rest shapes and ``WindowSpec.rest_step_floor`` the acceleration step leaving (reaching) rest is at
 #: least this share of its bound a_rest (q' >= 0 there without it).  The steep rises (``bspline.LP_REST_RISE_POWERS``)
 #: can lift q just past rest so far that the LP meets its integral of q with q' = 0 at rest, a feed that never
@@ -342,6 +355,10 @@ class LimitSet:
     #: too coarse for slowed it far around the turn (bench seed 594 lp+nlp, a 0.42 mm radius in a 5.4 m path on
     #: 85 mm knots: 0.565 -> 6.24 s of motion)
     check_turns: bool = False
+    #: cap stage 2's q* next to rest ends at what a feed from rest can reach (``QSTAR_REST_REACH``): method lp; off
+    #: when a piece is solved again for its samples (``pipeline.SAMPLE_REPAIR_ROUNDS``), and under lp+nlp, whose
+    #: NLP makes the feed (with it: lp+nlp bench seeds 0-99 none shorter, 3 longer by up to 3.2 %)
+    rest_reach: bool = True
 
     @classmethod
     def from_machine(
@@ -583,6 +600,8 @@ def curvature_jump(right: PathSamples, left: PathSamples, eps: float) -> FloatAr
 
 
 Coupling = tuple[NDArray[np.bool_], sp.csr_matrix, FloatArray]
+#: ``WindowLP._reach_ends``' record of one rest end.
+_ReachEnd = tuple[float, float, float, FloatArray, FloatArray, FloatArray, float]
 
 
 def _union(K: int, parts: list[Coupling | None]) -> Coupling | None:
@@ -782,6 +801,32 @@ def _min_ratio(X: FloatArray, num: FloatArray, square: bool) -> FloatArray:
         return np.asarray(np.min(np.where(x > AXIS_EPS, num[None, :] / x, np.inf), axis=1), dtype=np.float64)
 
 
+#: Newton steps for the time t of a distance sigma from rest in ``_reach_q`` (from above, within 26 % of t: 6 reach
+#: the last place).
+REACH_NEWTON_STEPS = 8
+
+
+def _reach_q(sig: FloatArray, a0: float, J: FloatArray, A: FloatArray) -> FloatArray:
+    """``WindowLP._rest_reach``'s q (K,) at distances sig >= 0 from rest (K,), mm, with the step a0 (mm/s^2) and the
+    bounds J (K,, mm/s^3) and A (K,, mm/s^2)."""
+    a0v = np.minimum(a0, A)
+    t1 = (A - a0v) / J
+    s1 = t1 * t1 * (a0v / 2.0 + J * t1 / 6.0)
+    v1 = t1 * (a0v + J * t1 / 2.0)
+    q = v1 * v1 + 2.0 * A * (sig - s1)
+    ramp = sig < s1
+    if ramp.any():
+        s, a, j = sig[ramp], a0v[ramp], J[ramp]
+        with np.errstate(divide="ignore", invalid="ignore"):  # (a = 0: the jerk's term alone; s = 0: t = 0)
+            t = np.minimum(np.cbrt(6.0 * s / j), np.where(a > 0.0, np.sqrt(2.0 * s / a), np.inf))
+        for _ in range(REACH_NEWTON_STEPS):  # (f convex and increasing for t >= 0: from above, monotone)
+            df = t * (a + j * t / 2.0)
+            t = np.where(df > 0.0, t - (t * t * (a / 2.0 + j * t / 6.0) - s) / np.where(df > 0.0, df, 1.0), t)
+        v = t * (a + j * t / 2.0)
+        q[ramp] = v * v
+    return np.asarray(q, dtype=np.float64)
+
+
 def velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
     """Upper bound on q at points g (K,): min(Fmax^2, programmed feed^2, min_x vmax_x^2 / x_s^2)."""
     ub = _min_ratio(g.d1, lim.vmax**2, True)
@@ -843,6 +888,7 @@ class WindowLP:
         self._check_g: tuple[FloatArray, PathSamples] | None = None
         self._step_cache: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._vstep_cache: FloatArray | None = None
+        self._reach_cache: list[_ReachEnd] | None = None
         #: ``_break_qmax`` for the Q it was computed at, and ``_vstep_live`` per (axis, limit, kernel, power, Q):
         #: both read only the window's breaks, not the points asked about (a flower loop with jerk asked for
         #: them ~60 and ~40 times a schedule)
@@ -1231,7 +1277,80 @@ class WindowLP:
         q = self._qstar(c_star, g.s)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             cap = QSTAR_JERK_CAP * _min_ratio(g.d3, self.lim.jmax, False) ** (2.0 / 3.0)
-        return np.asarray(np.minimum(q, cap), dtype=np.float64)
+        q = np.minimum(q, cap)
+        if QSTAR_REST_REACH > 0.0 and self.lim.rest_reach:
+            self._reach_ends(g)
+            q = np.minimum(q, QSTAR_REST_REACH * self._rest_reach(g.s))
+        return np.asarray(q, dtype=np.float64)
+
+    def _rest_reach(self, s: FloatArray) -> FloatArray:
+        r"""The largest q (K,) a feed leaving (or reaching) the window's rest ends can have at the points s (K,), inf
+        where the window has no rest end, mm^2/s^2 (times ``_corner_reach_factor`` at a corner).
+
+        At a distance sigma from rest, with the tangential bounds a_0 on the acceleration step at rest (the rest
+        row's: min_x a_rest_x / |x_s,x| at the rest point), A on the acceleration and J on the jerk (min_x amax_x
+        / |x_s,x|, jmax_x / |x_s,x|, their largest from the rest end to the point), the fastest feed is the one
+        that steps to a_0 and ramps at J to A, then holds A:
+
+            sigma = a_0 t^2 / 2 + J t^3 / 6,  v = a_0 t + J t^2 / 2          for t <= t_1 = (A - a_0) / J,
+            q = v(t_1)^2 + 2 A (sigma - sigma(t_1))                             beyond,
+
+        and q = v^2 (t from sigma by Newton's method from above).  No feed under those bounds is faster at any
+        sigma (a brute-force search over piecewise-constant jerks: at most 0.99986 of it); curvature terms of the
+        axes' jerk are left out (an estimate near rest, where the feed is small).  The bounds come from the first
+        points the window is asked about (its row points, ``_reach_ends``) and are read at the first of those
+        at or beyond each point."""
+        out = np.full(s.size, np.inf)
+        for s_rest, sign, a0, sig_grid, J_run, A_run, factor in self._reach_cache or []:
+            sig = sign * (s - s_rest)
+            at = np.minimum(np.searchsorted(sig_grid, sig, side="left"), sig_grid.size - 1)
+            reach = factor * _reach_q(np.maximum(sig, 0.0), a0, J_run[at], A_run[at])
+            out = np.minimum(out, np.where(sig < 0.0, np.inf, reach))
+        return out
+
+    def _corner_reach_factor(self) -> float:
+        """How many times the reach (``_rest_reach``) q* may be at a corner: 1 / (1 - share)^2, share the largest over
+        the axes of STEP_KERNEL a_rest_x / (Ts jmax_x) (at most 3/8; 1 without sampled jerk rows).
+
+        A third difference of the samples whose span (3 Ts) holds a corner's rest instant sees the jerk on both
+        sides plus up to STEP_KERNEL |step| / Ts, the axis acceleration stepping by up to a_rest_x across the
+        corner, both sides together (``pipeline._corner_rest``; ``_step_jerk``'s kernel).  With q* the reach the
+        feed left and reached corners at the jerk bound, and the samples read up to 1.14 x jmax there (bench seeds
+        0-149, lp); a repair round solves only the piece after the corner (seed 30: 1.019 x after both).  With q*
+        at most this factor over the reach the jerk rows over-read the jerk by at least 1 / (1 - share) while q is
+        at most the reach (always), which leaves the step its share, as stage 1's q* did (~3x at the step's end,
+        ~1.2x where the jerk ramp meets amax).  Rows holding the share within 3 Ts of travel of a corner instead
+        cost fast machines' short paths up to 30 % (bench seeds 10, 59: a coarser knot plan won)."""
+        Ts = self.lim.step_jerk_period
+        if Ts is None:
+            return 1.0
+        share = float(np.max(STEP_KERNEL * self.lim.a_rest / (Ts * self.lim.jmax)))
+        return 1.0 / (1.0 - min(share, 0.5)) ** 2
+
+    def _reach_ends(self, g: PathSamples) -> list[_ReachEnd]:
+        """Per rest end of the window (kept from the first call, on the row points): (its s, +1 at a start, -1
+        at an end, a_0, the points' distances from it ascending (K,), the running largest J and A there (K,), the
+        factor on the reach: 1 at a path end, ``_corner_reach_factor`` at a corner)."""
+        if self._reach_cache is not None:
+            return self._reach_cache
+        spec, lim = self.spec, self.lim
+        ends: list[tuple[float, float, FloatArray | None]] = []
+        if spec.start_fixed is None:
+            ends.append((spec.k0 * spec.d, 1.0, spec.a_rest_start))
+        if spec.end_rest:
+            ends.append((spec.k1 * spec.d, -1.0, spec.a_rest_end))
+        out = []
+        for s_rest, sign, a_rest in ends:
+            sig = sign * (g.s - s_rest)
+            order = np.argsort(sig, kind="stable")
+            x_s = g.d1[order]
+            J = np.maximum.accumulate(_min_ratio(x_s, lim.jmax, False))
+            A = np.maximum.accumulate(_min_ratio(x_s, lim.amax, False))
+            g_rest = self._known_geometry(np.array([s_rest]))
+            a0 = float(_min_ratio(g_rest.d1, lim.a_rest if a_rest is None else a_rest, False)[0])
+            out.append((s_rest, sign, a0, sig[order], J, A, 1.0 if a_rest is None else self._corner_reach_factor()))
+        self._reach_cache = out
+        return out
 
     # ----- solve -------------------------------------------------------------
     def solve(self, s_check: FloatArray) -> WindowResult:

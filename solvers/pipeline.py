@@ -83,9 +83,9 @@ from solvers.timing import (
 
 FloatArray = NDArray[np.float64]
 #: LP window results kept across the knot plans and repair rounds of one piece (``_solve_windows``): (n_int, k0,
-#: k1, rest_floor, rest_shapes, rest_step_floor) -> (what the window inherits, its extra verification points, its
-#: result)
-WindowCache = dict[tuple[int, int, int, bool, bool, bool], tuple[Any, FloatArray, WindowResult]]
+#: k1, rest_floor, rest_shapes, rest_step_floor, at a rest end with ``LimitSet.rest_reach``) -> (what the window
+#: inherits, its extra verification points, its result)
+WindowCache = dict[tuple[int, int, int, bool, bool, bool, bool], tuple[Any, FloatArray, WindowResult]]
 
 METHODS = ("lp+nlp", "lp")
 SOLVERS = ("highs", "clarabel")
@@ -801,7 +801,8 @@ class _WindowWalk:
         if end_fixed is not None:
             st += [end_fixed[1][k0 - end_fixed[0]: k1 + 2 - end_fixed[0]],
                    end_fixed[2][k0 - end_fixed[0]: k1 + 2 - end_fixed[0]]]
-        key = (plan.n_int, k0, k1, self.rest_floor, self.rest_shapes, self.rest_step_floor)
+        key = (plan.n_int, k0, k1, self.rest_floor, self.rest_shapes, self.rest_step_floor,
+               self.lim.rest_reach and (start is None or k1 == plan.n_int))
         stv = np.concatenate(st)
         cache = self.cache
         hit = cache.get(key) if cache is not None else None
@@ -1512,11 +1513,13 @@ def motion_time_floor(toolpath: Toolpath, machine: Machine, options: Options | N
 
 
 def _limit_set(machine: Machine, opt: Options) -> LimitSet:
-    """The LP's limits of ``machine`` under ``opt`` (lp+nlp: rest and step limits from the drive model)."""
-    return LimitSet.from_machine(
+    """The LP's limits of ``machine`` under ``opt`` (lp+nlp: rest and step limits from the drive model, and no cap on
+    q* next to rest ends, ``LimitSet.rest_reach``)."""
+    lim = LimitSet.from_machine(
         machine, opt.sample_period, opt.jerk, rest_from_drive=opt.method == "lp+nlp" and machine.has_drives,
         kinematic=opt.nlp_kinematic,
     )
+    return lim if opt.method == "lp" else replace(lim, rest_reach=False)
 
 
 def _speed_bound(vmax: FloatArray | None, opt: Options, machine: Machine) -> FloatArray | None:
@@ -1899,10 +1902,13 @@ def _schedule_stream(
             # reused), then re-sampled
             rounds += 1
             verify_s = np.union1d(verify_s, s_loc)
-            lim_r = lim
+            # without the cap on q* next to rest ends (``lp.QSTAR_REST_REACH``): with it the jerk rows read the
+            # jerk leaving rest as it is, and on top of the acceleration step there the samples' third
+            # differences can exceed jmax (bench seed 125, lp: 1.025 x at its start)
+            lim_r = replace(lim, rest_reach=False)
             if nlp and rounds == SAMPLE_REPAIR_ROUNDS:  # the steps at REPAIR_STEP_SHARE of the budget
                 share = REPAIR_STEP_SHARE / REST_SHARE
-                lim_r = replace(lim, a_rest=lim.a_rest * share,
+                lim_r = replace(lim_r, a_rest=lim.a_rest * share,
                                 a_step=None if lim.a_step is None else lim.a_step * share)
                 cache = {}  # (its windows were solved with the full share)
             lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim_r, stats, None, verify_s, cache,

@@ -59,7 +59,7 @@ def one_shot(tp: Toolpath, m: Machine, opt: P.Options) -> tuple[P.TimeSamples, i
     """The samples and repair rounds of the pipeline before streaming (see the module docstring)."""
     Ts = opt.sample_period
     nlp = opt.method == "lp+nlp"
-    lim = LimitSet.from_machine(m, Ts, opt.jerk, rest_from_drive=nlp)
+    lim = P._limit_set(m, opt)
     stats: dict[str, Any] = {"windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0, "unverified": 0,
                              "window_times": []}
     nlp_lim = NlpLimits.from_machine(m, opt.nlp_axis_velocity, opt.nlp_kinematic, lim.a_step, Ts) if nlp else None
@@ -71,7 +71,8 @@ def one_shot(tp: Toolpath, m: Machine, opt: P.Options) -> tuple[P.TimeSamples, i
     def solve(i: int, verify_s: np.ndarray | None, refiners: dict[tuple[int, int], NlpRefiner]) -> PieceProfile:
         piece = tp.pieces[i]
         fallbacks = stats.get("rest_plan_fallbacks", 0)
-        prof, joins = P.solve_piece(tp, piece, m, opt, lim, stats, None, verify_s, caches[i], None, firsts[i])
+        lim_i = lim if verify_s is None else replace(lim, rest_reach=False)  # (repairs: ``LimitSet.rest_reach``)
+        prof, joins = P.solve_piece(tp, piece, m, opt, lim_i, stats, None, verify_s, caches[i], None, firsts[i])
         if verify_s is None and stats.get("rest_plan_fallbacks", 0) != fallbacks:
             firsts[i] = None
         if nlp_lim is not None:
