@@ -827,6 +827,17 @@ def _reach_q(sig: FloatArray, a0: float, J: FloatArray, A: FloatArray) -> FloatA
     return np.asarray(q, dtype=np.float64)
 
 
+def _reach_travel(T: float, a0: float, J: float, A: float, V: float) -> float:
+    """How far (mm) a feed from rest can get in T seconds under the step a0, the jerk J and the acceleration A
+    (``_reach_q``'s ramp) and the feed V: a0 T^2 / 2 + J T^3 / 6 up to t_1 = (A - a0) / J, then at A; at most V T."""
+    a0 = min(a0, A)
+    t1 = min(T, (A - a0) / J) if J > 0.0 else 0.0
+    s1 = t1 * t1 * (a0 / 2.0 + J * t1 / 6.0)
+    v1 = t1 * (a0 + J * t1 / 2.0)
+    dt = T - t1
+    return min(s1 + dt * (v1 + A * dt / 2.0), V * T)
+
+
 def velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
     """Upper bound on q at points g (K,): min(Fmax^2, programmed feed^2, min_x vmax_x^2 / x_s^2)."""
     ub = _min_ratio(g.d1, lim.vmax**2, True)
@@ -1304,22 +1315,28 @@ class WindowLP:
         for s_rest, sign, a0, sig_grid, J_run, A_run, factor in self._reach_cache or []:
             sig = sign * (s - s_rest)
             at = np.minimum(np.searchsorted(sig_grid, sig, side="left"), sig_grid.size - 1)
-            reach = factor * _reach_q(np.maximum(sig, 0.0), a0, J_run[at], A_run[at])
+            reach = _reach_q(np.maximum(sig, 0.0), a0, J_run[at], A_run[at])
+            if factor != 1.0:  # (a corner: within 3 Ts of travel of it, ``_corner_reach_factor``)
+                near = _reach_travel(3.0 * float(self.lim.step_jerk_period or 0.0), a0, float(J_run[-1]),
+                                     float(A_run[-1]), math.sqrt(self.Q))
+                reach = np.where(sig <= near, factor * reach, reach)
             out = np.minimum(out, np.where(sig < 0.0, np.inf, reach))
         return out
 
     def _corner_reach_factor(self) -> float:
-        """How many times the reach (``_rest_reach``) q* may be at a corner: 1 / (1 - share)^2, share the largest over
-        the axes of STEP_KERNEL a_rest_x / (Ts jmax_x) (at most 3/8; 1 without sampled jerk rows).
+        """How many times the reach (``_rest_reach``) q* may be within 3 Ts of travel of a corner: 1 / (1 - share)^2,
+        share the largest over the axes of STEP_KERNEL a_rest_x / (Ts jmax_x) (at most 3/8; 1 without sampled jerk
+        rows).
 
         A third difference of the samples whose span (3 Ts) holds a corner's rest instant sees the jerk on both
         sides plus up to STEP_KERNEL |step| / Ts, the axis acceleration stepping by up to a_rest_x across the
         corner, both sides together (``pipeline._corner_rest``; ``_step_jerk``'s kernel).  With q* the reach the
         feed left and reached corners at the jerk bound, and the samples read up to 1.14 x jmax there (bench seeds
         0-149, lp); a repair round solves only the piece after the corner (seed 30: 1.019 x after both).  With q*
-        at most this factor over the reach the jerk rows over-read the jerk by at least 1 / (1 - share) while q is
-        at most the reach (always), which leaves the step its share, as stage 1's q* did (~3x at the step's end,
-        ~1.2x where the jerk ramp meets amax).  Rows holding the share within 3 Ts of travel of a corner instead
+        at most this factor over the reach there the jerk rows over-read the jerk by at least 1 / (1 - share) while
+        q is at most the reach (always), which leaves the step its share, as stage 1's q* did (~3x at the step's
+        end).  Travel from rest within 3 Ts is bounded by the fastest ramp (``_reach_travel``).  The factor
+        everywhere cost the square corner 0.7 % (1.0621 -> 1.0700 s); rows holding the share within 3 Ts of travel
         cost fast machines' short paths up to 30 % (bench seeds 10, 59: a coarser knot plan won)."""
         Ts = self.lim.step_jerk_period
         if Ts is None:

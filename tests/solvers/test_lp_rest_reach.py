@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from geometry import Toolpath
 from geometry import examples as ex
 from solvers import lp
-from solvers.lp import _reach_q
+from solvers.lp import _reach_q, _reach_travel
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
 from tests.fdcheck import utilisation
@@ -56,6 +56,11 @@ def test_reach_is_the_fastest_ramp_in_the_time_domain(a0: float, J: float, A: fl
     n = s.size
     q = _reach_q(s, a0, np.full(n, J), np.full(n, A))
     np.testing.assert_allclose(q, v * v, rtol=REACH_RTOL, atol=0.0)
+    # the travel in a given time (``_reach_travel``), and at most V t
+    travel = np.array([_reach_travel(float(ti), a0, J, A, np.inf) for ti in t])
+    np.testing.assert_allclose(travel, s, rtol=REACH_RTOL, atol=0.0)
+    V = float(v[n // 2])
+    assert _reach_travel(float(t[-1]), a0, J, A, V) == pytest.approx(V * float(t[-1]), rel=1e-15)
 
 
 @settings(max_examples=HYPOTHESIS_EXAMPLES, deadline=None)
@@ -110,7 +115,8 @@ def test_lines_leave_rest_at_the_jerk_bound(monkeypatch: pytest.MonkeyPatch, len
 
 @pytest.mark.parametrize(("seed", "what"), [
     (125, "a path start: the samples read 1.025 x jmax at t = 0 with the cap, repaired without it"),
-    (30, "corners on a fast machine (jmax ~1e8 mm/s^3): 1.14 x jmax next to a corner with the plain cap"),
+    (30, "corners on a fast machine (jmax ~1e8 mm/s^3): 1.14 x jmax next to a corner with the plain cap, 1.019 x "
+         "after both repairs (which re-solve the piece after the corner only)"),
     (142, "a corner: 1.020 x jmax with the plain cap"),
 ])
 def test_cases_that_found_the_reach_traps(seed: int, what: str) -> None:
