@@ -143,8 +143,13 @@ REST_RISE_POWERS: tuple[int, ...] = (2, 3, 4, 5)
 #: 0.1042 0.2149 0.4161 0.9863 3.6573 / 1.0768 / 4.2170 (short rest-to-rest pieces ~1.2-1.5x the CPU: a cut round
 #: more, HiGHS on more columns, the time table over the steeper rest intervals); + (8, 16, 32, 64, 128, 256)
 #: ... 0.9841 3.6504 / 1.0761 / 4.2178.  The NLP's rises stay REST_RISE_POWERS: with these its rest windows
-#: were slower and no faster in motion (flower lp+nlp 2.9797 -> 3.0025 s with (.., 32, 48, 64)).
-LP_REST_RISE_POWERS: tuple[int, ...] = (*REST_RISE_POWERS, 8, 16, 32, 64, 128)
+#: were slower and no faster in motion (flower lp+nlp 2.9797 -> 3.0025 s with (.., 32, 48, 64)).  Session 48's
+#: cap on q* next to rest (``lp.QSTAR_REST_REACH``) let the rows read the jerk leaving rest as it is, and 256
+#: gained more than it had: lines of 1 / 5 / 20 / 100 / 500 mm 0.09959 0.21279 0.41565 0.98643 3.65685 s ->
+#: 0.09889 0.21133 0.41410 0.98393 3.65003 / the corner 1.06210 -> 1.05980 / the flower 4.21011 -> 4.20499 s, at
+#: 0.98-1.09x the CPU; + (256, 512): ... 0.09822 0.21028 0.41281 0.98295 3.65049 / 1.06203 / 4.20294 s at 1.05-1.75x
+#: (the 1 mm line ran out of cut rounds: its rise of power 512 bends between the rows, ``lp.REST_ROW_R``).
+LP_REST_RISE_POWERS: tuple[int, ...] = (*REST_RISE_POWERS, 8, 16, 32, 64, 128, 256)
 
 
 def rest_bump(

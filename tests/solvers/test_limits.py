@@ -123,7 +123,12 @@ def test_jerk_rows_matter() -> None:
     with_jerk = schedule(tp, m, Options(method="lp"))
     u = utilisation(with_jerk.samples.position, TS, vmax, amax, jmax)
     assert max(u["jx"], u["jy"]) <= LIMIT_FACTOR
-    assert with_jerk.summary["motion_time"] > no_jerk.summary["motion_time"]
+    # and it is slower than the v + a optimum, which the v + a LP meets within 0.25 % on 1 mm knots
+    # (``test_optimality``).  Not than the v + a LP on the default knots: that one is 2.9 % over the optimum (a
+    # quadratic on 2.3 mm knots), and since session 48 the jerk LP's rest ends (its rest shapes, which the v + a LP
+    # has no use for, and q* capped at the reach from rest) gain more than that on the flower: 4.2050 against 4.2080 s.
+    fine = schedule(tp, m, Options(method="lp", jerk=False, knot_spacing=1.0))
+    assert with_jerk.summary["motion_time"] > fine.summary["motion_time"]
 
 
 @pytest.mark.parametrize("method", ["lp", "lp+nlp"])

@@ -30,13 +30,14 @@ SHAPE_ATOL = 1e-13
 ROWS_RTOL = 1e-12
 #: Lines of these lengths (mm) on the router: with the shapes within this share of the jerk-limited optimum
 #: (measured 6.6 / 2.0 / 1.2 % since session 47's steeper rises, ``bspline.LP_REST_RISE_POWERS``, and 1.9 / 1.9 /
-#: 1.2 % with session 48's cap on q* next to rest, ``test_lp_rest_reach``; 7.7 / 7.5 / 7.9 % with the NLP's four
+#: 1.2 % with session 48's cap on q* next to rest, ``test_lp_rest_reach``, 1.2 / 1.5 / 0.96 % with its rise of
+#: power 256; 7.7 / 7.5 / 7.9 % with the NLP's four
 #: alone, which spent 15-35 ms per rest end bringing q' up from 2 a_rest; without any shapes 25.8-28.5 %,
 #: ``test_optimality.LINE_JERK_GAP``) ...
 SHAPED_LINE_GAP = {1.0: 0.075, 20.0: 0.03, 100.0: 0.02}
 LINES_MM = tuple(SHAPED_LINE_GAP)
 #: ... and at most this share of their time without the shapes (measured 0.847 / 0.794 / 0.795, 0.810 / 0.793 /
-#: 0.795 with the cap; 0.836-0.855 with the four rises alone)
+#: 0.795 with the cap, 0.804 / 0.790 / 0.793 with the power 256; 0.836-0.855 with the four rises alone)
 SHAPED_GAIN = 0.87
 #: Sampled limits (finite differences at 1 kHz), as everywhere (issue 2).
 LIMIT_FACTOR = 1.01
