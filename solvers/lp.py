@@ -806,36 +806,38 @@ def _min_ratio(X: FloatArray, num: FloatArray, square: bool) -> FloatArray:
 REACH_NEWTON_STEPS = 8
 
 
+def _ramp(t: Any, a0: Any, J: Any) -> tuple[Any, Any]:
+    """Distance (mm) and feed (mm/s) at time t of the fastest ramp from rest while under A: the step a0, then the
+    jerk J: a0 t^2 / 2 + J t^3 / 6 and a0 t + J t^2 / 2 (floats or arrays)."""
+    return t * t * (a0 / 2.0 + J * t / 6.0), t * (a0 + J * t / 2.0)
+
+
 def _reach_q(sig: FloatArray, a0: float, J: FloatArray, A: FloatArray) -> FloatArray:
     """``WindowLP._rest_reach``'s q (K,) at distances sig >= 0 from rest (K,), mm, with the step a0 (mm/s^2) and the
     bounds J (K,, mm/s^3) and A (K,, mm/s^2)."""
     a0v = np.minimum(a0, A)
-    t1 = (A - a0v) / J
-    s1 = t1 * t1 * (a0v / 2.0 + J * t1 / 6.0)
-    v1 = t1 * (a0v + J * t1 / 2.0)
+    s1, v1 = _ramp((A - a0v) / J, a0v, J)  # (where the ramp meets A)
     q = v1 * v1 + 2.0 * A * (sig - s1)
     ramp = sig < s1
     if ramp.any():
         s, a, j = sig[ramp], a0v[ramp], J[ramp]
         with np.errstate(divide="ignore", invalid="ignore"):  # (a = 0: the jerk's term alone; s = 0: t = 0)
             t = np.minimum(np.cbrt(6.0 * s / j), np.where(a > 0.0, np.sqrt(2.0 * s / a), np.inf))
-        for _ in range(REACH_NEWTON_STEPS):  # (f convex and increasing for t >= 0: from above, monotone)
-            df = t * (a + j * t / 2.0)
-            t = np.where(df > 0.0, t - (t * t * (a / 2.0 + j * t / 6.0) - s) / np.where(df > 0.0, df, 1.0), t)
-        v = t * (a + j * t / 2.0)
-        q[ramp] = v * v
+        for _ in range(REACH_NEWTON_STEPS):  # (sigma(t) convex and increasing for t >= 0: from above, monotone)
+            sig_t, v = _ramp(t, a, j)
+            t = np.where(v > 0.0, t - (sig_t - s) / np.where(v > 0.0, v, 1.0), t)
+        q[ramp] = _ramp(t, a, j)[1] ** 2
     return np.asarray(q, dtype=np.float64)
 
 
 def _reach_travel(T: float, a0: float, J: float, A: float, V: float) -> float:
     """How far (mm) a feed from rest can get in T seconds under the step a0, the jerk J and the acceleration A
-    (``_reach_q``'s ramp) and the feed V: a0 T^2 / 2 + J T^3 / 6 up to t_1 = (A - a0) / J, then at A; at most V T."""
+    (``_reach_q``'s ramp, then A) and the feed V (at most V T)."""
     a0 = min(a0, A)
     t1 = min(T, (A - a0) / J) if J > 0.0 else 0.0
-    s1 = t1 * t1 * (a0 / 2.0 + J * t1 / 6.0)
-    v1 = t1 * (a0 + J * t1 / 2.0)
+    s1, v1 = _ramp(t1, a0, J)
     dt = T - t1
-    return min(s1 + dt * (v1 + A * dt / 2.0), V * T)
+    return float(min(s1 + dt * (v1 + A * dt / 2.0), V * T))
 
 
 def velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
@@ -1290,11 +1292,10 @@ class WindowLP:
             cap = QSTAR_JERK_CAP * _min_ratio(g.d3, self.lim.jmax, False) ** (2.0 / 3.0)
         q = np.minimum(q, cap)
         if QSTAR_REST_REACH > 0.0 and self.lim.rest_reach:
-            self._reach_ends(g)
-            q = np.minimum(q, QSTAR_REST_REACH * self._rest_reach(g.s))
+            q = np.minimum(q, QSTAR_REST_REACH * self._rest_reach(g.s, self._reach_ends(g)))
         return np.asarray(q, dtype=np.float64)
 
-    def _rest_reach(self, s: FloatArray) -> FloatArray:
+    def _rest_reach(self, s: FloatArray, ends: list[_ReachEnd]) -> FloatArray:
         r"""The largest q (K,) a feed leaving (or reaching) the window's rest ends can have at the points s (K,), inf
         where the window has no rest end, mm^2/s^2 (times ``_corner_reach_factor`` at a corner).
 
@@ -1309,10 +1310,10 @@ class WindowLP:
         and q = v^2 (t from sigma by Newton's method from above).  No feed under those bounds is faster at any
         sigma (a brute-force search over piecewise-constant jerks: at most 0.99986 of it); curvature terms of the
         axes' jerk are left out (an estimate near rest, where the feed is small).  The bounds come from the first
-        points the window is asked about (its row points, ``_reach_ends``) and are read at the first of those
-        at or beyond each point."""
+        points the window is asked about (its row points, ``_reach_ends``: ``ends``) and are read at the first of
+        those at or beyond each point."""
         out = np.full(s.size, np.inf)
-        for s_rest, sign, a0, sig_grid, J_run, A_run, factor in self._reach_cache or []:
+        for s_rest, sign, a0, sig_grid, J_run, A_run, factor in ends:
             sig = sign * (s - s_rest)
             at = np.minimum(np.searchsorted(sig_grid, sig, side="left"), sig_grid.size - 1)
             reach = _reach_q(np.maximum(sig, 0.0), a0, J_run[at], A_run[at])
