@@ -148,7 +148,8 @@ REST_RISE_POWERS: tuple[int, ...] = (2, 3, 4, 5)
 #: gained more than it had: lines of 1 / 5 / 20 / 100 / 500 mm 0.09959 0.21279 0.41565 0.98643 3.65685 s ->
 #: 0.09889 0.21133 0.41410 0.98393 3.65003 / the corner 1.06210 -> 1.05980 / the flower 4.21011 -> 4.20499 s, at
 #: 0.98-1.09x the CPU; + (256, 512): ... 0.09822 0.21028 0.41281 0.98295 3.65049 / 1.06203 / 4.20294 s at 1.05-1.75x
-#: (the 1 mm line ran out of cut rounds: its rise of power 512 bends between the rows, ``lp.REST_ROW_R``).
+#: (the 1 mm line ran out of cut rounds: a row 49 nm from rest held in HiGHS's scaled form, not in a; see
+#: docs/history.md, session 48).
 LP_REST_RISE_POWERS: tuple[int, ...] = (*REST_RISE_POWERS, 8, 16, 32, 64, 128, 256)
 
 
