@@ -601,7 +601,7 @@ def curvature_jump(right: PathSamples, left: PathSamples, eps: float) -> FloatAr
 
 Coupling = tuple[NDArray[np.bool_], sp.csr_matrix, FloatArray]
 #: ``WindowLP._reach_ends``' record of one rest end.
-_ReachEnd = tuple[float, float, float, FloatArray, FloatArray, FloatArray, float]
+_ReachEnd = tuple[float, float, float, FloatArray, FloatArray, FloatArray, float, float]
 
 
 def _union(K: int, parts: list[Coupling | None]) -> Coupling | None:
@@ -1313,13 +1313,11 @@ class WindowLP:
         points the window is asked about (its row points, ``_reach_ends``: ``ends``) and are read at the first of
         those at or beyond each point."""
         out = np.full(s.size, np.inf)
-        for s_rest, sign, a0, sig_grid, J_run, A_run, factor in ends:
+        for s_rest, sign, a0, sig_grid, J_run, A_run, factor, near in ends:
             sig = sign * (s - s_rest)
             at = np.minimum(np.searchsorted(sig_grid, sig, side="left"), sig_grid.size - 1)
             reach = _reach_q(np.maximum(sig, 0.0), a0, J_run[at], A_run[at])
             if factor != 1.0:  # (a corner: within 3 Ts of travel of it, ``_corner_reach_factor``)
-                near = _reach_travel(3.0 * float(self.lim.step_jerk_period or 0.0), a0, float(J_run[-1]),
-                                     float(A_run[-1]), math.sqrt(self.Q))
                 reach = np.where(sig <= near, factor * reach, reach)
             out = np.minimum(out, np.where(sig < 0.0, np.inf, reach))
         return out
@@ -1348,7 +1346,8 @@ class WindowLP:
     def _reach_ends(self, g: PathSamples) -> list[_ReachEnd]:
         """Per rest end of the window (kept from the first call, on the row points): (its s, +1 at a start, -1
         at an end, a_0, the points' distances from it ascending (K,), the running largest J and A there (K,), the
-        factor on the reach: 1 at a path end, ``_corner_reach_factor`` at a corner)."""
+        factor on the reach: 1 at a path end, ``_corner_reach_factor`` at a corner, and the distance from rest it
+        applies within: 3 Ts of travel, ``_reach_travel`` with the window's largest J and A and feed sqrt(Q))."""
         if self._reach_cache is not None:
             return self._reach_cache
         spec, lim = self.spec, self.lim
@@ -1366,7 +1365,11 @@ class WindowLP:
             A = np.maximum.accumulate(_min_ratio(x_s, lim.amax, False))
             g_rest = self._known_geometry(np.array([s_rest]))
             a0 = float(_min_ratio(g_rest.d1, lim.a_rest if a_rest is None else a_rest, False)[0])
-            out.append((s_rest, sign, a0, sig[order], J, A, 1.0 if a_rest is None else self._corner_reach_factor()))
+            factor = 1.0 if a_rest is None else self._corner_reach_factor()
+            Ts = lim.step_jerk_period
+            near = (0.0 if factor == 1.0 or Ts is None
+                    else _reach_travel(3.0 * Ts, a0, float(J[-1]), float(A[-1]), math.sqrt(self.Q)))
+            out.append((s_rest, sign, a0, sig[order], J, A, factor, near))
         self._reach_cache = out
         return out
 
