@@ -77,9 +77,10 @@ QSTAR_JERK_CAP = 2.0
 #: sqrt(q*) x ... <= jmax, over-read the jerk there by sqrt(q* / q), ~3x at the rest step's end and ~1.2x where
 #: the jerk ramp meets amax, and the feed left rest at 0.4-0.75 jmax (session 48).  Lines of 1 / 5 mm, the
 #: square corner, the flower (method lp): 0.10426 / 0.21504 / 1.07774 / 4.21709 s -> 0.09959 / 0.21279 / 1.07002
-#: / 4.21011 s (at a corner the cap is ``WindowLP._corner_reach_factor`` x the reach; at the reach 1.06210 s).
+#: / 4.21011 s (at a corner the cap is ``WindowLP._step_reach_factor`` x the reach; at the reach 1.06210 s).
 #: The third differences of the samples see the acceleration step at rest on top of the jerk after it, which the
-#: over-read left room for: a piece solved again for its samples goes without the cap (``LimitSet.rest_reach``).
+#: over-read left room for: a piece solved again for its samples keeps the cap with room for the step at every
+#: rest end in its first repair round and goes without it in the last (``pipeline._repair_limits``).
 #: Holding the step's share in the jerk rows within 3 Ts of rest instead cost the lines more than the cap gained
 #: (1 mm: 0.1034 s; 0.1003 s with the share at a path end derived for its kernel, 0.2 a_rest / Ts) and left two
 #: windows infeasible (bench seeds 10, 59).
@@ -141,6 +142,12 @@ STEP_SHARE = 0.25
 #: Peak of the third-difference kernel (a quadratic B-spline over 3 Ts) times Ts: a step A of the
 #: axis acceleration between samples adds up to STEP_KERNEL A / Ts to a sampled jerk.
 STEP_KERNEL = 0.75
+#: At a path end an axis's acceleration steps from 0 to its rest step A at the rest instant, on one side only:
+#: a sampled third difference whose span holds the instant reads the step's share plus the jerk j of the moving
+#: side.  Over every offset of the instant between samples it stays within jmax while j <= jmax (1 - k A / (Ts
+#: jmax)), k at most this (computed: 0.2016 for the full step A = jmax Ts / 2, where j = jmax reads 1.083 x;
+#: 0.043 for A = jmax Ts / 4).  ``WindowLP._step_reach_factor`` turns it into room over the reach.
+END_STEP_KERNEL = 0.21
 #: Curvature jumps whose step term would stay below this share of jmax even at their largest q (``_break_qmax``) get no
 #: coupled jerk rows (``WindowLP._step_jerk``).
 STEP_JERK_MIN = 1e-3
@@ -356,9 +363,13 @@ class LimitSet:
     #: 85 mm knots: 0.565 -> 6.24 s of motion)
     check_turns: bool = False
     #: cap stage 2's q* next to rest ends at what a feed from rest can reach (``QSTAR_REST_REACH``): method lp; off
-    #: when a piece is solved again for its samples (``pipeline.SAMPLE_REPAIR_ROUNDS``), and under lp+nlp, whose
-    #: NLP makes the feed (with it: lp+nlp bench seeds 0-99 none shorter, 3 longer by up to 3.2 %)
+    #: in a piece's last repair round for its samples (``pipeline._repair_limits``), and under lp+nlp, whose NLP
+    #: makes the feed (with it: lp+nlp bench seeds 0-99 none shorter, 3 longer by up to 3.2 %)
     rest_reach: bool = True
+    #: with ``rest_reach``: within 3 Ts of travel of a path end too, not only of a corner, q* may be over the reach
+    #: by the room its acceleration step needs in the samples' third differences (``WindowLP._step_reach_factor``
+    #: with END_STEP_KERNEL): a piece's first repair round for its samples (``pipeline._repair_limits``)
+    rest_reach_ends: bool = False
 
     @classmethod
     def from_machine(
@@ -1297,7 +1308,8 @@ class WindowLP:
 
     def _rest_reach(self, s: FloatArray, ends: list[_ReachEnd]) -> FloatArray:
         r"""The largest q (K,) a feed leaving (or reaching) the window's rest ends can have at the points s (K,), inf
-        where the window has no rest end, mm^2/s^2 (times ``_corner_reach_factor`` at a corner).
+        where the window has no rest end, mm^2/s^2 (times ``_step_reach_factor`` near a corner, and near a path end
+        with ``LimitSet.rest_reach_ends``).
 
         At a distance sigma from rest, with the tangential bounds a_0 on the acceleration step at rest (the rest
         row's: min_x a_rest_x / |x_s,x| at the rest point), A on the acceleration and J on the jerk (min_x amax_x
@@ -1317,15 +1329,17 @@ class WindowLP:
             sig = sign * (s - s_rest)
             at = np.minimum(np.searchsorted(sig_grid, sig, side="left"), sig_grid.size - 1)
             reach = _reach_q(np.maximum(sig, 0.0), a0, J_run[at], A_run[at])
-            if factor != 1.0:  # (a corner: within 3 Ts of travel of it, ``_corner_reach_factor``)
+            if factor != 1.0:  # (within 3 Ts of travel of a corner, or of any rest end: ``_step_reach_factor``)
                 reach = np.where(sig <= near, factor * reach, reach)
             out = np.minimum(out, np.where(sig < 0.0, np.inf, reach))
         return out
 
-    def _corner_reach_factor(self) -> float:
-        """How many times the reach (``_rest_reach``) q* may be within 3 Ts of travel of a corner: 1 / (1 - share)^2,
-        share the largest over the axes of STEP_KERNEL a_rest_x / (Ts jmax_x) (at most 3/8; 1 without sampled jerk
-        rows).
+    def _step_reach_factor(self, kernel: float) -> float:
+        """How many times the reach (``_rest_reach``) q* may be within 3 Ts of travel of a rest end whose
+        acceleration step adds up to ``kernel`` step / Ts to the samples' third differences: 1 / (1 - share)^2,
+        share the largest over the axes of kernel a_rest_x / (Ts jmax_x) (1 without sampled jerk rows).  At a
+        corner kernel = STEP_KERNEL (share at most 3/8, factor 2.56); at a path end END_STEP_KERNEL (at most
+        0.105, factor 1.25), only with ``LimitSet.rest_reach_ends``: a piece's first repair round.
 
         A third difference of the samples whose span (3 Ts) holds a corner's rest instant sees the jerk on both
         sides plus up to STEP_KERNEL |step| / Ts, the axis acceleration stepping by up to a_rest_x across the
@@ -1340,13 +1354,14 @@ class WindowLP:
         Ts = self.lim.step_jerk_period
         if Ts is None:
             return 1.0
-        share = float(np.max(STEP_KERNEL * self.lim.a_rest / (Ts * self.lim.jmax)))
+        share = float(np.max(kernel * self.lim.a_rest / (Ts * self.lim.jmax)))
         return 1.0 / (1.0 - min(share, 0.5)) ** 2
 
     def _reach_ends(self, g: PathSamples) -> list[_ReachEnd]:
         """Per rest end of the window (kept from the first call, on the row points): (its s, +1 at a start, -1
         at an end, a_0, the points' distances from it ascending (K,), the running largest J and A there (K,), the
-        factor on the reach: 1 at a path end, ``_corner_reach_factor`` at a corner, and the distance from rest it
+        factor on the reach (``_step_reach_factor``: at a corner; at a path end with ``LimitSet.rest_reach_ends``,
+        else 1) and the distance from rest it
         applies within: 3 Ts of travel, ``_reach_travel`` with the window's largest J and A and feed sqrt(Q))."""
         if self._reach_cache is not None:
             return self._reach_cache
@@ -1365,7 +1380,10 @@ class WindowLP:
             A = np.maximum.accumulate(_min_ratio(x_s, lim.amax, False))
             g_rest = self._known_geometry(np.array([s_rest]))
             a0 = float(_min_ratio(g_rest.d1, lim.a_rest if a_rest is None else a_rest, False)[0])
-            factor = 1.0 if a_rest is None else self._corner_reach_factor()
+            if a_rest is not None:
+                factor = self._step_reach_factor(STEP_KERNEL)  # (a corner)
+            else:
+                factor = self._step_reach_factor(END_STEP_KERNEL) if lim.rest_reach_ends else 1.0  # (a path end)
             Ts = lim.step_jerk_period
             near = (0.0 if factor == 1.0 or Ts is None
                     else _reach_travel(3.0 * Ts, a0, float(J[-1]), float(A[-1]), math.sqrt(self.Q)))

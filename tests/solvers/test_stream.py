@@ -68,10 +68,11 @@ def one_shot(tp: Toolpath, m: Machine, opt: P.Options) -> tuple[P.TimeSamples, i
     # the knots a piece's solves start from (``rest_intervals``), kept for its repairs unless the first fell back
     firsts = [P.rest_intervals(p, m, opt) for p in tp.pieces]
 
-    def solve(i: int, verify_s: np.ndarray | None, refiners: dict[tuple[int, int], NlpRefiner]) -> PieceProfile:
+    def solve(i: int, verify_s: np.ndarray | None, refiners: dict[tuple[int, int], NlpRefiner],
+              rounds: int = 0) -> PieceProfile:
         piece = tp.pieces[i]
         fallbacks = stats.get("rest_plan_fallbacks", 0)
-        lim_i = lim if verify_s is None else replace(lim, rest_reach=False)  # (repairs: ``LimitSet.rest_reach``)
+        lim_i = lim if verify_s is None else P._repair_limits(lim, rounds)
         prof, joins = P.solve_piece(tp, piece, m, opt, lim_i, stats, None, verify_s, caches[i], None, firsts[i])
         if verify_s is None and stats.get("rest_plan_fallbacks", 0) != fallbacks:
             firsts[i] = None
@@ -120,7 +121,7 @@ def one_shot(tp: Toolpath, m: Machine, opt: P.Options) -> tuple[P.TimeSamples, i
             s_loc = s_bad[owner == i] - piece.s_start
             s_loc = s_loc[(s_loc > 0.0) & (s_loc < piece.length)]
             verify_s[i] = np.union1d(verify_s.get(i, np.zeros(0)), s_loc)
-            profiles[i] = solve(i, verify_s[i], {})
+            profiles[i] = solve(i, verify_s[i], {}, rounds)
     assert not chk.failed
     return smp, rounds
 
