@@ -636,10 +636,11 @@ def solve_piece(
             )
             if not floored and not stuck(prof):
                 return prof, joins
-            if _floor_refines(opt) and not stuck(prof):
+            duration = _moving_duration(prof) if _floor_refines(opt) and not stuck(prof) else None
+            if duration is not None:
                 # (a candidate besides the refinements': bench seed 198 lp, 13.3 ms on these 64 intervals,
                 # 20.3 ms on the plan's 16, 48.5 ms on 32, where the refinements stopped)
-                first = (PieceTiming.build(prof, inverse=False).duration, prof, joins)
+                first = (duration, prof, joins)
         except (InfeasibleError, SolverFailure):
             pass
         stats["rest_plan_fallbacks"] = stats.get("rest_plan_fallbacks", 0) + 1
@@ -694,10 +695,11 @@ def _refined(
                 raise
             break
         is_stuck = stuck(prof)
-        if not is_stuck:
-            if not floored and best is None and first is None:
-                break
-            duration = PieceTiming.build(prof, inverse=False).duration
+        if not is_stuck and not floored and best is None and first is None:
+            break
+        duration = None if is_stuck else _moving_duration(prof)
+        is_stuck = duration is None  # (or its time table cannot be built: a stall ``stuck`` does not see)
+        if duration is not None:
             levels.append((duration, prof, joins))
             # A plan coarser than ``first``'s and no faster than it ends nothing (neither as clean nor as "finer
             # knots no longer pay"): it says nothing about knots finer than first's.  Bench seed 97 lp, a 110.6 mm
@@ -732,7 +734,9 @@ def _refined(
     result = (prof, joins)
     if first is not None:
         if best is None and prof is not None and not stuck(prof):
-            best = (PieceTiming.build(prof, inverse=False).duration, prof, joins)
+            last = _moving_duration(prof)
+            if last is not None:
+                best = (last, prof, joins)
         if best is None or first[0] < best[0]:
             best = first
     if best is not None:
@@ -983,11 +987,19 @@ def _solve_windows(
 
 def _table_moves(profile: PieceProfile) -> bool:
     """Whether the time table of ``profile`` can be built (the feed neither stalls nor is stuck at rest)."""
+    return _moving_duration(profile) is not None
+
+
+def _moving_duration(profile: PieceProfile) -> float | None:
+    """The motion time (s) of ``profile``, or None where its time table cannot be built: the feed stalls where
+    ``stuck`` does not look (q at 0 inside a rest interval, between the points the LP held it at).  A knot plan
+    whose profile does so is no candidate (``solve_piece``, ``_refined``): the refinements go on past it.  With
+    rises of power 512 in the rest shapes (tried, session 49) bench seed 276's 64-interval profile dipped to 0 at
+    r = 0.17 of its last interval, and the schedule failed there instead of refining."""
     try:
-        PieceTiming.build(profile, inverse=False)
+        return PieceTiming.build(profile, inverse=False).duration
     except ScheduleError:
-        return False
-    return True
+        return None
 
 
 def _walk_plan(
