@@ -57,9 +57,14 @@ IntArray = NDArray[np.int64]
 #: solved once more from scratch with the other presolve setting (``_highs_run``).  Bench seed 949 (lp): a
 #: cut round's hot-started dual simplex on 5,730 rows ran for minutes (243 iterations in 5 s when
 #: limited; it never returned otherwise); the cold re-solve takes 431 iterations and 0.03 s.  A
-#: 4,000-interval full-horizon window (flower at 0.1 mm) runs 1.2 s.
-HIGHS_TIME_LIMIT_S = 10.0
-HIGHS_TIME_PER_ROW_S = 1e-3
+#: 4,000-interval full-horizon window (flower at 0.1 mm) runs 1.2 s.  Until session 49 10 s + 1 ms a row: bench
+#: seed 11994 (lp) ran over the random bench's 120 s of CPU, a 64-interval window of 4,203 rows and 88 columns
+#: (the rest shapes' numbers) stalling at 13-30 ms an iteration in each of its walks, 10.9-14.2 s a run, every
+#: run ending unknown, at the time limit or infeasible.  The slowest solves that end optimal, lp bench seeds
+#: 0-149 and cam 0-59 with both scans on the 2 cores: 1.43 s on 53,300 rows, at most 0.13 of 0.5 s + 0.2 ms a
+#: row; the only run over it, bench seed 142's 1.27 s on 2,211 rows, ended unknown.
+HIGHS_TIME_LIMIT_S = 1.0
+HIGHS_TIME_PER_ROW_S = 2e-4
 #: Coefficients below this (after scaling) are dropped (HiGHS presolve trap, spec §10).
 TINY_COEF = 1e-9
 #: Jerk rows whose sqrt(q*) is below this fraction of sqrt(Q) are dropped (spec §10).

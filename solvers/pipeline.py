@@ -84,8 +84,10 @@ from solvers.timing import (
 FloatArray = NDArray[np.float64]
 #: LP window results kept across the knot plans and repair rounds of one piece (``_solve_windows``): (n_int, k0,
 #: k1, rest_floor, rest_shapes, rest_step_floor, at a rest end with ``LimitSet.rest_reach`` and with
-#: ``LimitSet.rest_reach_ends``) -> (what the window inherits, its extra verification points, its result)
-WindowCache = dict[tuple[int, int, int, bool, bool, bool, tuple[bool, bool]], tuple[Any, FloatArray, WindowResult]]
+#: ``LimitSet.rest_reach_ends``) -> (what the window inherits, its extra verification points, its result or the
+#: error it failed with)
+WindowCache = dict[tuple[int, int, int, bool, bool, bool, tuple[bool, bool]],
+                   tuple[Any, FloatArray, "WindowResult | InfeasibleError | SolverFailure"]]
 
 METHODS = ("lp+nlp", "lp")
 SOLVERS = ("highs", "clarabel")
@@ -815,12 +817,19 @@ class _WindowWalk:
         cache = self.cache
         hit = cache.get(key) if cache is not None else None
         if hit is not None and np.array_equal(hit[0], stv, equal_nan=True) and np.array_equal(hit[1], v_in):
+            if isinstance(hit[2], (InfeasibleError, SolverFailure)):
+                raise hit[2]  # (failed on these inputs before: bench seed 11994's stalling windows, ~11 s each)
             return spec, hit[2]
         t0 = time.perf_counter()
         # only the window's own breaks (WindowLP looks at no others): masking all of a long piece's
         # breaks in every window grew with the square of the path length
         b0, b1 = np.searchsorted(self.breaks, (k0 * plan.d, k1 * plan.d))
-        res = WindowLP(spec, self.lim, self.geometry, self.opt.solver, self.breaks[b0:b1], v_in).solve(s_check)
+        try:
+            res = WindowLP(spec, self.lim, self.geometry, self.opt.solver, self.breaks[b0:b1], v_in).solve(s_check)
+        except (InfeasibleError, SolverFailure) as exc:
+            if cache is not None:
+                cache[key] = (stv, v_in, exc)
+            raise
         stats["window_times"].append(time.perf_counter() - t0)
         stats["windows"] += 1
         stats["iterations"] += res.iterations

@@ -1120,3 +1120,26 @@ def test_a_window_far_outside_its_rows_is_solved_by_the_elastic_start(monkeypatc
     ipopt = harness.run(case, "lp+nlp")
     assert made[-1].ipm_handed > 0
     assert out.samples == ipopt.samples
+
+
+#: CPU (and wall) seconds bench seed 11994 lp may take in its worker: ~30 s since session 49 (145 s before, over the
+#: random bench's 120 s), with room for a loaded machine.
+STALLING_WINDOWS_CPU_S = 90
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_windows_whose_highs_runs_stall_fail_fast() -> None:
+    """Bench seed 11994 (lp): the first piece's windows on 16 / 32 / 64 knot intervals (4,203 rows, 88 columns)
+    stall HiGHS at 13-30 ms an iteration in every walk (with rest shapes, with the rest step floored, without
+    shapes), each run ending unknown, infeasible or at the time limit, and the piece moves on 128-1,024 intervals.
+    With 10 s + 1 ms a row per run and the same failing windows solved again on the second 64-interval plan it
+    took 145 s of CPU; with ``lp.HIGHS_TIME_LIMIT_S`` 1 s + 0.2 ms a row and failures kept in the window cache
+    (``pipeline._WindowWalk.window``) ~30 s, the same motion (0.25803 s).  Checked by the independent checker."""
+    from bench import random_cases
+
+    w = random_cases.Worker("bench")
+    try:
+        row = w.run(11994, "lp", STALLING_WINDOWS_CPU_S, STALLING_WINDOWS_CPU_S)
+    finally:
+        w.close()
+    assert row["ok"], row
