@@ -188,7 +188,9 @@ KNOT_REFINEMENTS = 3
 #: (q <= 0.019 there), still stalled at 128 intervals and moves at 512.
 STUCK_REFINE_MAX_INTERVALS = 1024
 #: A piece refined because the LP held control points at their q floor keeps refining only while
-#: each refinement shortens its motion to under this share of the best so far or of the level before it ...
+#: each refinement shortens its motion to under this share of the best so far, or shortens it at all against
+#: the level before it (session 49; by this share until then: lp bench seeds 0-299, 3 shorter, 241 0.83x, 29
+#: 0.97x, 96 0.99x, none longer, their CPU up to 1.9x: 0.14 -> 0.26 s) ...
 FLOOR_REFINE_GAIN = 0.99
 #: ... or while at most this many refinements in a row have not.  (Against the best alone, bench seed 54 lp
 #: stopped at 128 intervals when its 16-interval profile (0.1558 s) was faster than 64's (0.1801) and 128's
@@ -711,9 +713,11 @@ def _refined(
             behind = first is not None and plan.n_int < first[1].n_int and duration >= first[0]
             if not floored and best is None and not behind:
                 break
-            # (a level faster than the one before it by the gain is no miss, even if not the fastest yet)
+            # (a level faster than the one before it is no miss, even if not the fastest yet; until session 49 only
+            # one faster by the gain: bench seed 46 went 2.86 / 3.09 / 3.05 s on 34 / 68 / 136 intervals, 0.9876 of
+            # the level before, and on to 2.52 s on 544, but stopped at 136 where that step read 0.9907)
             if (not behind and best is not None and duration > FLOOR_REFINE_GAIN * best[0]
-                    and not (prev_duration is not None and duration <= FLOOR_REFINE_GAIN * prev_duration)):
+                    and not (prev_duration is not None and duration < prev_duration)):
                 misses += 1
                 if misses > FLOOR_REFINE_PATIENCE:
                     break  # finer knots no longer pay

@@ -1122,6 +1122,29 @@ def test_a_window_far_outside_its_rows_is_solved_by_the_elastic_start(monkeypatc
     assert out.samples == ipopt.samples
 
 
+#: bench seed 241's motion with the default knots against its motion on FINER_LEVEL_INTERVALS explicit knots (no
+#: refinement): at most this ratio (1.8754 / 1.7927 s measured, 1.046; 2.2711 s, 1.267, when a level faster than
+#: the one before by less than FLOOR_REFINE_GAIN counted as a miss)
+FINER_LEVEL_MOTION_RATIO = 1.10
+FINER_LEVEL_INTERVALS = 608
+
+
+def test_refinements_go_on_while_each_level_is_faster_than_the_one_before() -> None:
+    """Bench seed 241 (lp): a 19.6 mm piece held at a floor on every plan: 19 intervals 5.48 s, 38: 2.287, 76:
+    2.271 (0.993 of 38's, under FLOOR_REFINE_GAIN's 1 %: a miss until session 49), 152: 2.310 (a second miss: the
+    refinements stopped there), 304: 2.007, 608: 1.875 s.  A level faster than the one before it at all is no miss
+    now.  Truth: the same path on explicit knots of 608's spacing (``Options.knot_spacing``, not refined):
+    1.7927 s."""
+    case = gen.case(241, "bench")
+    tp = case.toolpath()
+    sch = schedule(tp, case.lp_machine, Options(method="lp"))
+    fine = schedule(tp, case.lp_machine, Options(method="lp", knot_spacing=tp.length / FINER_LEVEL_INTERVALS))
+    ratio = float(sch.summary["motion_time"]) / float(fine.summary["motion_time"])
+    assert ratio <= FINER_LEVEL_MOTION_RATIO, (sch.summary["motion_time"], fine.summary["motion_time"])
+    out = harness.run(case, "lp")
+    assert out.ok, out.describe()
+
+
 #: CPU (and wall) seconds bench seed 11994 lp may take in its worker: ~30 s since session 49 (145 s before, over the
 #: random bench's 120 s), with room for a loaded machine.
 STALLING_WINDOWS_CPU_S = 90
