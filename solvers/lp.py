@@ -62,7 +62,8 @@ IntArray = NDArray[np.int64]
 #: (the rest shapes' numbers) stalling at 13-30 ms an iteration in each of its walks, 10.9-14.2 s a run, every
 #: run ending unknown, at the time limit or infeasible.  The slowest solves that end optimal, lp bench seeds
 #: 0-149 and cam 0-59 with both scans on the 2 cores: 1.43 s on 53,300 rows, at most 0.13 of 0.5 s + 0.2 ms a
-#: row; the only run over it, bench seed 142's 1.27 s on 2,211 rows, ended unknown.
+#: row (the limit allows 1 s + 0.2 ms); the only run over 0.5 s + 0.2 ms, bench seed 142's 1.27 s on 2,211 rows,
+#: ended unknown.
 HIGHS_TIME_LIMIT_S = 1.0
 HIGHS_TIME_PER_ROW_S = 2e-4
 #: Coefficients below this (after scaling) are dropped (HiGHS presolve trap, spec §10).
