@@ -1367,8 +1367,8 @@ class WindowLP:
         """Per rest end of the window (kept from the first call, on the row points): (its s, +1 at a start, -1
         at an end, a_0, the points' distances from it ascending (K,), the running largest J and A there (K,), the
         factor on the reach (``_step_reach_factor``: at a corner; at a path end with ``LimitSet.rest_reach_ends``,
-        else 1) and the distance from rest it
-        applies within: 3 Ts of travel, ``_reach_travel`` with the window's largest J and A and feed sqrt(Q))."""
+        else 1) and the distance from rest it applies within: 3 Ts of travel, ``_reach_travel`` with the window's
+        largest J and A and feed sqrt(Q))."""
         if self._reach_cache is not None:
             return self._reach_cache
         spec, lim = self.spec, self.lim
