@@ -157,9 +157,8 @@ END_STEP_KERNEL = 0.21
 #: Curvature jumps whose step term would stay below this share of jmax even at their largest q (``_break_qmax``) get no
 #: coupled jerk rows (``WindowLP._step_jerk``).
 STEP_JERK_MIN = 1e-3
-#: ... and those whose term stays within this share of jmax at their largest q are charged it as a constant
-STEP_CONST_SHARE = 0.25
-#: ... as long as the constants at one point add up to at most this share
+#: ... and each break's q is capped so that at any point the terms of the breaks within reach add up to at most
+#: this share of jmax at their caps (``WindowLP._step_crowd_factor``), each charged as a constant there
 STEP_CONST_TOTAL = 0.5
 #: At a tangent break passed at speed (a junction turning by less than the corner tolerance) the
 #: axis velocity steps by f |jump of x_s|.  Sampled at Ts that step is an impulse: it adds up to
@@ -1201,19 +1200,11 @@ class WindowLP:
             parts = [self._vstep_coupling(g.s, ax, self.lim.jmax[ax], V_KERNEL_J, 2)]
             step = self._step_jerk(g.s, ax)
             if step is not None:
+                # each break charged its share at its cap, a constant (``_step_crowd_factor``: at most
+                # STEP_CONST_TOTAL at any point)
                 near, M = step
-                # a break whose share at its largest q is at most STEP_CONST_SHARE is charged that share as a
-                # constant, the others in q(s_b) (coupled, the LP trades q(s_b) against the points around it:
-                # it held breaks at their floor, a crawl); where the constants of several breaks would add up
-                # to over STEP_CONST_TOTAL, all of them stay coupled (bench seeds 71, 127 lp: 6-8 breaks within
-                # reach, 1.1-1.5 x jmax, infeasible)
-                qmax = self._break_qmax()
-                fixed = M.max(axis=0).toarray().ravel() * qmax <= STEP_CONST_SHARE
-                const = np.asarray(M @ np.where(fixed, qmax, 0.0), dtype=np.float64)
-                alone = const <= STEP_CONST_TOTAL
-                const = np.where(alone, const, 0.0)
-                Mc = M - sp.diags(alone.astype(np.float64)) @ M @ sp.diags(fixed.astype(np.float64))
-                parts.append((near, sp.csr_matrix(Mc @ self._mats(self._steps()[0])[0]) * Q, const))
+                const = np.asarray(M @ self._break_qmax(), dtype=np.float64)
+                parts.append((near, sp.csr_matrix((int(near.sum()), self.nvar)), const))
             self._add_coupled(rows, A, g.s, _union(g.s.size, parts))
 
     def _rest_rows(self, rows: _Rows, s_rest: float, sign: float, Q: float, a_rest: FloatArray | None) -> float:
@@ -1582,13 +1573,13 @@ class WindowLP:
         """q <= min_x a_step_x / |jump of x_ss| at every geometry break inside the window (the
         acceleration step there, x_ss jump x q, stays within a_step), and q <= min_x (v_step_x /
         |jump of x_s|)^2 (the velocity step at a tangent break passed at speed, f |jump of x_s|,
-        stays within v_step); returns the smallest cap."""
+        stays within v_step), both lowered where breaks crowd (``_break_qmax``); returns the smallest cap."""
         if self.breaks.size == 0:
             return np.inf
         br = self._steps()[0]
         if br.size == 0:
             return np.inf
-        cap = np.minimum(self._step_caps(), self._vstep_caps())
+        cap = self._break_qmax()
         keep = cap < Q  # q never exceeds Q (the largest velocity bound): larger caps are no rows
         if not keep.any():
             return np.inf
@@ -1597,11 +1588,58 @@ class WindowLP:
         return float(np.min(cap[keep]))
 
     def _break_qmax(self) -> FloatArray:
-        """The largest q each break may have (nb,): its velocity step's cap, its acceleration step's (both
-        rows of every model, ``_step_rows``) and Q."""
+        """The largest q each break may have (nb,): its velocity step's cap, its acceleration step's and Q, times
+        ``_step_crowd_factor`` (rows of every model, ``_step_rows``)."""
         if self._qmax_cache is None or self._qmax_cache[0] != self.Q:
-            self._qmax_cache = (self.Q, np.minimum(np.minimum(self._vstep_caps(), self._step_caps()), self.Q))
+            qmax = np.minimum(np.minimum(self._vstep_caps(), self._step_caps()), self.Q)
+            self._qmax_cache = (self.Q, qmax * self._step_crowd_factor(qmax))
         return self._qmax_cache[1]
+
+    def _step_reach(self, qmax: FloatArray) -> FloatArray:
+        """How far (nb,) mm from each break a point's sampled third differences can span it (``_step_jerk``):
+        3 Ts of travel at most at the window's largest feed sqrt(Q), and at most at the break's own largest
+        feed sqrt(qmax) plus what the acceleration limits add over 3 Ts."""
+        Ts = self.lim.step_jerk_period
+        assert Ts is not None
+        return np.asarray(3.0 * Ts * np.minimum(np.sqrt(self.Q), np.sqrt(qmax) + 3.0 * Ts
+                                                * float(np.linalg.norm(self.lim.amax))), dtype=np.float64)
+
+    def _step_crowd_factor(self, qmax: FloatArray) -> FloatArray:
+        r"""Factor (nb,) <= 1 on each break's cap qmax (nb,) so that at every point s the step terms of the curvature
+        jumps within reach (``_step_jerk``) add up to at most STEP_CONST_TOTAL of jmax_x at their caps:
+
+            T_x(s) = sum_{b: |s - s_b| <= R_b} w_bx qmax_b,   w_bx = STEP_KERNEL |jump_bx| / (Ts jmax_x),
+            factor_b = min_x min(1, STEP_CONST_TOTAL / max_{|s - s_b| <= R_b} T_x(s))
+
+        (R_b = ``_step_reach``; lowering the caps only shrinks the reaches, so the sums stay within the share).  The
+        jerk rows then charge each break its term at its cap as a constant (``_jerk_rows``).  Until session 50 the
+        breaks whose constants summed to over STEP_CONST_TOTAL were coupled to the rows through q(s_b), and the LP,
+        whose objective integral q hardly sees a narrow dip, traded q(s_b) against the points around: it held
+        those breaks at their q floor, a crawl (bench seed 71 lp: ~1.5 mm/s for 0.08 s at two curvature jumps
+        4.9 mm apart, where the caps allow hundreds of mm/s; 0.194 -> 0.133 s; on 1 mm knots 1.97 -> 0.17 s).
+
+        T_x is piecewise constant and rises only where a reach starts, so its largest value over [s_b - R_b,
+        s_b + R_b] is at one of those starts inside: O(nb log nb) by sorting and one ``maximum.reduceat``."""
+        out = np.ones(qmax.size)
+        if self.lim.step_jerk_period is None or qmax.size == 0:
+            return out
+        Ts = self.lim.step_jerk_period
+        br, jump, _ = self._steps()
+        reach = self._step_reach(qmax)
+        lo, hi = br - reach, br + reach
+        o_lo, o_hi = np.argsort(lo, kind="stable"), np.argsort(hi, kind="stable")
+        x = lo[o_lo]  # where a reach starts (sorted)
+        n_in = np.searchsorted(x, x, side="right")  # reaches started at or before each start
+        n_out = np.searchsorted(hi[o_hi], x, side="left")  # ... and ended before it
+        at = np.column_stack([np.searchsorted(x, lo, side="left"), np.searchsorted(x, hi, side="right")]).ravel()
+        for ax in range(3):
+            share = STEP_KERNEL * jump[:, ax] / (Ts * self.lim.jmax[ax]) * qmax
+            share = np.where(share > STEP_JERK_MIN, share, 0.0)  # (``_step_jerk``'s live breaks)
+            total = (np.concatenate([[0.0], np.cumsum(share[o_lo])])[n_in]
+                     - np.concatenate([[0.0], np.cumsum(share[o_hi])])[n_out])
+            worst = np.maximum.reduceat(np.append(total, 0.0), at)[::2]
+            out = np.minimum(out, np.where(worst > STEP_CONST_TOTAL, STEP_CONST_TOTAL / np.maximum(worst, 1e-300), 1.0))
+        return out
 
     def _step_caps(self) -> FloatArray:
         """Cap on q at each break from the acceleration step, min_x a_step_x / |jump of x_ss|, (nb,)."""
@@ -1764,7 +1802,7 @@ class WindowLP:
             return None
         # within 3 Ts of travel of the break: at most the window's largest feed, sqrt(Q), and at most its own
         # largest feed (``_break_qmax``) plus what the acceleration limits add over 3 Ts
-        reach = 3.0 * Ts * np.minimum(np.sqrt(self.Q), np.sqrt(qmax) + 3.0 * Ts * float(np.linalg.norm(self.lim.amax)))
+        reach = self._step_reach(qmax)
         close = (np.abs(s[:, None] - br[None, :]) <= reach[None, :]) & live[None, :]
         near = close.any(axis=1)
         if not near.any():

@@ -852,8 +852,9 @@ def test_curvature_jump_at_a_tight_turn_couples_only_the_points_it_can_reach(
     rows its share: 79.7 s of motion for 18.6 mm, 75 s of it under 5 um/s, with HiGHS's own edge weights; with
     Devex (``lp.DUAL_EDGE_WEIGHT`` = 1) another optimal vertex went below the floor and the feed stalled (a
     typed error).  Now the reach is bounded by the break's own largest feed (its caps) plus what the
-    acceleration limits add over 3 Ts, and a break whose share stays within ``lp.STEP_CONST_SHARE`` is
-    charged it as a constant: 6.71 s with either, and the samples pass the independent checker.  (Two
+    acceleration limits add over 3 Ts, and a break whose share stays within 0.25 of jmax is charged it as a
+    constant (since session 50 every break is, its cap lowered where breaks crowd, ``lp.STEP_CONST_TOTAL``):
+    6.71 s with either, and the samples pass the independent checker.  (Two
     dips at the floor remain, 0.24 and 0.62 s, where the cap at the apex holds the quadratic's
     control points on a 76 um knot spacing: see docs/history.md, session 26.)"""
     monkeypatch.setattr(lp, "DUAL_EDGE_WEIGHT", edge_weight)
