@@ -711,17 +711,21 @@ def _refined(
             # 4.00 s, stopped refinements that on 128 (with the rest floor) reach 1.16 s; so did a clean 16-interval
             # profile of 2.51 s (which of two equally good stage-2 vertices HiGHS met decided between them).
             behind = first is not None and plan.n_int < first[1].n_int and duration >= first[0]
+            # A plan on first's own knots and no faster than it is no miss either: it is first solved again (until
+            # session 50 it counted: bench seed 201's second piece, 16 / 32 / 64 / 128 intervals 4.40 / 2.36 / 5.06
+            # / 5.35 s, two misses, stopped where 256 / 512 / 1,024 reach 1.76 / 1.39 / 1.30 s)
+            again = first is not None and plan.n_int == first[1].n_int and duration >= first[0]
             if not floored and best is None and not behind:
                 break
             # (a level faster than the one before it is no miss, even if not the fastest yet; until session 49 only
             # one faster by the gain: bench seed 46 went 2.86 / 3.09 / 3.05 s on 34 / 68 / 136 intervals, 0.9876 of
             # the level before, and on to 2.52 s on 544, but stopped at 136 where that step read 0.9907)
-            if (not behind and best is not None and duration > FLOOR_REFINE_GAIN * best[0]
+            if (not behind and not again and best is not None and duration > FLOOR_REFINE_GAIN * best[0]
                     and not (prev_duration is not None and duration < prev_duration)):
                 misses += 1
                 if misses > FLOOR_REFINE_PATIENCE:
                     break  # finer knots no longer pay
-            elif not behind and best is not None:
+            elif not behind and not again and best is not None:
                 misses = 0
             prev_duration = duration
             if best is None or duration < best[0]:
