@@ -154,8 +154,8 @@ STEP_KERNEL = 0.75
 #: jmax)), k at most this (computed: 0.2016 for the full step A = jmax Ts / 2, where j = jmax reads 1.083 x;
 #: 0.043 for A = jmax Ts / 4).  ``WindowLP._step_reach_factor`` turns it into room over the reach.
 END_STEP_KERNEL = 0.21
-#: Curvature jumps whose step term would stay below this share of jmax even at their largest q (``_break_qmax``) get no
-#: coupled jerk rows (``WindowLP._step_jerk``).
+#: Curvature jumps whose step term would stay below this share of jmax even at their largest q (``_break_qmax``) add
+#: nothing to the jerk rows (``WindowLP._step_jerk``).
 STEP_JERK_MIN = 1e-3
 #: ... and each break's q is capped so that at any point the terms of the breaks within reach add up to at most
 #: this share of jmax at their caps (``WindowLP._step_crowd_factor``), each charged as a constant there
@@ -1780,7 +1780,8 @@ class WindowLP:
         |jump_x| q(s_b) at the break s_b, and a third difference of the samples whose span (3 Ts)
         holds the break sees the jerk around it plus up to STEP_KERNEL |step| / Ts.  So at points
         within 3 Ts of travel of a break the jerk rows become
-        |j(s)| + sum_b STEP_KERNEL |jump_bx| q(s_b) / Ts <= jmax_x.
+        |j(s)| + sum_b STEP_KERNEL |jump_bx| q(s_b) / Ts <= jmax_x, q(s_b) taken at its cap there (a constant:
+        ``_step_crowd_factor``) and as it is in the checks (``_violations``).
 
         The travel is bounded by the break's own largest feed (``_break_qmax``: its caps hold q(s_b) in
         every model) plus what the acceleration limits add over 3 Ts, and by the window's largest feed
