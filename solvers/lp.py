@@ -1194,7 +1194,6 @@ class WindowLP:
             J = self._combo(basis, g.d3[:, ax], 1.5 * g.d2[:, ax], 0.5 * g.d1[:, ax])
             A = csr.make(J.data * np.repeat(rq * Q / self.lim.jmax[ax], np.diff(J.indptr)), J.indices, J.indptr,
                          J.shape)
-            self._add_needed(rows, A, g.s, ~implied[ax])
             # next to a curvature jump, |j| + the step's share <= jmax (``_step_jerk``); next to a
             # tangent break, + the velocity step's impulse (``_vstep_coupling``): one row holds both
             parts = [self._vstep_coupling(g.s, ax, self.lim.jmax[ax], V_KERNEL_J, 2)]
@@ -1205,7 +1204,14 @@ class WindowLP:
                 near, M = step
                 const = np.asarray(M @ self._break_qmax(), dtype=np.float64)
                 parts.append((near, sp.csr_matrix((int(near.sum()), self.nvar)), const))
-            self._add_coupled(rows, A, g.s, _union(g.s.size, parts))
+            coup = _union(g.s.size, parts)
+            if coup is not None and coup[1].nnz == 0:  # constants only: one row |A chat| <= 1 - const at those points
+                near, _, const = coup
+                self._add_needed(rows, A, g.s, ~implied[ax] & ~near)
+                self._add(rows, A[near], const - 1.0, 1.0 - const, g.s[near])
+            else:
+                self._add_needed(rows, A, g.s, ~implied[ax])
+                self._add_coupled(rows, A, g.s, coup)
 
     def _rest_rows(self, rows: _Rows, s_rest: float, sign: float, Q: float, a_rest: FloatArray | None) -> float:
         """q(s_rest) = 0 and sign * q'(s_rest) * max_x(|x_s|/(2 a_rest_x)) <= 1 (a_rest: default lim.a_rest).
