@@ -1603,12 +1603,14 @@ class WindowLP:
 
     def _step_reach(self, qmax: FloatArray) -> FloatArray:
         """How far (nb,) mm from each break a point's sampled third differences can span it (``_step_jerk``):
-        3 Ts of travel at most at the window's largest feed sqrt(Q), and at most at the break's own largest
-        feed sqrt(qmax) plus what the acceleration limits add over 3 Ts."""
+        3 Ts of travel at most at the window's largest feed sqrt(Q), and at most 3 Ts sqrt(qmax) + |amax| (3 Ts)^2 / 2,
+        the break's own largest feed sqrt(qmax) and the tangential acceleration (at most |amax|: x_s . a) over the
+        3 Ts either side (until session 50 3 Ts (sqrt(qmax) + 3 Ts |amax|), twice the acceleration's share)."""
         Ts = self.lim.step_jerk_period
         assert Ts is not None
-        return np.asarray(3.0 * Ts * np.minimum(np.sqrt(self.Q), np.sqrt(qmax) + 3.0 * Ts
-                                                * float(np.linalg.norm(self.lim.amax))), dtype=np.float64)
+        span = 3.0 * Ts
+        return np.asarray(np.minimum(span * np.sqrt(self.Q), span * np.sqrt(qmax) + 0.5 * span * span
+                                     * float(np.linalg.norm(self.lim.amax))), dtype=np.float64)
 
     def _step_crowd_factor(self, qmax: FloatArray) -> FloatArray:
         r"""Factor (nb,) <= 1 on each break's cap qmax (nb,) so that at every point s the step terms of the curvature

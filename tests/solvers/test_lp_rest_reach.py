@@ -128,12 +128,13 @@ def test_cases_that_found_the_reach_traps(seed: int, what: str) -> None:
     assert out.ok, f"{what}: {out.describe()}"
 
 
-@pytest.mark.parametrize("seed", [55, 125])
+@pytest.mark.parametrize("seed", [51, 125])
 def test_first_repair_keeps_the_cap(seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
     """A piece repaired for its samples keeps the cap in its first round, with room for the acceleration step at
-    its path ends (``pipeline._repair_limits``, ``LimitSet.rest_reach_ends``): bench seeds 55 and 125 (lp) need one
-    repair round, pass the independent checker, and move faster than with the cap dropped in that round (measured
-    0.11645 against 0.11938 s, 0.35965 against 0.36083 s)."""
+    its path ends (``pipeline._repair_limits``, ``LimitSet.rest_reach_ends``): bench seeds 51 and 125 (lp) need one
+    repair round, pass the independent checker, and move faster than with the cap dropped in that round (seed 51
+    measured 0.61136 against 0.61926 s in session 50; seed 55, this test's until then, needs no repair since the
+    curvature jumps' reach was tightened, ``lp.WindowLP._step_reach``)."""
     case = gen.case(seed, "bench")
     opt = Options(method="lp", sample_period=harness.TS)
     kept = schedule(case.toolpath(), case.lp_machine, opt)
