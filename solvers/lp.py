@@ -1608,6 +1608,11 @@ class WindowLP:
         3 Ts either side (until session 50 3 Ts (sqrt(qmax) + 3 Ts |amax|), twice the acceleration's share)."""
         Ts = self.lim.step_jerk_period
         assert Ts is not None
+        return self._travel_3ts(Ts, qmax)
+
+    def _travel_3ts(self, Ts: float, qmax: FloatArray) -> FloatArray:
+        """The travel (nb,) mm over 3 Ts either side of a break whose q is at most qmax (nb,): at most
+        min(3 Ts sqrt(Q), 3 Ts sqrt(qmax) + |amax| (3 Ts)^2 / 2) (``_step_reach``, ``_live_steps``)."""
         span = 3.0 * Ts
         return np.asarray(np.minimum(span * np.sqrt(self.Q), span * np.sqrt(qmax) + 0.5 * span * span
                                      * float(np.linalg.norm(self.lim.amax))), dtype=np.float64)
@@ -1670,8 +1675,9 @@ class WindowLP:
         acceleration (``power`` 1, ``kernel`` V_KERNEL_A) or jerk (2, V_KERNEL_J) of axis ``ax`` sees it
         at points s: kernel |jump_bx| f_b / Ts^power per unit ``limit``, for points whose differences can
         span break b: within 3 Ts of travel of it, at the largest feed its cap allows plus what the
-        acceleration limits add over 3 Ts (a polyline of 0.5 mm legs is dense: at the window's largest
-        feed three breaks were within reach of one point and their rows infeasible).
+        acceleration limits add over 3 Ts, and at most at the window's largest feed (``_travel_3ts``, as
+        for a curvature jump; a polyline of 0.5 mm legs is dense: at the window's largest feed three
+        breaks were within reach of one point and their rows infeasible).
 
         Returns (near (K,) bool, W (near.sum(), nl) sparse, the weight w_b of f_b at each near point
         (none where b is not close), the live breaks' s (nl,), q0 (nl,) the q at which f_b is linearised: the
@@ -1723,7 +1729,8 @@ class WindowLP:
         if not live.any():
             return None
         br, q0, qmax, w = br[live], q0[live], qmax[live], w[live]
-        reach = 3.0 * Ts * (np.sqrt(qmax) + 3.0 * Ts * float(np.linalg.norm(self.lim.amax))) + BREAK_EPS_MM
+        # (until session 51 3 Ts (sqrt(qmax) + 3 Ts |amax|): twice the acceleration's share, and not bounded by sqrt(Q))
+        reach = self._travel_3ts(Ts, qmax) + BREAK_EPS_MM
         # breaks within twice the reach of each (counted against the largest reach: at most more)
         crowd = (np.searchsorted(br, br + reach + reach.max(), side="right")
                  - np.searchsorted(br, br - reach - reach.max(), side="left"))
