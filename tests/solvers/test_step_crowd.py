@@ -10,8 +10,6 @@ the LP held them at their q floor: a crawl (bench seed 71).
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import pytest
 
@@ -20,6 +18,7 @@ from solvers import lp
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
 from tests.reliability import gen, harness
+from tests.solvers.one_window import whole_piece_window
 
 TS = 1e-3
 #: Relative slack of the brute-force sums against the share (rounding of the sorted sums).
@@ -40,20 +39,6 @@ def _wiggle(n: int, step: float, amp: float, seed: int = 3) -> Toolpath:
     return Toolpath([NurbsSegment.create(2, knots, pts)])
 
 
-def _window(tp: Toolpath, lim: lp.LimitSet, Q: float) -> lp.WindowLP:
-    piece = tp.pieces[0]
-
-    def geometry(s: np.ndarray) -> Any:
-        return tp.evaluate(np.asarray(s, dtype=np.float64) + piece.s_start, piece)
-
-    n_int = 64
-    d = piece.length / n_int
-    breaks = tp.knot_s[(tp.knot_s > 0.0) & (tp.knot_s < piece.length)]
-    w = lp.WindowLP(lp.WindowSpec(0, 0, n_int, d, n_int, None, True), lim, geometry, "highs", breaks)
-    w.Q = Q
-    return w
-
-
 @pytest.mark.parametrize("amp", [1e-3, 3e-4])
 def test_crowd_factor_against_brute_force_sums(amp: float) -> None:
     """The factors against the definition evaluated point by point, on 57 curvature jumps 0.1 mm apart whose reaches
@@ -62,7 +47,7 @@ def test_crowd_factor_against_brute_force_sums(amp: float) -> None:
     end (T_x is constant between them); factor_b = min over x of min(1, STEP_CONST_TOTAL / max T_x over b's reach).
     With the lowered caps the sums at every point stay within STEP_CONST_TOTAL."""
     lim = lp.LimitSet.from_machine(router(), TS, True)
-    w = _window(_wiggle(60, 0.1, amp), lim, Q=float(np.max(lim.vmax)) ** 2)
+    w = whole_piece_window(_wiggle(60, 0.1, amp), lim, Q=float(np.max(lim.vmax)) ** 2)
     br, jump, _ = w._steps()
     assert br.size > 20
     qmax0 = np.minimum(np.minimum(w._vstep_caps(), w._step_caps()), w.Q)

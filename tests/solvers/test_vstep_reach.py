@@ -12,14 +12,13 @@ they need.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from geometry import Toolpath, primitives
 from solvers import lp
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
+from tests.solvers.one_window import whole_piece_window
 
 TS = 1e-3
 #: Relative slack of the reach against its formula (float rounding).
@@ -40,20 +39,6 @@ def _zigzag(n: int) -> Toolpath:
     return Toolpath([primitives.polyline(pts)])
 
 
-def _window(tp: Toolpath, lim: lp.LimitSet, Q: float) -> lp.WindowLP:
-    piece = tp.pieces[0]
-
-    def geometry(s: np.ndarray) -> Any:
-        return tp.evaluate(np.asarray(s, dtype=np.float64) + piece.s_start, piece)
-
-    n_int = 64
-    d = piece.length / n_int
-    breaks = tp.knot_s[(tp.knot_s > 0.0) & (tp.knot_s < piece.length)]
-    w = lp.WindowLP(lp.WindowSpec(0, 0, n_int, d, n_int, None, True), lim, geometry, "highs", breaks)
-    w.Q = Q
-    return w
-
-
 def _bound(lim: lp.LimitSet, Q: float, qmax: np.ndarray) -> np.ndarray:
     span = 3.0 * TS
     return np.asarray(np.minimum(span * np.sqrt(Q), span * np.sqrt(qmax) + 0.5 * float(np.linalg.norm(lim.amax))
@@ -67,7 +52,7 @@ def test_tangent_break_reach_is_the_travel_over_3_ts() -> None:
     assert lim.v_step_period == TS
     tp = _zigzag(40)
     for Q in (float(np.max(lim.vmax)) ** 2, 50.0**2):
-        w = _window(tp, lim, Q)
+        w = whole_piece_window(tp, lim, Q)
         qmax_all = w._break_qmax()
         br_all = w._steps()[0]
         assert br_all.size == 39
@@ -93,7 +78,7 @@ def test_sampled_travel_around_a_tangent_break_stays_within_its_reach() -> None:
     tp = _zigzag(40)
     sch = schedule(tp, m, Options(method="lp", sample_period=TS))
     smp = sch.samples
-    w = _window(tp, lim, float(np.max(lim.vmax)) ** 2)
+    w = whole_piece_window(tp, lim, float(np.max(lim.vmax)) ** 2)
     br, qmax = w._steps()[0], w._break_qmax()
     t_b = np.interp(br, smp.s, smp.t)
     s_lo = np.interp(t_b - 3.0 * TS, smp.t, smp.s)
