@@ -1463,13 +1463,32 @@ class NlpStats:
 #: NLP shapes kept per thread across schedules (each ~0.15-0.3 s of CasADi set-up, Ipopt's more; a shape
 #: depends only on its key, every limit and geometry value is a parameter of the call)
 SHAPE_CACHE_SIZE = 16
+#: ... and at most this much memory of them (MB, as ``shape_mb`` estimates it), the newest shape always kept.  A
+#: shape's size grows with its window, and refined pieces use windows of up to 512 intervals (session 51, cam-bench
+#: seed 100 lp+nlp streamed, 10.4 M samples: 16 shapes alone, up to 580 MB of them, peaked at +512 MB of resident
+#: memory over the 107 MB before; with this bound +365 MB, 185 shapes built instead of 155, CPU 74.0 -> 75.5 s,
+#: the samples bit-identical).  Where the windows are short (the flower's 12-24 intervals) 16 shapes take ~20 MB.
+SHAPE_CACHE_MB = 256.0
+#: A shape's memory per knot interval and moving axis at N = 4 (MB: the resident growth while one is built, 51.8 MB
+#: at 512 intervals and 3 axes, 61.9 MB with cut slots; session 51), and the factor with cut slots.  A rest window's
+#: shape has ~3-4 MB more whatever its size, not counted: the estimate is there to bound the large ones.
+SHAPE_MB_PER_AXIS_INTERVAL = 0.035
+SHAPE_SLOTTED_FACTOR = 1.2
 _SHAPE_CACHE = threading.local()
+
+
+def shape_mb(key: tuple[Any, ...]) -> float:
+    """The memory (MB) a cached shape of this key holds, estimated from its intervals n, checkpoints per interval N,
+    moving axes and cut slots: SHAPE_MB_PER_AXIS_INTERVAL n |axes| N / 4 (x SHAPE_SLOTTED_FACTOR with slots)."""
+    n, N, axes, _, slotted = key[:5]
+    return float(SHAPE_MB_PER_AXIS_INTERVAL * n * len(axes) * N / 4.0 * (SHAPE_SLOTTED_FACTOR if slotted else 1.0))
 
 
 def _cached_shape(n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted: bool, head: bool = False,
                   tail: bool = False) -> _Shape:
-    """The shape for this key from this thread's LRU cache, built on a miss.  Per thread: a CasADi
-    Function's call and the OSQP hand-over fit hold state, so two threads never share one."""
+    """The shape for this key from this thread's LRU cache, built on a miss (at most SHAPE_CACHE_SIZE shapes and
+    SHAPE_CACHE_MB of them).  Per thread: a CasADi Function's call and the OSQP hand-over fit hold state, so two
+    threads never share one."""
     cache: OrderedDict[tuple[Any, ...], _Shape] | None = getattr(_SHAPE_CACHE, "shapes", None)
     if cache is None:
         cache = _SHAPE_CACHE.shapes = OrderedDict()
@@ -1479,7 +1498,7 @@ def _cached_shape(n: int, N: int, axes: tuple[int, ...], with_aj: bool, slotted:
     shape = cache.get(key)
     if shape is None:
         shape = cache[key] = _Shape(n, N, axes, with_aj, slotted, head, tail)
-        while len(cache) > SHAPE_CACHE_SIZE:
+        while len(cache) > SHAPE_CACHE_SIZE or (len(cache) > 1 and sum(map(shape_mb, cache)) > SHAPE_CACHE_MB):
             cache.popitem(last=False)
     else:
         cache.move_to_end(key)

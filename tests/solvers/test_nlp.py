@@ -329,6 +329,45 @@ def test_a_refiner_does_not_keep_its_shapes_alive(monkeypatch: pytest.MonkeyPatc
     assert list(nlp._SHAPE_CACHE.shapes.values()) == [again]
 
 
+def test_the_shape_cache_is_bounded_by_memory_too(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``_cached_shape`` keeps at most SHAPE_CACHE_SIZE shapes and at most SHAPE_CACHE_MB of them as ``shape_mb``
+    estimates them, dropping the least recently used first and always keeping the newest (a stand-in class for the
+    shapes: the policy, not CasADi).  ``shape_mb`` against its formula: SHAPE_MB_PER_AXIS_INTERVAL an interval and
+    axis at N = 4."""
+    from solvers import nlp
+
+    class Dummy:
+        def __init__(self, n: int, *_: object) -> None:
+            self.n = n
+
+    monkeypatch.setattr(nlp, "_Shape", Dummy)
+    monkeypatch.setattr(nlp._SHAPE_CACHE, "shapes", OrderedDict(), raising=False)
+    monkeypatch.setattr(nlp, "SHAPE_CACHE_MB", 100.0)
+    monkeypatch.setattr(nlp, "SHAPE_MB_PER_AXIS_INTERVAL", 0.045)  # (the sizes below in MB)
+    axes = (0, 1, 2)
+    mb = nlp.SHAPE_MB_PER_AXIS_INTERVAL
+    assert nlp.shape_mb((512, 4, axes, True, False)) == pytest.approx(mb * 512 * 3)
+    assert nlp.shape_mb((512, 4, axes, True, True)) == pytest.approx(mb * 512 * 3 * nlp.SHAPE_SLOTTED_FACTOR)
+    assert nlp.shape_mb((16, 8, (0,), True, False)) == pytest.approx(mb * 16 * 2)
+
+    def keys() -> list[int]:
+        return [k[0] for k in nlp._SHAPE_CACHE.shapes]
+
+    for n in (64, 128, 256):  # 8.6 + 17.3 + 34.6 MB
+        nlp._cached_shape(n, 4, axes, True, False)
+    assert keys() == [64, 128, 256]
+    nlp._cached_shape(64, 4, axes, True, False)  # used again: the most recent now
+    assert keys() == [128, 256, 64]
+    nlp._cached_shape(320, 4, axes, True, False)  # 43.2 MB: 103.7 MB in all, 128 goes (86.4 MB)
+    assert keys() == [256, 64, 320]
+    nlp._cached_shape(1024, 4, axes, True, False)  # 138 MB alone: over the budget, kept as the newest
+    assert keys() == [1024]
+    monkeypatch.setattr(nlp, "SHAPE_CACHE_MB", float("inf"))
+    for n in range(1, nlp.SHAPE_CACHE_SIZE + 3):
+        nlp._cached_shape(n, 4, axes, True, False)
+    assert keys() == list(range(3, nlp.SHAPE_CACHE_SIZE + 3))
+
+
 def test_chain_window_is_long_only_where_the_chain_holds_one() -> None:
     """``NlpRefiner.chain_window``: the long window where the chain's grid between the rest intervals
     (knots 1 .. n_int - 1) holds it, else the short one; without a long window always the short one."""
