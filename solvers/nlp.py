@@ -1467,7 +1467,7 @@ SHAPE_CACHE_SIZE = 16
 #: shape's size grows with its window, and refined pieces use windows of up to 512 intervals (session 51, cam-bench
 #: seed 100 lp+nlp streamed, 10.4 M samples: 16 shapes alone, up to 580 MB of them, peaked at +512 MB of resident
 #: memory over the 107 MB before; with this bound +365 MB, 185 shapes built instead of 155, CPU 74.0 -> 75.5 s,
-#: the samples bit-identical).  Where the windows are short (the flower's 12-24 intervals) 16 shapes take ~20 MB.
+#: the samples bit-identical).  Where the windows are short (the flower's 12-24 intervals) 16 shapes take ~30 MB.
 SHAPE_CACHE_MB = 256.0
 #: A shape's memory per knot interval and moving axis at N = 4 (MB: the resident growth while one is built, 51.8 MB
 #: at 512 intervals and 3 axes, 61.9 MB with cut slots; session 51), and the factor with cut slots.  A rest window's
