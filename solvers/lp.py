@@ -207,6 +207,12 @@ DUAL_EDGE_WEIGHT = 1
 SIMPLEX_SCALE = 0
 #: ... and the scaling of the second try of a window that did not reach optimality (with the other presolve).
 SIMPLEX_SCALE_RETRY = 2
+#: ... and its simplex (``simplex_strategy``: 4 the primal; the model's later runs, its cut rounds hot-started from
+#: the basis, go back to the dual, 1).  Bench seed 11994 (lp): windows of 1,256-2,243 rows x 40-88 columns end
+#: unknown in the dual simplex in 0.004-0.13 s (Devex: "possibly dual unbounded" at every iteration, each a
+#: rebuild), and the dual retry stalled the same way until its time limit (0.6-0.9 s of CPU, 8 retries); the
+#: primal simplex ends them in a few ms.  11.0 -> 5.7 s of CPU, the same motion (session 51).
+SIMPLEX_STRATEGY_RETRY = 4
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.
 COL_SCALE_MIN_BASIS = 0.1
@@ -2139,15 +2145,18 @@ class WindowLP:
     def _highs_run(self, h: highspy.Highs) -> FloatArray:
         self._timed_run(h)
         status = h.getModelStatus()
-        # Not optimal: once more with the other presolve setting and SIMPLEX_SCALE_RETRY, cold; but an infeasible
-        # model with a lower floor still to try goes to it (``solve``): a short piece's floors are infeasible next
-        # to its rest ends, and proving it twice took 4 of a 2.8 mm line's 5 solves
+        # Not optimal: once more with the other presolve setting, SIMPLEX_SCALE_RETRY and the primal simplex
+        # (SIMPLEX_STRATEGY_RETRY), cold; but an infeasible model with a lower floor still to try goes to it
+        # (``solve``): a short piece's floors are infeasible next to its rest ends, and proving it twice took 4 of
+        # a 2.8 mm line's 5 solves
         infeasible = status == highspy.HighsModelStatus.kInfeasible
         if status != highspy.HighsModelStatus.kOptimal and not (infeasible and self.fallback_left):
             h.setOptionValue("presolve", "on" if PRESOLVE == "off" else "off")
             h.setOptionValue("simplex_scale_strategy", SIMPLEX_SCALE_RETRY)
+            h.setOptionValue("simplex_strategy", SIMPLEX_STRATEGY_RETRY)
             h.clearSolver()
             self._timed_run(h)
+            h.setOptionValue("simplex_strategy", 1)  # (the dual again for the cut rounds' hot starts)
             status = h.getModelStatus()
         self.iterations += int(h.getInfo().simplex_iteration_count)
         if status == highspy.HighsModelStatus.kInfeasible:
