@@ -211,8 +211,14 @@ SIMPLEX_SCALE_RETRY = 2
 #: the basis, go back to the dual, 1).  Bench seed 11994 (lp): windows of 1,256-2,243 rows x 40-88 columns end
 #: unknown in the dual simplex in 0.004-0.13 s (Devex: "possibly dual unbounded" at every iteration, each a
 #: rebuild), and the dual retry stalled the same way until its time limit (0.6-0.9 s of CPU, 8 retries); the
-#: primal simplex ends them in a few ms.  11.0 -> 5.7 s of CPU, the same motion (session 51).
+#: primal simplex ends 5 of them in a few ms (3 still run to the limit).  11.0 -> 5.7 s of CPU, the same motion
+#: (session 51).
 SIMPLEX_STRATEGY_RETRY = 4
+#: Stage 2 followed, where it holds control points at their floor, by one LP step on the travel time
+#: (``WindowLP._time_stage``; with ``LimitSet.time_stage``: method lp), and the q the step's weights read at least
+#: this share of Q in a window without floors.
+TIME_STAGE = True
+TIME_Q_MIN = 1e-8
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.
 COL_SCALE_MIN_BASIS = 0.1
@@ -381,6 +387,10 @@ class LimitSet:
     #: by the room its acceleration step needs in the samples' third differences (``WindowLP._step_reach_factor``
     #: with END_STEP_KERNEL): a piece's first repair round for its samples (``pipeline._repair_limits``)
     rest_reach_ends: bool = False
+    #: stage 2's floored windows take one LP step on the travel time (``WindowLP._time_stage``, with TIME_STAGE):
+    #: method lp, whose feed is the output.  Not lp+nlp, whose NLP makes the feed: bench seeds 0-79 3 shorter (down
+    #: to 0.973x), at up to 3.3x the CPU of a case (seed 10 0.31 -> 1.02 s)
+    time_stage: bool = False
 
     @classmethod
     def from_machine(
@@ -402,7 +412,7 @@ class LimitSet:
                                 V_STEP_SHARE_DRIVE if rest_from_drive else V_STEP_SHARE),
                    None if rest_from_drive else sample_period,
                    m.drive_arrays() if rest_from_drive and not kinematic and m.has_drives else None,
-                   not rest_from_drive)
+                   not rest_from_drive, time_stage=not rest_from_drive)
 
 
 def v_step_limit(
@@ -1519,10 +1529,13 @@ class WindowLP:
         # stage 2: + q <= q*, pseudo-jerk
         qstar = self._capped_qstar(c_star, g)
 
+        last_rows: list[_Rows] = []  # (the model of the last stage-2 solve: ``_time_stage`` goes on in it)
+
         def stage2(lo: FloatArray, warm: _Rows | None = None) -> tuple[FloatArray, tuple[int, int, int]]:
             # a fresh model each time (the solver keeps its column bounds), or stage 1's own (``warm``, on its
             # floor: the rows added to it, the dual simplex going on from its optimal basis)
             r2 = base.copy() if warm is None else warm
+            last_rows[:] = [r2]
             self._stage1_rows(r2, g, Q, qstar, velocity_only=warm is not None)
             self._jerk_rows(r2, g, Q, qstar)
             return self._cuts(self._run(r2, w, lo, col_hi), r2, w, lo, col_hi, Q, s_check, c_star)
@@ -1566,8 +1579,51 @@ class WindowLP:
                 if prev is None or self._inherited_end(prev) >= prev[0] + prev[1].size - 2:
                     raise
                 self.inherited *= 2
+        n_floored = floored(chat2, lo_i)  # (stage 2's count: what the knot refinements go by)
+        if TIME_STAGE and self.lim.time_stage and n_floored and self.solver == "highs" and last_rows:
+            pos = lo_i[:n][lo_i[:n] > 0.0]
+            q_min = float(np.min(pos)) * Q if pos.size else TIME_Q_MIN * Q
+            chat2 = self._time_stage(chat2, last_rows[0], lo_i, col_hi, Q, s_check, c_star, g_fine.s, q_min)
         return WindowResult(chat2[:n] * Q, c_star[:n], self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1],
-                            pts2[2], floored(chat2, lo_i), self._shapes(chat2 * Q))
+                            pts2[2], n_floored, self._shapes(chat2 * Q))
+
+    def _travel(self, chat: FloatArray, s: FloatArray, Q: float, q_min: float) -> float:
+        """T = integral ds / sqrt(q) over the points s (K,) (trapezoids), q at least q_min (mm^2/s^2), for a
+        solution chat (in units of Q): the window's travel time, s."""
+        f = 1.0 / np.sqrt(np.maximum(self._eval(chat * Q, s)[0], q_min))
+        return float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(s)))
+
+    def _time_stage(self, chat: FloatArray, rows: _Rows, lo: FloatArray, col_hi: FloatArray, Q: float,
+                    s_check: FloatArray, c_star: FloatArray, s: FloatArray, q_min: float) -> FloatArray:
+        r"""Stage 2's solution chat, or one more LP on its rows (``rows``, its HiGHS model: the dual simplex goes on
+        from its basis) with the travel time's gradient as the objective, if that is faster.
+
+        Stage 2 maximises integral q ds, which hardly sees a narrow dip: where its solution holds control points
+        at their floor (a crawl), the travel time T(c) = integral q^(-1/2) ds is what matters, and
+
+            dT/dc_j = -1/2 integral B_j(s) q(s)^(-3/2) ds,
+
+        so the LP here maximises sum_j w_j c_j with w_j = integral B_j(s) max(q, q_min)^(-3/2) ds (stage 2's q on
+        the verification grid s (K,), trapezoids; q_min the window's smallest floor, so that the rest ends, where q
+        goes to 0, do not take all the weight), then its cut rounds.  The rows are the same, so the result keeps
+        every limit stage 2 keeps; it is kept only if its T (``_travel``) is lower.  One such step (a second gained
+        little more at 2.5x the added CPU: lp bench 0-299, 48 shorter against 47).  Session 51: lp bench 0-299,
+        47 runs shorter (276 0.558x, 46 0.945x, 255 0.949x), none longer; cam 0-59 12 shorter (35 0.962x), none
+        longer; wall time of lp bench 0-149, side by side, 1.04x in all (a case up to ~1.7x: seed 13 1.07 -> 1.84 s).
+        Stage 2's floored count is what the window reports: counted after this step, a crawl lifted just off its
+        floor stopped the knot refinements that found the fast profile (bench seed 251 1.36x)."""
+        t0 = self._travel(chat, s, Q, q_min)
+        q = np.maximum(self._eval(chat * Q, s)[0], q_min) / Q
+        ds = np.zeros(s.size)
+        ds[1:] += 0.5 * np.diff(s)
+        ds[:-1] += 0.5 * np.diff(s)
+        wt = np.asarray(self._mats(s)[0].T @ (ds * q**-1.5), dtype=np.float64)
+        wt = wt / float(np.max(np.abs(wt)))
+        try:
+            c3, _ = self._cuts(self._run(rows, wt, lo, col_hi), rows, wt, lo, col_hi, Q, s_check, c_star)
+        except (InfeasibleError, SolverFailure):
+            return chat
+        return c3 if self._travel(c3, s, Q, q_min) < t0 else chat
 
     def _stage1(
         self, base: _Rows, g: PathSamples, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray, Q: float,
@@ -2104,6 +2160,8 @@ class WindowLP:
         inf = highspy.kHighsInf
         if rows.highs is not None:
             h = rows.highs
+            # (the objective as given: ``_time_stage`` re-solves a model with another)
+            h.changeColsCost(w.size, np.arange(w.size, dtype=np.int32), np.ascontiguousarray(-w, dtype=np.float64))
             for idx, lo_c, hi_c in rows.bound_changes:  # (in the rows' scales as passed)
                 r = rows.row_scale[idx]
                 h.changeRowsBounds(  # type: ignore[attr-defined]  # (in highspy, not in its stubs)
