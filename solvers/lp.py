@@ -207,8 +207,10 @@ DUAL_EDGE_WEIGHT = 1
 SIMPLEX_SCALE = 0
 #: ... and the scaling of the second try of a window that did not reach optimality (with the other presolve).
 SIMPLEX_SCALE_RETRY = 2
-#: ... and its simplex (``simplex_strategy``: 4 the primal; the model's later runs, its cut rounds hot-started from
-#: the basis, go back to the dual, 1).  Bench seed 11994 (lp): windows of 1,256-2,243 rows x 40-88 columns end
+#: HiGHS's simplex (``simplex_strategy``): the dual (1, HiGHS's default) ...
+SIMPLEX_STRATEGY = 1
+#: ... and the second try's (4, the primal; the model's later runs, its cut rounds hot-started from the basis, go
+#: back to SIMPLEX_STRATEGY).  Bench seed 11994 (lp): windows of 1,256-2,243 rows x 40-88 columns end
 #: unknown in the dual simplex in 0.004-0.13 s (Devex: "possibly dual unbounded" at every iteration, each a
 #: rebuild), and the dual retry stalled the same way until its time limit (0.6-0.9 s of CPU, 8 retries); the
 #: primal simplex ends 5 of them in a few ms (3 still run to the limit).  11.0 -> 5.7 s of CPU, the same motion
@@ -457,12 +459,14 @@ def _index_type(nnz: int, ncols: int) -> type[np.signedinteger[Any]]:
 
 
 def new_highs() -> highspy.Highs:
-    """A HiGHS instance set up as the LP windows run it: quiet, PRESOLVE, DUAL_EDGE_WEIGHT, SIMPLEX_SCALE."""
+    """A HiGHS instance set up as the LP windows run it: quiet, PRESOLVE, DUAL_EDGE_WEIGHT, SIMPLEX_SCALE,
+    SIMPLEX_STRATEGY."""
     h = highspy.Highs()  # type: ignore[no-untyped-call]
     h.setOptionValue("output_flag", False)
     h.setOptionValue("presolve", PRESOLVE)
     h.setOptionValue("simplex_dual_edge_weight_strategy", DUAL_EDGE_WEIGHT)
     h.setOptionValue("simplex_scale_strategy", SIMPLEX_SCALE)
+    h.setOptionValue("simplex_strategy", SIMPLEX_STRATEGY)
     return h
 
 
@@ -1587,10 +1591,14 @@ class WindowLP:
         return WindowResult(chat2[:n] * Q, c_star[:n], self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1],
                             pts2[2], n_floored, self._shapes(chat2 * Q))
 
-    def _travel(self, chat: FloatArray, s: FloatArray, Q: float, q_min: float) -> float:
-        """T = integral ds / sqrt(q) over the points s (K,) (trapezoids), q at least q_min (mm^2/s^2), for a
-        solution chat (in units of Q): the window's travel time, s."""
-        f = 1.0 / np.sqrt(np.maximum(self._eval(chat * Q, s)[0], q_min))
+    def _q_at_least(self, chat: FloatArray, s: FloatArray, Q: float, q_min: float) -> FloatArray:
+        """q (K,) of a solution chat (in units of Q) at the points s (K,), at least q_min (mm^2/s^2)."""
+        return np.maximum(self._eval(chat * Q, s)[0], q_min)
+
+    @staticmethod
+    def _travel(q: FloatArray, s: FloatArray) -> float:
+        """T = integral ds / sqrt(q) over the points s (K,) (trapezoids) for q (K,) there: a travel time, s."""
+        f = 1.0 / np.sqrt(q)
         return float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(s)))
 
     def _time_stage(self, chat: FloatArray, rows: _Rows, lo: FloatArray, col_hi: FloatArray, Q: float,
@@ -1606,24 +1614,24 @@ class WindowLP:
         so the LP here maximises sum_j w_j c_j with w_j = integral B_j(s) max(q, q_min)^(-3/2) ds (stage 2's q on
         the verification grid s (K,), trapezoids; q_min the window's smallest floor, so that the rest ends, where q
         goes to 0, do not take all the weight), then its cut rounds.  The rows are the same, so the result keeps
-        every limit stage 2 keeps; it is kept only if its T (``_travel``) is lower.  One such step (a second gained
+        every limit stage 2 keeps; it is kept only if its T (``_travel``) is lower.  (With HiGHS only: Clarabel
+        would solve the window from scratch once more.)  One such step (a second gained
         little more at 2.5x the added CPU: lp bench 0-299, 48 shorter against 47).  Session 51: lp bench 0-299,
         47 runs shorter (276 0.558x, 46 0.945x, 255 0.949x), none longer; cam 0-59 12 shorter (35 0.962x), none
         longer; wall time of lp bench 0-149, side by side, 1.04x in all (a case up to ~1.7x: seed 13 1.07 -> 1.84 s).
         Stage 2's floored count is what the window reports: counted after this step, a crawl lifted just off its
         floor stopped the knot refinements that found the fast profile (bench seed 251 1.36x)."""
-        t0 = self._travel(chat, s, Q, q_min)
-        q = np.maximum(self._eval(chat * Q, s)[0], q_min) / Q
+        q = self._q_at_least(chat, s, Q, q_min)
         ds = np.zeros(s.size)
         ds[1:] += 0.5 * np.diff(s)
         ds[:-1] += 0.5 * np.diff(s)
-        wt = np.asarray(self._mats(s)[0].T @ (ds * q**-1.5), dtype=np.float64)
+        wt = np.asarray(self._mats(s)[0].T @ (ds * (q / Q) ** -1.5), dtype=np.float64)
         wt = wt / float(np.max(np.abs(wt)))
         try:
             c3, _ = self._cuts(self._run(rows, wt, lo, col_hi), rows, wt, lo, col_hi, Q, s_check, c_star)
         except (InfeasibleError, SolverFailure):
             return chat
-        return c3 if self._travel(c3, s, Q, q_min) < t0 else chat
+        return c3 if self._travel(self._q_at_least(c3, s, Q, q_min), s) < self._travel(q, s) else chat
 
     def _stage1(
         self, base: _Rows, g: PathSamples, w: FloatArray, col_lo: FloatArray, col_hi: FloatArray, Q: float,
@@ -2214,7 +2222,7 @@ class WindowLP:
             h.setOptionValue("simplex_strategy", SIMPLEX_STRATEGY_RETRY)
             h.clearSolver()
             self._timed_run(h)
-            h.setOptionValue("simplex_strategy", 1)  # (the dual again for the cut rounds' hot starts)
+            h.setOptionValue("simplex_strategy", SIMPLEX_STRATEGY)  # (the dual again for the cut rounds' hot starts)
             status = h.getModelStatus()
         self.iterations += int(h.getInfo().simplex_iteration_count)
         if status == highspy.HighsModelStatus.kInfeasible:

@@ -51,6 +51,7 @@ def test_first_runs_use_the_configured_options(monkeypatch: pytest.MonkeyPatch) 
     schedule(tp, router(), opt)
     assert seen, "no HiGHS run"
     assert set(seen) == {(lp.SIMPLEX_SCALE, lp.PRESOLVE, DUAL)}, seen
+    assert lp.SIMPLEX_STRATEGY == DUAL
 
 
 def test_a_run_short_of_optimality_is_solved_again_scaled(monkeypatch: pytest.MonkeyPatch) -> None:
