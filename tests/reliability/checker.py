@@ -9,7 +9,8 @@ everything itself:
 - velocity, acceleration and jerk by finite differences of the sampled
   positions, the machine held at rest before the first and after the last
   sample (a k-th difference is a positive-kernel average of the k-th
-  derivative, so it never over-reports a smooth motion);
+  derivative, so it never over-reports a smooth motion; ``tests.fdcheck``,
+  the tests' own differences);
 - control signal u = M a + b v + c + d sign(v) and servo error
   e = Kv v + Ka a + Kj j from those differences (central v, j at each point);
 - distance of every sample from the path: nearest point of a dense polyline of
@@ -34,6 +35,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from tests.fdcheck import REST_PAD, fd_drive, fd_kinematics
+
 FloatArray = NDArray[np.float64]
 
 #: Allowed overshoot of every limit (issue 5: 1.01 x).
@@ -44,8 +47,6 @@ PATH_TOL_MM = 1e-3
 END_TOL_MM = 1e-6
 #: Period jitter allowed in t, relative to Ts: t_k = k Ts to rounding.
 PERIOD_TOL = 1e-9
-#: Samples of rest padding before and after the motion for the differences.
-REST_PAD = 4
 #: Junction angle (degrees) above which the checker demands a stop; the scheduler stops
 #: above 0.5 degrees, the margin keeps near-threshold junctions out of the test.
 CORNER_CHECK_DEG = 1.0
@@ -412,29 +413,6 @@ def _nearest_brackets(
 
 def _dist(seg: Segment, u: FloatArray, x: FloatArray) -> FloatArray:
     return np.asarray(np.linalg.norm(seg.points(u) - x, axis=1), dtype=np.float64)
-
-
-def fd_kinematics(position: FloatArray, Ts: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Velocity, acceleration and jerk by finite differences, with REST_PAD samples of rest at both ends."""
-    p = np.concatenate([np.repeat(position[:1], REST_PAD, axis=0), position,
-                        np.repeat(position[-1:], REST_PAD, axis=0)])
-    return np.diff(p, axis=0) / Ts, np.diff(p, n=2, axis=0) / Ts**2, np.diff(p, n=3, axis=0) / Ts**3
-
-
-def fd_drive(position: FloatArray, Ts: float, drive: dict[str, FloatArray],
-             kinematics: tuple[FloatArray, FloatArray, FloatArray] | None = None) -> tuple[FloatArray, FloatArray]:
-    """u and e at every padded interior point: central v, second difference a, central j.
-
-    ``kinematics``: ``fd_kinematics(position, Ts)`` if already at hand (a second copy of the three (K, 3)
-    differences is 0.7 GB at cam-bench seed 100's 10.4 M samples, checked under the bench's 8 GiB)."""
-    v, a, j = fd_kinematics(position, Ts) if kinematics is None else kinematics
-    L = a.shape[0] + 2
-    vc = 0.5 * (v[1 : L - 3] + v[2 : L - 2])
-    ac = a[1 : L - 3]
-    jc = 0.5 * (j[0 : L - 4] + j[1 : L - 3])
-    u = drive["M"] * ac + drive["b"] * vc + drive["c"] + drive["d"] * np.sign(vc)
-    e = drive["Kv"] * vc + drive["Ka"] * ac + drive["Kj"] * jc
-    return u, e
 
 
 @dataclass
