@@ -128,6 +128,27 @@ def test_an_infeasible_problem_is_not_reported_solved() -> None:
     assert res.status != "Solve_Succeeded"
 
 
+@pytest.mark.parametrize("gap", [0.0, 1e-10, 1e-6, 1e-3])
+def test_a_start_on_a_linear_rows_upper_bound_is_not_held_there(gap: float) -> None:
+    """min sum 1 / x_i (a travel time: singular at x = 0, pulling every x up) under linear caps x_i + x_i+1 <= 2
+    (rows of g, as the NLP's feed caps), from x0 = 1 - gap: every cap within gap of its bound.  The optimum is
+    x = 1, f = n.  The step keeps linear rows feasible only at their lower bounds (f >= 0): kept at the caps
+    too, a start within rounding of them (gap 1e-10, 1e-6) held every step under 1e-10 and failed its line
+    search (cam seed 1215 lp+nlp, whose windows went to Ipopt)."""
+    n = 6
+    x = ca.SX.sym("x", n)
+    p = ca.SX.sym("p", n)
+    prob = {"x": x, "p": p, "f": ca.sum1(p / x), "g": ca.vertcat(*[x[i] + x[i + 1] for i in range(n - 1)])}
+    args = {"x0": np.full(n, 1.0 - gap), "p": np.ones(n), "lbx": np.full(n, 1e-3), "ubx": np.full(n, np.inf),
+            "lbg": np.full(n - 1, -np.inf), "ubg": np.full(n - 1, 2.0)}
+    ipm = DenseIpm(prob)
+    assert ipm.linear[: n - 1].all()  # (the caps are linear rows)
+    res = ipm.solve(**args)
+    assert res.success, res.status
+    assert abs(float(np.sum(1.0 / res.x)) - n) <= F_RTOL * n
+    _kkt(prob, args, res)
+
+
 def _random_problem(seed: int, n: int, m: int, convex: bool) -> tuple[dict[str, Any], dict[str, Any]]:
     """min sum w_i / (x_i + 1) + |x - c|^2 / 10 (strictly convex for x > -1) over banded rows like an NLP
     window's: row k reads x_i .. x_i+2.  Convex: a_k . x + b_k |x_(i..i+2)|^2 <= 1 (b_k >= 0); non-convex:
