@@ -207,6 +207,24 @@ def test_failed_sampling_process_leaves_its_half_to_this_one(monkeypatch: pytest
         np.testing.assert_array_equal(getattr(two, col), getattr(one, col), err_msg=col)
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_held_samples_are_placed_before_the_pieces_own(monkeypatch: pytest.MonkeyPatch, workers: int) -> None:
+    """``_sample_piece(..., held)``: the held rows, then the piece's own, bit for bit ``concat_samples`` of the
+    two (in one process, and with the second half forked), without copying the piece's own rows."""
+    tp, prof, K = _piece()
+    whole = _sample(tp, prof, K, 1)
+    H = pipeline.HELD_SAMPLES
+    held = pipeline._rows(_sample(tp, prof, K // 3, 1), K // 3 - H, K // 3)
+    calls = _split_samples(monkeypatch)
+    out = pipeline._sample_piece(tp, tp.pieces[0], prof, PieceTiming.build(prof), 0.0, K // 3, K, 1e-3, workers,
+                                 held=held)
+    assert calls == ([(K - K // 3) // 2] if workers == 2 else [K - K // 3])
+    want = pipeline.concat_samples([held, pipeline._rows(whole, K // 3, K)])
+    for col in COLUMNS:
+        np.testing.assert_array_equal(getattr(out, col), getattr(want, col), err_msg=col)
+    np.testing.assert_array_equal(out.position, whole.position[K // 3 - H :])
+
+
 #: Motion time of the default windows (``pipeline.lp_window``) against DEFAULT_LP_WINDOW ones, relative: the
 #: same receding-horizon optimum over windows of other lengths (18.35 m at 4.63 mm: 193.9609 vs 193.9606 s).
 WINDOW_MOTION_RTOL = 1e-4
