@@ -1435,8 +1435,8 @@ def _sample_piece(
     (elementwise in v, a, j: added where the samples are released).  With ``workers`` > 1 and at least
     SAMPLE_SPLIT_MIN samples, a forked process computes the second half (if it fails, this one does).
     ``held``: samples computed before these and not yet released (``_Carry.held``), placed first in the same
-    columns, as ``concat_samples([held, own])`` without u and e, but without copying the piece's own (cam
-    seed 45 lp+nlp, 3.3 M samples: that copy was 1.1 of its 6.6 s of CPU)."""
+    columns: ``concat_samples([held, own])`` without u and e, but without a copy of the piece's own samples,
+    which held its columns twice while it was made (timed, the CPU saved was within the machine's noise)."""
     t_own = np.arange(k_lo, k_hi, dtype=np.float64) * Ts
     H = 0 if held is None else held.t.size
     K = H + t_own.size

@@ -168,10 +168,10 @@ def test_pieces_streamed_in_blocks_are_the_one_shot_schedule(
     sample, streamed = P._sample_piece, P.schedule_stream
     active = [False]
 
-    def counted(*a: Any) -> P.TimeSamples:
-        out = sample(*a)
+    def counted(*a: Any, **kw: Any) -> P.TimeSamples:
+        out = sample(*a, **kw)
         if active[0]:  # (the samples computed: the held ones, passed in, lead the output)
-            held = a[10] if len(a) > 10 else None
+            held = kw.get("held", a[10] if len(a) > 10 else None)
             calls.append(int(out.t.size) - (0 if held is None else int(held.t.size)))
         return out
 
