@@ -217,10 +217,8 @@ SIMPLEX_STRATEGY = 1
 #: (session 51).
 SIMPLEX_STRATEGY_RETRY = 4
 #: Stage 2 followed, where it holds control points at their floor, by one LP step on the travel time
-#: (``WindowLP._time_stage``; with ``LimitSet.time_stage``: method lp), and the q the step's weights read at least
-#: this share of Q in a window without floors.
+#: (``WindowLP._time_stage``; with ``LimitSet.time_stage``: method lp).
 TIME_STAGE = True
-TIME_Q_MIN = 1e-8
 #: Column scaling (``WindowLP._col_scale``): basis values below this do not bound a column's scale,
 #: and no column is scaled below this share of the window's Q.
 COL_SCALE_MIN_BASIS = 0.1
@@ -1585,8 +1583,8 @@ class WindowLP:
                 self.inherited *= 2
         n_floored = floored(chat2, lo_i)  # (stage 2's count: what the knot refinements go by)
         if TIME_STAGE and self.lim.time_stage and n_floored and self.solver == "highs" and last_rows:
-            pos = lo_i[:n][lo_i[:n] > 0.0]
-            q_min = float(np.min(pos)) * Q if pos.size else TIME_Q_MIN * Q
+            # (the smallest floor: a floored control point is one at a floor > 0 among the first n)
+            q_min = float(np.min(lo_i[:n][lo_i[:n] > 0.0])) * Q
             chat2 = self._time_stage(chat2, last_rows[0], lo_i, col_hi, Q, s_check, c_star, g_fine.s, q_min)
         return WindowResult(chat2[:n] * Q, c_star[:n], self.iterations, pts1[0] + pts2[0], pts1[1] + pts2[1],
                             pts2[2], n_floored, self._shapes(chat2 * Q))
