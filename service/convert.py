@@ -23,7 +23,7 @@ from geometry import GeometryError, NurbsSegment, Toolpath, arcblend, gcode, pri
 from service.errors import too_large
 from service.schemas import ArcIn, LineIn, MachineIn, NurbsIn, PolylineIn, ScheduleRequest
 from solvers.machine import AXES, Axis, AxisLimits, DriveModel, Machine, derive_limits, preset
-from solvers.pipeline import Options, Schedule, TimeSamples, motion_time_floor, plan_piece
+from solvers.pipeline import Options, Schedule, TimeSamples, least_intervals, motion_time_floor
 from solvers.timing import PieceProfile
 
 FloatArray = NDArray[np.float64]
@@ -142,7 +142,7 @@ def control_point_count(req: ScheduleRequest) -> int:
 
 def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) -> None:
     """Raise a 413 ServiceError when the work certainly exceeds ``budget`` (estimates are lower bounds)."""
-    intervals = sum(plan_piece(p, machine, opts, toolpath=tp).n_int for p in tp.pieces)
+    intervals = sum(least_intervals(tp, p, machine, opts) for p in tp.pieces)
     if intervals > budget.max_intervals:
         raise too_large(
             f"{intervals} knot intervals exceed the {budget.max_intervals} allowed in {budget.where}",

@@ -835,7 +835,13 @@ def _min_ratio(X: FloatArray, num: FloatArray, square: bool) -> FloatArray:
         return np.asarray(np.min(np.where(x > AXIS_EPS, num[None, :] / x, np.inf), axis=1), dtype=np.float64)
 
 
-#: Newton steps for the time t of a distance sigma from rest in ``_reach_q`` (from above, within 26 % of t: 6 reach
+def tangential_bound(X: FloatArray, limit: FloatArray) -> FloatArray:
+    """min over the moving axes of limit_x / |X_x| (K,; inf where no axis moves): with X = x_s the bound on the
+    tangential feed, acceleration or jerk that a per-axis limit sets where the path's curvature terms are left out."""
+    return _min_ratio(X, limit, False)
+
+
+#: Newton steps for the time t of a distance sigma from rest in ``reach_q`` (from above, within 26 % of t: 6 reach
 #: the last place).
 REACH_NEWTON_STEPS = 8
 
@@ -846,7 +852,7 @@ def _ramp(t: Any, a0: Any, J: Any) -> tuple[Any, Any]:
     return t * t * (a0 / 2.0 + J * t / 6.0), t * (a0 + J * t / 2.0)
 
 
-def _reach_q(sig: FloatArray, a0: float, J: FloatArray, A: FloatArray) -> FloatArray:
+def reach_q(sig: FloatArray, a0: float, J: FloatArray, A: FloatArray) -> FloatArray:
     """``WindowLP._rest_reach``'s q (K,) at distances sig >= 0 from rest (K,), mm, with the step a0 (mm/s^2) and the
     bounds J (K,, mm/s^3) and A (K,, mm/s^2)."""
     a0v = np.minimum(a0, A)
@@ -864,9 +870,20 @@ def _reach_q(sig: FloatArray, a0: float, J: FloatArray, A: FloatArray) -> FloatA
     return np.asarray(q, dtype=np.float64)
 
 
+def reach_distance(V: float, a0: float, J: float, A: float) -> float:
+    """How far (mm) ``reach_q``'s ramp from rest (the step a0, the jerk J up to the acceleration A, then A) takes
+    to reach the feed V (mm/s): no feed under those bounds reaches V sooner."""
+    a0 = min(a0, A)
+    s1, v1 = _ramp((A - a0) / J, a0, J)
+    if V <= v1:
+        t = (math.sqrt(a0 * a0 + 2.0 * J * V) - a0) / J
+        return float(_ramp(t, a0, J)[0])
+    return float(s1 + (V * V - v1 * v1) / (2.0 * A))
+
+
 def _reach_travel(T: float, a0: float, J: float, A: float, V: float) -> float:
     """How far (mm) a feed from rest can get in T seconds under the step a0, the jerk J and the acceleration A
-    (``_reach_q``'s ramp, then A) and the feed V (at most V T)."""
+    (``reach_q``'s ramp, then A) and the feed V (at most V T)."""
     a0 = min(a0, A)
     t1 = min(T, (A - a0) / J) if J > 0.0 else 0.0
     s1, v1 = _ramp(t1, a0, J)
@@ -882,6 +899,32 @@ def velocity_bound(g: PathSamples, lim: LimitSet) -> FloatArray:
     if g.feed_limit is not None:
         ub = np.minimum(ub, g.feed_limit**2)
     return np.asarray(ub, dtype=np.float64)
+
+
+def acceleration_bound(g: PathSamples, amax: FloatArray) -> FloatArray:
+    """Upper bound on q at points g (K,) from the acceleration limits alone: the largest q for which some
+    sddot holds every axis' |a_x| = |x_ss q + x_s sddot| <= amax_x (the maximum velocity curve of the
+    acceleration rows; inf where nothing bounds it).
+
+    An axis with x_s = 0 (|x_s| <= AXIS_EPS; x_ss too is read as 0 where under it) bounds q by amax / |x_ss|.
+    An axis with x_s != 0 holds sddot in [-r q - w, -r q + w] (r = x_ss / x_s, w = amax / |x_s|), and two such
+    intervals meet, for every pair (by Helly's theorem in one dimension, for all the axes), where
+    |r_1 - r_2| q <= w_1 + w_2."""
+    beta = g.d1
+    alpha = np.where(np.abs(g.d2) <= AXIS_EPS, 0.0, g.d2)  # (rounding residues of a straight line's 0)
+    still = np.abs(beta) <= AXIS_EPS
+    safe = np.where(still, 1.0, beta)
+    r = np.where(still, 0.0, alpha / safe)
+    w = np.where(still, np.inf, amax[None, :] / np.abs(safe))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ub = np.min(np.where(still, amax[None, :] / np.abs(alpha), np.inf), axis=1)
+        n_ax = beta.shape[1]
+        for i in range(n_ax):
+            for k in range(i + 1, n_ax):
+                both = ~still[:, i] & ~still[:, k]
+                pair = (w[:, i] + w[:, k]) / np.abs(r[:, i] - r[:, k])
+                ub = np.minimum(ub, np.where(both, pair, np.inf))
+    return np.asarray(np.where(np.isnan(ub), np.inf, ub), dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -1349,7 +1392,7 @@ class WindowLP:
         for s_rest, sign, a0, sig_grid, J_run, A_run, factor, near in ends:
             sig = sign * (s - s_rest)
             at = np.minimum(np.searchsorted(sig_grid, sig, side="left"), sig_grid.size - 1)
-            reach = _reach_q(np.maximum(sig, 0.0), a0, J_run[at], A_run[at])
+            reach = reach_q(np.maximum(sig, 0.0), a0, J_run[at], A_run[at])
             if factor != 1.0:  # (within 3 Ts of travel of a corner, or of any rest end: ``_step_reach_factor``)
                 reach = np.where(sig <= near, factor * reach, reach)
             out = np.minimum(out, np.where(sig < 0.0, np.inf, reach))

@@ -133,6 +133,11 @@ class Machine:
             worst = max(worst, D)
         return worst
 
+    def top_feed(self) -> float:
+        """The fastest any axis may move (mm/s): its vmax, at most the feed cap (as in ``stopping_distance``)."""
+        v = max(ax.limits.vmax for ax in self.axes)
+        return v if self.feed_max is None else min(v, self.feed_max)
+
     @property
     def has_drives(self) -> bool:
         """Whether every axis has a drive model (needed for control signal and servo error)."""

@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from geometry.toolpath import PathSamples, Piece, Toolpath
-from solvers import blas, kinematics, verify
+from solvers import blas, kinematics, lp, verify
 from solvers.errors import (
     InfeasibleError,
     InvalidMachineError,
@@ -61,6 +61,7 @@ from solvers.lp import (
     WindowLP,
     WindowResult,
     WindowSpec,
+    acceleration_bound,
     step_cap,
     v_step_limit,
     velocity_bound,
@@ -102,6 +103,38 @@ MIN_INTERVALS = 16
 #: 16 only: motion -3.0 % (lp) and -5.95 % (lp+nlp) in the geometric mean, none longer by more
 #: than 2 %, CPU x1.07 (lp) and x1.11 (lp+nlp).
 REST_MIN_INTERVALS = 64
+#: A piece on the default knot spacing is first solved on knots the machine's top feed (``Machine.top_feed``)
+#: covers in KNOT_FLOOR_SAMPLES sample periods, where that is at least KNOT_FLOOR_MIN_GAIN times coarser than its
+#: plan's (``floor_intervals``), and that profile is kept only if its motion time is within KNOT_FLOOR_TOL of a
+#: lower bound on any motion along the piece (``piece_time_bound``; the plan's knots cannot beat it either), else
+#: the piece is solved as without it.  The default knots are 0.1 x the stopping distance, which under a low feed cap
+#: falls as the cap squared (the cap^1.5 where the jerk binds) while the motion time only grows as its inverse:
+#: the flower at a 10 mm/s cap ran on 14 um knots (29,193 control points), 1.9 s of CPU (lp) and 20.7 s (lp+nlp)
+#: for 40.8 s of motion; a 30 mm line at 1 mm/s on 0.4 um knots, 3.7 / 6.1 s for 30 s.  Where the cap binds
+#: along the whole piece the knots only shape the ramps at its rest ends (and the steps of its programmed
+#: feeds), each worth a few sample periods.  An unconditional floor (session 52, branch ``tried-knot-floor``)
+#: lost motion where the feed does not sit at its cap: lp bench seeds 0-149, 28 longer (seed 115 1.082x).
+KNOT_FLOOR_SAMPLES = 10
+KNOT_FLOOR_MIN_GAIN = 2
+KNOT_FLOOR_TOL = 2e-3
+#: ... and where the floor's profile is over its bound, the piece is solved on this many times its knots, and so on
+#: while they stay KNOT_FLOOR_MIN_GAIN times coarser than the plan's (``solve_piece``): the ramps at the rest ends
+#: cost up to ~5 sample periods each on the floor's knots, 0.55 % of a 2.1 s piece under lp+nlp, whose LP has no
+#: rest shapes (bench seed 12 at an 8.3 mm/s cap: 209 floor intervals against a plan of 323,930)
+KNOT_FLOOR_LEVEL_STEP = 4
+#: ... on pieces at least 1 / KNOT_FLOOR_STOP_SHARE stopping distances long: on shorter ones the ramps at the rest
+#: ends are much of the motion, where the bound is the loosest (its reach leaves out the jerk's rounding into the
+#: cruise: a straight line at the router's feeds reads 0.95-0.99 of the S-curve) and the floor's coarse knots cost
+#: the most, and its profile was rarely kept (lp bench seeds 0-149: the pieces rejected had D / L 3.0e-3 to 7.8e-3,
+#: and 4 of 5 on 64-165 floor intervals; those kept 4.2e-4 and 1.2e-3; each rejected one a coarse solve wasted)
+KNOT_FLOOR_STOP_SHARE = 2e-3
+#: ``piece_time_bound``'s grid points per floor knot interval, and the most evaluated at once.
+KNOT_FLOOR_GRID = 4
+KNOT_FLOOR_CHUNK = 65536
+KNOT_FLOOR_END_POINTS = 48
+KNOT_FLOOR_END_FIRST = 1e-9
+#: ``piece_time_bound``'s tangential jerk bound without jerk rows (mm/s^3: the reach is the acceleration's alone).
+REACH_NO_JERK = 1e300
 #: Turns passed at speed listed in ``diagnostics.passed_turns`` (those with the lowest feed caps).
 PASSED_TURNS_LISTED = 10
 #: Default knot spacing as a fraction of the machine's stopping distance.
@@ -570,6 +603,147 @@ def rest_intervals(piece: Piece, machine: Machine, opt: Options) -> int | None:
     return REST_MIN_INTERVALS if n_int < REST_MIN_INTERVALS else None
 
 
+def first_plan(
+    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet,
+) -> tuple[int | None, float | None]:
+    """The knot intervals a piece is first solved on and the bound that profile must keep to be kept
+    (``solve_piece``'s ``first_n_int``, ``first_bound``): ``rest_intervals`` (no bound), else
+    ``floor_intervals``, else (None, None)."""
+    first = rest_intervals(piece, machine, opt)
+    if first is not None:
+        return first, None
+    knot_floor = floor_intervals(toolpath, piece, machine, opt, lim)
+    return (None, None) if knot_floor is None else knot_floor
+
+
+def floor_intervals(
+    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet,
+) -> tuple[int, float] | None:
+    """The knot floor's first plan of a piece (``KNOT_FLOOR_SAMPLES``): (knot intervals, the most motion time (s)
+    its profile may take to be kept: KNOT_FLOOR_TOL over ``piece_time_bound``), or None where the floor does not
+    apply (``floor_count``)."""
+    n_f = floor_count(piece, machine, opt)
+    if n_f is None:
+        return None
+    return n_f, (1.0 + KNOT_FLOOR_TOL) * piece_time_bound(toolpath, piece, lim, KNOT_FLOOR_GRID * n_f)
+
+
+def floor_count(piece: Piece, machine: Machine, opt: Options) -> int | None:
+    """The knot intervals of a piece on the knot floor (``KNOT_FLOOR_SAMPLES``), or None where the floor does not
+    apply: an explicit ``Options.knot_spacing``; a piece under 1 / KNOT_FLOOR_STOP_SHARE stopping distances long;
+    knots (at least REST_MIN_INTERVALS) not at least KNOT_FLOOR_MIN_GAIN times coarser than the plan's."""
+    if opt.knot_spacing is not None:
+        return None
+    if machine.stopping_distance() > KNOT_FLOOR_STOP_SHARE * piece.length:
+        return None
+    n0 = plan_piece(piece, machine, opt).n_int
+    n_f = max(REST_MIN_INTERVALS,
+              math.ceil(piece.length / (KNOT_FLOOR_SAMPLES * opt.sample_period * machine.top_feed()) - 1e-9))
+    if KNOT_FLOOR_MIN_GAIN * n_f > n0:
+        return None
+    return n_f
+
+
+def least_intervals(toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options) -> int:
+    """The fewest knot intervals a piece is solved on (a lower bound on its LP's work): the knot floor's where it
+    applies (``floor_count``; its profile may yet be rejected), else its plan's."""
+    n_f = floor_count(piece, machine, opt)
+    return n_f if n_f is not None else plan_piece(piece, machine, opt, toolpath=toolpath).n_int
+
+
+def piece_time_bound(
+    toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int, span: tuple[float, float] | None = None,
+) -> float:
+    """A lower bound (s) on the time of any motion along the piece under ``lim``'s limits, from rest to rest, on m
+    uniform intervals:
+
+        T = sum_i (s_i+1 - s_i) / sqrt(max(q(s_i), q(s_i+1))),
+        q = min(q_v, q_a, reach from the start, reach to the end)
+
+    q_v: ``lp.velocity_bound`` (the feed caps and every axis' vmax); q_a: ``lp.acceleration_bound`` (amax);
+    the reach: ``lp.reach_q``, the fastest feed from rest under the tangential bounds of the acceleration step
+    at rest, the acceleration and the jerk (min_x a_rest_x, amax_x, jmax_x / |x_s,x|, the latter two their
+    largest from the rest end to the point, as ``WindowLP._rest_reach``).  A bound where q is monotone over
+    each interval (it is piecewise constant on lines and under a binding feed cap, between the ramps at the
+    ends).  The first interval at each end is split geometrically (KNOT_FLOOR_END_POINTS points from
+    KNOT_FLOOR_END_FIRST of it): the reach's 1 / sqrt(q) is singular at rest (q ~ sigma^(2/3) under the jerk),
+    and one interval read the first one's time 1.5 x short.
+
+    ``span`` (lo, hi), piece-local mm, if given: the time over the grid's intervals inside [lo, hi] only.
+
+    In bounded memory: the grid is walked KNOT_FLOOR_CHUNK intervals at a time, and the reach is taken only
+    within ``_reach_extent`` of each end (beyond it, it is over every q_v); the end's running maxima come from a
+    pass over that stretch first."""
+    geometry = _local(toolpath, piece)
+    L = piece.length
+    ends = L / m * np.geomspace(KNOT_FLOOR_END_FIRST, 1.0, KNOT_FLOOR_END_POINTS, endpoint=False)
+    reach = _reach_extent(lim)
+
+    def grid(i0: int, i1: int) -> FloatArray:
+        """The points of uniform intervals [i0, i1) and the end points among them."""
+        s = L * np.arange(i0, i1 + 1, dtype=np.float64) / m
+        if i0 == 0:
+            s = np.union1d(s, ends)
+        if i1 == m:
+            s = np.union1d(s, L - ends)
+        return s
+
+    def bounds(g: PathSamples) -> tuple[FloatArray, FloatArray]:
+        """The tangential bounds (A, J) at g (K,) each."""
+        A = lp.tangential_bound(g.d1, lim.amax)
+        J = lp.tangential_bound(g.d1, lim.jmax) if lim.jerk else np.full(A.size, REACH_NO_JERK)
+        return A, J
+
+    # the end's stretch: its running maxima from the end
+    k_tail = max(0, min(m, math.floor((L - reach) / L * m)))
+    s_tail = grid(k_tail, m)
+    g_tail = geometry(s_tail)
+    A_tail, J_tail = (np.maximum.accumulate(x[::-1])[::-1] for x in bounds(g_tail))
+    a0_end = float(lp.tangential_bound(g_tail.d1[-1:], lim.a_rest)[0])
+    del g_tail
+    total = 0.0
+    A_run = J_run = 0.0
+    a0_start = 0.0
+    for i0 in range(0, m, KNOT_FLOOR_CHUNK):
+        i1 = min(m, i0 + KNOT_FLOOR_CHUNK)
+        s = grid(i0, i1)
+        g = geometry(s)
+        q = np.minimum(velocity_bound(g, lim), acceleration_bound(g, lim.amax))
+        if i0 == 0:
+            a0_start = float(lp.tangential_bound(g.d1[:1], lim.a_rest)[0])
+        if s[0] <= reach:
+            A, J = bounds(g)
+            A = np.maximum(np.maximum.accumulate(A), A_run)
+            J = np.maximum(np.maximum.accumulate(J), J_run)
+            A_run, J_run = float(A[-1]), float(J[-1])
+            head = s <= reach
+            q[head] = np.minimum(q[head], lp.reach_q(s[head], a0_start, J[head], A[head]))
+        tail = s >= s_tail[0]
+        if tail.any():
+            at = np.searchsorted(s_tail, s[tail])
+            q[tail] = np.minimum(q[tail], lp.reach_q(L - s[tail], a0_end, J_tail[at], A_tail[at]))
+        dt = np.diff(s)
+        with np.errstate(divide="ignore"):
+            dt = dt / np.sqrt(np.maximum(q[1:], q[:-1]))
+        if span is not None:
+            tol = 1e-9 * L / m
+            dt = dt[(s[:-1] >= span[0] - tol) & (s[1:] <= span[1] + tol)]
+        total += float(np.sum(dt))
+    return total
+
+
+def _reach_extent(lim: LimitSet) -> float:
+    """How far (mm) from a rest end the reach (``lp.reach_q``) can be under the largest q_v anywhere: the ramp to
+    sqrt(q_top) under the smallest tangential bounds any path has (an axis' limit over |x_s,x| <= 1: the least of
+    the axes' a_rest, amax, jmax), q_top = min(Fmax^2, 3 max_x vmax_x^2) (velocity_bound is min_x vmax_x^2 / x_s,x^2,
+    and some |x_s,x| >= 1 / sqrt(3))."""
+    q_top = 3.0 * float(np.max(lim.vmax)) ** 2
+    if lim.feed_max is not None:
+        q_top = min(q_top, lim.feed_max**2)
+    J = float(np.min(lim.jmax)) if lim.jerk else REACH_NO_JERK
+    return lp.reach_distance(math.sqrt(q_top), float(np.min(lim.a_rest)), J, float(np.min(lim.amax)))
+
+
 def _local(toolpath: Toolpath, piece: Piece) -> Any:
     """The piece's geometry at piece-local s, as the solvers see it.
 
@@ -598,6 +772,7 @@ def solve_piece(
     on_lp: Callable[[FloatArray, list[int]], None] | None = None,
     first_n_int: int | None = None,
     plain: list[tuple[PieceProfile, list[int]]] | None = None,
+    first_bound: float | None = None,
 ) -> tuple[PieceProfile, list[int]]:
     """Walk LP windows over one piece and assemble its control points.
 
@@ -608,9 +783,12 @@ def solve_piece(
     the piece's control points so far (final up to the last join) and the joins so far
     (``nlp.ChainPipeline.lp_progress``).
 
-    ``first_n_int`` (``rest_intervals``), if given: the piece is solved on that many knot intervals
-    first, and that profile is kept unless it is stuck, holds control points at a q floor, or an LP
-    fails on it; then the piece is solved as without it (below), from its plan's knots.  (Refining
+    ``first_n_int`` (``rest_intervals``, ``floor_intervals``), if given: the piece is solved on that many knot
+    intervals first, and that profile is kept unless it is stuck, holds control points at a q floor, takes
+    longer than ``first_bound`` (s), if given, or an LP fails on it; with ``first_bound`` (the knot floor,
+    ``floor_intervals``) then on KNOT_FLOOR_LEVEL_STEP times the knots, and so on while they stay
+    KNOT_FLOOR_MIN_GAIN times coarser than the plan's; then the piece is solved as without it (below), from its
+    plan's knots.  (Refining
     on from the first knots instead, bench seeds 0-199: the same 0 failures and -12 % / -17 % motion
     in the geometric mean, but 8 runs 1.7-8.3 x slower in motion (floors at rest reached on 512
     intervals) and up to 30 x the CPU; a cusp test case's LP failed numerically on 512 intervals.)
@@ -632,24 +810,34 @@ def solve_piece(
     """
     first: tuple[float, PieceProfile, list[int]] | None = None
     if first_n_int is not None:
-        floored: list[int] = []
-        try:
-            prof, joins = _solve_windows(
-                toolpath, piece, plan_piece(piece, machine, opt, first_n_int), opt, lim, stats, on_window, verify,
-                cache, floored=floored, on_lp=on_lp,
-            )
-            if not floored and not stuck(prof):
-                return prof, joins
-            duration = _moving_duration(prof) if _floor_refines(opt) and not stuck(prof) else None
-            if duration is not None:
-                # (a candidate besides the refinements': bench seed 198 lp, 13.3 ms on these 64 intervals,
-                # 20.3 ms on the plan's 16, 48.5 ms on 32, where the refinements stopped)
-                first = (duration, prof, joins)
-        except (InfeasibleError, SolverFailure):
-            pass
+        n_first = first_n_int
+        while True:
+            floored: list[int] = []
+            try:
+                prof, joins = _solve_windows(
+                    toolpath, piece, plan_piece(piece, machine, opt, n_first), opt, lim, stats, on_window, verify,
+                    cache, floored=floored, on_lp=on_lp,
+                )
+                if not floored and not stuck(prof) and first_bound is None:
+                    return prof, joins
+                duration = _moving_duration(prof) if not stuck(prof) else None
+                if not floored and duration is not None and first_bound is not None and duration <= first_bound:
+                    return prof, joins
+                if duration is not None and _floor_refines(opt) and (first is None or duration < first[0]):
+                    # (a candidate besides the refinements': bench seed 198 lp, 13.3 ms on these 64 intervals,
+                    # 20.3 ms on the plan's 16, 48.5 ms on 32, where the refinements stopped)
+                    first = (duration, prof, joins)
+            except (InfeasibleError, SolverFailure):
+                pass
+            # (progress and the chains handed out were the first plan's: the pipeline sees the knots change)
+            on_window = on_lp = None
+            # the knot floor's next level, while still KNOT_FLOOR_MIN_GAIN times coarser than the plan's
+            n_next = KNOT_FLOOR_LEVEL_STEP * n_first
+            if first_bound is None or KNOT_FLOOR_MIN_GAIN * n_next > plan_piece(piece, machine, opt).n_int:
+                break
+            n_first = n_next
+            stats["knot_floor_levels"] = stats.get("knot_floor_levels", 0) + 1  # (0 in ``one_shot``'s stats)
         stats["rest_plan_fallbacks"] = stats.get("rest_plan_fallbacks", 0) + 1
-        # (progress and the chains handed out were the first plan's: the pipeline sees the knots change)
-        on_window = on_lp = None
     return _refined(toolpath, piece, machine, opt, lim, stats, on_window, verify, cache, on_lp, first, plain)
 
 
@@ -1826,7 +2014,8 @@ def _schedule_stream(
     stats: dict[str, Any] = {
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
         "unverified": 0, "window_times": [], "sample_repairs": 0, "lp_chains": 0, "lp_seam_fallbacks": 0,
-        "rest_shape_fallbacks": 0, "rest_step_floor_walks": 0,
+        "rest_shape_fallbacks": 0, "rest_step_floor_walks": 0, "knot_floor_pieces": 0, "knot_floor_fallbacks": 0,
+        "knot_floor_levels": 0,
     }
     if opt.method == "lp+nlp" and not machine.has_drives:
         raise InvalidMachineError(
@@ -1888,7 +2077,7 @@ def _schedule_stream(
         def on_window(s_done: float, s0: float = piece.s_start) -> None:
             report((s0 + lp_share * s_done) / total)
 
-        first = rest_intervals(piece, machine, opt)
+        first, first_bound = first_plan(toolpath, piece, machine, opt, lim)
         # with NLP workers, the chains go to them while the LP still solves the later windows
         pipe = (_chain_pipeline(toolpath, piece, machine, opt, nlp_lim, refiners, nlp_stats, first, lead_in)
                 if nlp_stats is not None and nlp_lim is not None and _workers(opt) > 1 else None)
@@ -1898,11 +2087,16 @@ def _schedule_stream(
             fallbacks = stats.get("rest_plan_fallbacks", 0)
             lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache,
                                          pipe.lp_progress if pipe is not None else None, first,
-                                         plain if nlp_stats is not None else None)
+                                         plain if nlp_stats is not None else None, first_bound)
             t_lp += time.perf_counter() - t0
             # repairs start from the knots the first solve started from
+            if first_bound is not None:
+                on_floor = stats.get("rest_plan_fallbacks", 0) == fallbacks
+                stats["knot_floor_pieces" if on_floor else "knot_floor_fallbacks"] += 1
+                if on_floor:
+                    first = lp_prof.n_int  # (the level kept: its repairs start there)
             if stats.get("rest_plan_fallbacks", 0) != fallbacks:
-                first = None
+                first = first_bound = None
             prof = lp_prof
             if nlp_stats is not None and nlp_lim is not None:
                 def on_chain(s_done: float, s0: float = piece.s_start, length: float = piece.length) -> None:
@@ -1965,7 +2159,7 @@ def _schedule_stream(
                                 a_step=None if lim.a_step is None else lim.a_step * share)
                 cache = {}  # (its windows were solved with the full share)
             lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim_r, stats, None, verify_s, cache,
-                                         None, first)
+                                         None, first, first_bound=first_bound)
             prof = lp_prof
             if nlp_stats is not None and nlp_lim is not None:
                 prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, {}, nlp_stats,
@@ -2036,6 +2230,12 @@ def _schedule_stream(
         # with the rest shapes, and those walked without the shapes at last (``_solve_windows``)
         "rest_step_floor_walks": stats["rest_step_floor_walks"],
         "rest_shape_fallbacks": stats["rest_shape_fallbacks"],
+        # pieces first solved on the knot floor (``KNOT_FLOOR_SAMPLES``) and kept on it, and those solved again
+        # on their plan's knots (the floor's motion over its bound)
+        "knot_floor_pieces": stats["knot_floor_pieces"],
+        "knot_floor_fallbacks": stats["knot_floor_fallbacks"],
+        # ... and the finer levels of the floor solved (``KNOT_FLOOR_LEVEL_STEP``), repairs included
+        "knot_floor_levels": stats["knot_floor_levels"],
         # most rounds of re-solving a piece whose samples were over a limit (solvers.verify)
         "sample_repairs": stats["sample_repairs"],
         "control_points": int(sum(p.c.size for p in profiles)),

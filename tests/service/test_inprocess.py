@@ -211,3 +211,17 @@ def test_router_machine(client: TestClient) -> None:
     assert body["axes"][0]["limits"]["amax"] == 500.0
     assert body["axes"][2]["limits"] == body["axes"][2]["limits_from_drive"]  # z is derived from its drive
     assert body["units"]["jmax"] == "mm/s^3" and body["stopping_distance_mm"] > 0
+
+
+def test_the_interval_budget_counts_the_knot_floor(client: TestClient) -> None:
+    """30 mm at a 1 mm/s feed cap: the default knots (0.1 x the stopping distance, 0.4 um) would be 75,300
+    intervals, over the synchronous budget of 20,000; the knot floor's (10 um) are 3,000, so the request is
+    served, on the floor.  Explicit 1 um knots (the finest the API takes, 30,000 intervals) are still a 413."""
+    line = {"degree": 1, "knots": [0, 0, 1, 1], "control_points": [[0, 0, 0], [30.0, 0, 0]]}
+    body = {"toolpath": {"segments": [line]}, "machine": "router", "options": {"method": "lp", "feed_max": 1.0}}
+    r = client.post("/v1/schedule", json=body)
+    assert r.status_code == 200, r.text
+    summary = r.json()["summary"]
+    assert summary["knot_floor_pieces"] == 1 and summary["control_points"] == 3002
+    body["options"]["knot_spacing"] = 0.001
+    assert_problem(client.post("/v1/schedule", json=body), 413, "options.knot_spacing")

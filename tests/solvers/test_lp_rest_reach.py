@@ -17,7 +17,7 @@ from geometry import Toolpath
 from geometry import examples as ex
 from solvers import lp
 from solvers import pipeline as P
-from solvers.lp import _reach_q, _reach_travel
+from solvers.lp import _reach_travel, reach_q
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
 from tests.fdcheck import utilisation
@@ -56,7 +56,7 @@ def test_reach_is_the_fastest_ramp_in_the_time_domain(a0: float, J: float, A: fl
     t = np.concatenate([[0.0], np.geomspace(1e-6, 10.0, 400) * (A / J)])
     s, v = _ramp(t, a0, J, A)
     n = s.size
-    q = _reach_q(s, a0, np.full(n, J), np.full(n, A))
+    q = reach_q(s, a0, np.full(n, J), np.full(n, A))
     np.testing.assert_allclose(q, v * v, rtol=REACH_RTOL, atol=0.0)
     # the travel in a given time (``_reach_travel``), and at most V t
     travel = np.array([_reach_travel(float(ti), a0, J, A, np.inf) for ti in t])
@@ -90,7 +90,7 @@ def test_no_feed_from_rest_under_the_bounds_beats_the_reach(seed: int, pieces: i
         if v < 0.0:
             break
     ps, pv = np.array(pts_s), np.array(pts_v)
-    reach = _reach_q(ps, a0, np.full(ps.size, J), np.full(ps.size, A))
+    reach = reach_q(ps, a0, np.full(ps.size, J), np.full(ps.size, A))
     assert np.all(pv * pv <= reach * (1.0 + BOUND_RTOL) + 1e-300), float(np.max(pv * pv / np.maximum(reach, 1e-300)))
 
 

@@ -16,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from geometry import NurbsSegment, Toolpath
+from geometry import examples as ex
 from solvers import nlp
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
@@ -118,3 +119,24 @@ def test_kept_stretch_at_the_feed_limit_holds_the_limits_and_loses_no_time(monke
     assert solved.summary["nlp_lp_kept_spans"] == 0
     assert kept.summary["nlp_windows"] < solved.summary["nlp_windows"]
     assert kept.summary["motion_time"] <= (1 + KEPT_MOTION_REL) * solved.summary["motion_time"]
+
+
+def test_a_break_whose_step_cap_the_feed_is_far_under_does_not_stop_a_stretch(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A 3-D wave at a 10 mm/s cap: C1 knots (a step cap on the feed at each) every ~12 knot intervals, the
+    LP's feed at the cap between them and a few % of each step's cap.  Kept against every break stopping a
+    stretch (LP_KEPT_STEP_CAP_SHARE 0, as until session 53): whole chains kept, far fewer NLP windows,
+    the motion longer by at most the kept feed's gap to its bound, the samples within u, e and the cap."""
+    F = 10.0
+    tp = Toolpath([ex.wave3d()])
+    m = router().with_feed_max(F)
+    kept = schedule(tp, m, Options(method="lp+nlp", nlp_workers=1))
+    assert kept.summary["nlp_lp_kept_chains"] >= 1 and kept.summary["nlp_lp_kept_spans"] >= 1
+    _check_drive(m, kept)
+    assert float(np.max(kept.samples.feed)) <= F * (1 + FEED_OVER)
+    _assert_seams_continuous(kept)
+    monkeypatch.setattr(nlp, "LP_KEPT_STEP_CAP_SHARE", 0.0)
+    solved = schedule(tp, m, Options(method="lp+nlp", nlp_workers=1))
+    assert solved.summary["nlp_lp_kept_chains"] == 0
+    assert solved.summary["nlp_lp_kept_intervals"] < 0.1 * solved.profiles[0].n_int
+    assert 4 * kept.summary["nlp_windows"] < solved.summary["nlp_windows"]
+    assert kept.summary["motion_time"] <= (1 + nlp.LP_KEPT_FEED_GAP) * solved.summary["motion_time"]

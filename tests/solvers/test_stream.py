@@ -65,17 +65,21 @@ def one_shot(tp: Toolpath, m: Machine, opt: P.Options) -> tuple[P.TimeSamples, i
     nlp_lim = NlpLimits.from_machine(m, opt.nlp_axis_velocity, opt.nlp_kinematic, lim.a_step, Ts) if nlp else None
     nst = NlpStats()
 
-    # the knots a piece's solves start from (``rest_intervals``), kept for its repairs unless the first fell back
-    firsts = [P.rest_intervals(p, m, opt) for p in tp.pieces]
+    # the knots a piece's solves start from and their bound (``first_plan``), kept for its repairs unless the
+    # first fell back
+    firsts = [P.first_plan(tp, p, m, opt, lim) for p in tp.pieces]
 
     def solve(i: int, verify_s: np.ndarray | None, refiners: dict[tuple[int, int], NlpRefiner],
               rounds: int = 0) -> PieceProfile:
         piece = tp.pieces[i]
         fallbacks = stats.get("rest_plan_fallbacks", 0)
         lim_i = lim if verify_s is None else P._repair_limits(lim, rounds)
-        prof, joins = P.solve_piece(tp, piece, m, opt, lim_i, stats, None, verify_s, caches[i], None, firsts[i])
+        prof, joins = P.solve_piece(tp, piece, m, opt, lim_i, stats, None, verify_s, caches[i], None, firsts[i][0],
+                                    first_bound=firsts[i][1])
         if verify_s is None and stats.get("rest_plan_fallbacks", 0) != fallbacks:
-            firsts[i] = None
+            firsts[i] = (None, None)
+        elif verify_s is None and firsts[i][1] is not None:
+            firsts[i] = (prof.n_int, firsts[i][1])  # (the knot floor's level kept)
         if nlp_lim is not None:
             prof = P._refine_piece(tp, piece, m, opt, prof, joins, nlp_lim, refiners, nst, None, verify_s)
         return prof
