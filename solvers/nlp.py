@@ -193,7 +193,7 @@ LP_KEPT_UTIL = 0.9
 #: ... and a break with a step cap stops it only where the LP's feed there is over this share of the cap (until
 #: session 53 every such break did, whatever the feed: a 3-D wave at a 5 mm/s cap, its C1 knots every ~12 of the
 #: knot floor's intervals, kept 6 of 5,423 intervals, and 218 NLP windows took 6.9 s to gain 1.3 ms in 54.23 s;
-#: now 9 windows, 0.7 s of CPU).  The step's sampled e and u are among the utilisations above.
+#: now 10 windows, 0.7 s of CPU).  The step's servo error (``_step_servo_error``) is among the utilisations above.
 LP_KEPT_STEP_CAP_SHARE = 0.9
 #: Inside a chain that is not kept whole, a stretch of knot intervals where the LP's feed is kept by the same
 #: rules keeps it unsolved too (``kept_parts``): the chain is solved as the parts either side of it, each from
@@ -1701,15 +1701,16 @@ class NlpRefiner:
         min_run = min(ok.size, self._kept_min_run())
         if all(j - i < min_run for i, j in _true_runs(ok)):  # (no stretch to keep, whatever the other limits)
             return ok
-        util = self.lim.utilisation(g, fd)
+        br, f_cap = self._step_caps(geometry, s0, s1, breaks)
+        # (with the feed's share of each step cap and the servo error of the step across it, as a window's)
+        util = self._fine_utilisation(fine, g, fd, br, f_cap)
         self._sampled(fine, g, fd, util)
         # (the feed and axis-speed rows are the feed bound itself)
         for k, u in util.items():
             cap = 1.0 + VERIFY_TOL if k in ("feed", "velocity") else LP_KEPT_UTIL
             good &= (u.max(axis=1) if u.ndim == 2 else u) <= cap
         ok = intervals(good)
-        br, f_cap = self._step_caps(geometry, s0, s1, breaks)
-        if br.size:  # (a cap the LP's feed is well under binds nothing: its step's e and u are in ``util``)
+        if br.size:  # (a cap the LP's feed is well under binds nothing; its step's e is in ``util`` above)
             f_br = np.sqrt(np.maximum(bspline.evaluate(c, br, d)[0], 0.0))
             br = br[f_br > LP_KEPT_STEP_CAP_SHARE * f_cap]
         for k in np.floor((br - s0) / d).astype(np.int64):
