@@ -651,9 +651,7 @@ def least_intervals(toolpath: Toolpath, piece: Piece, machine: Machine, opt: Opt
     return n_f if n_f is not None else plan_piece(piece, machine, opt, toolpath=toolpath).n_int
 
 
-def piece_time_bound(
-    toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int, span: tuple[float, float] | None = None,
-) -> float:
+def piece_time_bound(toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int) -> float:
     """A lower bound (s) on the time of any motion along the piece under ``lim``'s limits, from rest to rest, on m
     uniform intervals:
 
@@ -668,8 +666,6 @@ def piece_time_bound(
     ends).  The first interval at each end is split geometrically (KNOT_FLOOR_END_POINTS points from
     KNOT_FLOOR_END_FIRST of it): the reach's 1 / sqrt(q) is singular at rest (q ~ sigma^(2/3) under the jerk),
     and one interval read the first one's time 1.5 x short.
-
-    ``span`` (lo, hi), piece-local mm, if given: the time over the grid's intervals inside [lo, hi] only.
 
     In bounded memory: the grid is walked KNOT_FLOOR_CHUNK intervals at a time, and the reach is taken only
     within ``_reach_extent`` of each end (beyond it, it is over every q_v); the end's running maxima come from a
@@ -722,13 +718,8 @@ def piece_time_bound(
         if tail.any():
             at = np.searchsorted(s_tail, s[tail])
             q[tail] = np.minimum(q[tail], lp.reach_q(L - s[tail], a0_end, J_tail[at], A_tail[at]))
-        dt = np.diff(s)
         with np.errstate(divide="ignore"):
-            dt = dt / np.sqrt(np.maximum(q[1:], q[:-1]))
-        if span is not None:
-            tol = 1e-9 * L / m
-            dt = dt[(s[:-1] >= span[0] - tol) & (s[1:] <= span[1] + tol)]
-        total += float(np.sum(dt))
+            total += float(np.sum(np.diff(s) / np.sqrt(np.maximum(q[1:], q[:-1]))))
     return total
 
 
@@ -811,6 +802,8 @@ def solve_piece(
     first: tuple[float, PieceProfile, list[int]] | None = None
     if first_n_int is not None:
         n_first = first_n_int
+        # (the knot floor's levels stay KNOT_FLOOR_MIN_GAIN times coarser than this)
+        n_plan = plan_piece(piece, machine, opt).n_int if first_bound is not None else 0
         while True:
             floored: list[int] = []
             try:
@@ -818,9 +811,10 @@ def solve_piece(
                     toolpath, piece, plan_piece(piece, machine, opt, n_first), opt, lim, stats, on_window, verify,
                     cache, floored=floored, on_lp=on_lp,
                 )
-                if not floored and not stuck(prof) and first_bound is None:
+                is_stuck = stuck(prof)
+                if not floored and not is_stuck and first_bound is None:
                     return prof, joins
-                duration = _moving_duration(prof) if not stuck(prof) else None
+                duration = None if is_stuck else _moving_duration(prof)
                 if not floored and duration is not None and first_bound is not None and duration <= first_bound:
                     return prof, joins
                 if duration is not None and _floor_refines(opt) and (first is None or duration < first[0]):
@@ -833,7 +827,7 @@ def solve_piece(
             on_window = on_lp = None
             # the knot floor's next level, while still KNOT_FLOOR_MIN_GAIN times coarser than the plan's
             n_next = KNOT_FLOOR_LEVEL_STEP * n_first
-            if first_bound is None or KNOT_FLOOR_MIN_GAIN * n_next > plan_piece(piece, machine, opt).n_int:
+            if first_bound is None or KNOT_FLOOR_MIN_GAIN * n_next > n_plan:
                 break
             n_first = n_next
             stats["knot_floor_levels"] = stats.get("knot_floor_levels", 0) + 1  # (0 in ``one_shot``'s stats)
