@@ -28,6 +28,7 @@ the tables of closed-form sub-segments only when asked for.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -340,6 +341,8 @@ class Piece:
     s_end: float
     first_sub: int
     last_sub: int  # inclusive
+    #: the highest programmed feed limit (mm/s, an F word) on the piece; inf where one of its sub-segments has none
+    feed: float = math.inf
 
     @property
     def length(self) -> float:
@@ -601,6 +604,8 @@ class Toolpath:
     def _pieces(self) -> list[Piece]:
         starts = [0] + [int(np.searchsorted(self.offsets, c.s)) for c in self.corners]
         ends = [*starts[1:], len(self.subs)]
+        feed = (np.full(len(starts), math.inf) if self._feed is None
+                else np.maximum.reduceat(self._feed[self.sub_origin], np.asarray(starts, dtype=np.int64)))
         return [
             Piece(
                 index=i,
@@ -608,6 +613,7 @@ class Toolpath:
                 s_end=float(self.offsets[b]),
                 first_sub=a,
                 last_sub=b - 1,
+                feed=float(feed[i]),
             )
             for i, (a, b) in enumerate(zip(starts, ends, strict=True))
         ]

@@ -881,6 +881,35 @@ def reach_distance(V: float, a0: float, J: float, A: float) -> float:
     return float(s1 + (V * V - v1 * v1) / (2.0 * A))
 
 
+def s_curve(V: FloatArray, a0: float, J: FloatArray, A: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Time (s) and distance (mm) of the fastest ramp from rest to the feed V (K,, mm/s) that never passes V: the
+    step a0 (mm/s^2), the jerk J (K,, mm/s^3) up to the acceleration a1 <= A (K,, mm/s^2), A held, then -J down to
+    0 at V (the time-optimal jerk-limited ramp, the S-curve).  ``reach_q``'s ramp leaves out its last phase.
+
+        a1 = min(A, sqrt((2 J V + a0^2) / 2))           (the peak acceleration)
+        t1 = (a1 - a0) / J,  v1 = a0 t1 + J t1^2 / 2,  s1 = a0 t1^2 / 2 + J t1^3 / 6
+        t2 = (V - a1^2 / (2 J) - v1) / a1,  v2 = v1 + a1 t2,  s2 = v1 t2 + a1 t2^2 / 2
+        t3 = a1 / J,  s3 = v2 t3 + a1 t3^2 / 2 - J t3^3 / 6
+
+    NaN where no such ramp is: the step alone overshoots (a0^2 / (2 J) > V), or a bound is not finite and > 0."""
+    V, J, A = (np.asarray(x, dtype=np.float64) for x in (V, J, A))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        a0v = np.minimum(a0, A)
+        a1 = np.minimum(A, np.sqrt((2.0 * J * V + a0v * a0v) / 2.0))
+        t1 = (a1 - a0v) / J
+        v1, s1 = t1 * (a0v + J * t1 / 2.0), t1 * t1 * (a0v / 2.0 + J * t1 / 6.0)
+        v2 = V - a1 * a1 / (2.0 * J)
+        t2 = np.maximum(0.0, (v2 - v1) / a1)
+        s2 = t2 * (v1 + v2) / 2.0
+        t3 = a1 / J
+        s3 = t3 * (v2 + a1 * t3 / 2.0 - J * t3 * t3 / 6.0)
+        ok = (np.isfinite(J) & np.isfinite(A) & np.isfinite(V) & (J > 0.0) & (A > 0.0) & (V > 0.0)
+              & (a0v * a0v <= 2.0 * J * V))
+    T = np.where(ok, t1 + t2 + t3, np.nan)
+    D = np.where(ok, s1 + s2 + s3, np.nan)
+    return np.asarray(T, dtype=np.float64), np.asarray(D, dtype=np.float64)
+
+
 def _reach_travel(T: float, a0: float, J: float, A: float, V: float) -> float:
     """How far (mm) a feed from rest can get in T seconds under the step a0, the jerk J and the acceleration A
     (``reach_q``'s ramp, then A) and the feed V (at most V T)."""

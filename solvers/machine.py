@@ -122,20 +122,23 @@ class Machine:
             np.array([a.limits.jmax for a in self.axes]),
         )
 
-    def stopping_distance(self) -> float:
-        """Longest distance (mm) any axis needs to stop from vmax under amax, jmax (spec §6)."""
+    def stopping_distance(self, feed: float = math.inf) -> float:
+        """Longest distance (mm) any axis needs to stop from vmax under amax, jmax (spec §6); ``feed`` (mm/s), if
+        given, caps vmax as ``feed_max`` does (a piece's programmed feed: ``Piece.feed``)."""
         worst = 0.0
         for ax in self.axes:
             v, a, j = ax.limits.vmax, ax.limits.amax, ax.limits.jmax
+            v = min(v, feed)
             if self.feed_max is not None:
                 v = min(v, self.feed_max)
             D = v / 2.0 * (v / a + a / j) if v >= a * a / j else v * math.sqrt(v / j)
             worst = max(worst, D)
         return worst
 
-    def top_feed(self) -> float:
-        """The fastest any axis may move (mm/s): its vmax, at most the feed cap (as in ``stopping_distance``)."""
-        v = max(ax.limits.vmax for ax in self.axes)
+    def top_feed(self, feed: float = math.inf) -> float:
+        """The fastest any axis may move (mm/s): its vmax, at most the feed cap and ``feed`` (as in
+        ``stopping_distance``)."""
+        v = min(max(ax.limits.vmax for ax in self.axes), feed)
         return v if self.feed_max is None else min(v, self.feed_max)
 
     @property

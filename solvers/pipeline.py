@@ -103,12 +103,13 @@ MIN_INTERVALS = 16
 #: 16 only: motion -3.0 % (lp) and -5.95 % (lp+nlp) in the geometric mean, none longer by more
 #: than 2 %, CPU x1.07 (lp) and x1.11 (lp+nlp).
 REST_MIN_INTERVALS = 64
-#: A piece on the default knot spacing is first solved on knots the machine's top feed (``Machine.top_feed``)
-#: covers in KNOT_FLOOR_SAMPLES sample periods, where that is at least KNOT_FLOOR_MIN_GAIN times coarser than its
-#: plan's (``floor_intervals``), and that profile is kept only if its motion time is within KNOT_FLOOR_TOL of a
-#: lower bound on any motion along the piece (``piece_time_bound``; the plan's knots cannot beat it either), else
-#: the piece is solved as without it.  The default knots are 0.1 x the stopping distance, which under a low feed cap
-#: falls as the cap squared (the cap^1.5 where the jerk binds) while the motion time only grows as its inverse:
+#: A piece on the default knot spacing is first solved on knots the machine's top feed (``Machine.top_feed``, at most
+#: the piece's programmed feed, ``Piece.feed``) covers in KNOT_FLOOR_SAMPLES sample periods, where that is at least
+#: KNOT_FLOOR_MIN_GAIN times coarser than its plan's (``floor_intervals``), and that profile is kept only if its
+#: motion time is within KNOT_FLOOR_TOL of a lower bound on any motion along the piece (``piece_time_bound``; the
+#: plan's knots cannot beat it either), else the piece is solved as without it.  The default knots are 0.1 x the
+#: stopping distance, which under a low feed cap falls as the cap squared (the cap^1.5 where the jerk binds) while
+#: the motion time only grows as its inverse:
 #: the flower at a 10 mm/s cap ran on 14 um knots (29,193 control points), 1.9 s of CPU (lp) and 20.7 s (lp+nlp)
 #: for 40.8 s of motion; a 30 mm line at 1 mm/s on 0.4 um knots, 3.7 / 6.1 s for 30 s.  Where the cap binds
 #: along the whole piece the knots only shape the ramps at its rest ends (and the steps of its programmed
@@ -133,12 +134,25 @@ KNOT_FLOOR_GRID = 4
 KNOT_FLOOR_CHUNK = 65536
 KNOT_FLOOR_END_POINTS = 48
 KNOT_FLOOR_END_FIRST = 1e-9
+#: ``piece_time_bound``'s S-curve ends look this many times the longest ramp from each rest end (``_ramp_stretch``).
+RAMP_EXTENT = 2.0
 #: ``piece_time_bound``'s tangential jerk bound without jerk rows (mm/s^3: the reach is the acceleration's alone).
 REACH_NO_JERK = 1e300
 #: Turns passed at speed listed in ``diagnostics.passed_turns`` (those with the lowest feed caps).
 PASSED_TURNS_LISTED = 10
-#: Default knot spacing as a fraction of the machine's stopping distance.
+#: Default knot spacing as a fraction of the machine's stopping distance; under method lp+nlp, of the stopping
+#: distance at the piece's programmed feed (``Piece.feed``: its F words, as a machine feed cap of that value sets
+#: it; ``PIECE_FEED_KNOTS``).
 KNOT_SPACING_PER_STOP = 0.1
+#: Why lp+nlp's knots follow the piece's F words: on the machine's knots a piece at a low F word had rest intervals
+#: many ramps long, and the NLP's rest shapes (``bspline.REST_RISE_POWERS``) could not form the ramp inside one: the
+#: router's 3.1 m pocket (40 corners, ``bench.stream_latency.pocket``) at F600 / F1800 / F6000 took 315.28 /
+#: 105.90 / 35.05 s on 2.3 mm knots, 310.42 / 104.48 / 34.90 s on its feed's (-1.5 / -1.3 / -0.4 %) for 1.73 /
+#: 1.34 / 1.34 -> 7.79 / 4.18 / 1.95 s of CPU; random CAM programs (cam 0-79) -0.72 % in the geometric mean, none
+#: failed.  Coarser knots, 0.2-0.5 x the feed's stopping distance, kept less of it (F1800 104.66-104.97 s).  Method
+#: lp's steep rest shapes (``bspline.LP_REST_RISE_POWERS``) form the ramp in one interval: the same pocket -0.05 /
+#: -0.15 / +0.00 % at 3-6 x the CPU, so its knots stay the machine's (the knot floor follows the F words under both).
+PIECE_FEED_KNOTS = ("lp+nlp",)
 #: Default knots, knot phase: a sharp curvature peak (radius of curvature under PHASE_PEAK_RADIUS knot
 #: spacings) costs far more motion time where it falls on a knot than mid-interval (the quadratic
 #: feed's C1 joint there cannot form the narrow dip the peak wants).  Flower, one loop, its 5 petal
@@ -532,8 +546,9 @@ def plan_piece(
 ) -> WindowPlan:
     """Knots and window sizes of one piece; ``n_int`` overrides the knot count (a refined piece).  With
     ``toolpath`` and the default knot spacing, the knot count is phased to the piece's curvature peaks
-    (``phase_intervals``; method lp+nlp only, see PHASE_SEARCH)."""
-    D = machine.stopping_distance()
+    (``phase_intervals``; method lp+nlp only, see PHASE_SEARCH).  The stopping distance D that sizes the default
+    knots and the overlaps is the machine's, under lp+nlp at the piece's programmed feed (``PIECE_FEED_KNOTS``)."""
+    D = machine.stopping_distance(piece.feed if opt.method in PIECE_FEED_KNOTS else math.inf)
     d_target = opt.knot_spacing if opt.knot_spacing is not None else KNOT_SPACING_PER_STOP * D
     if n_int is None:
         n_int = max(MIN_INTERVALS, math.ceil(piece.length / d_target - 1e-9))
@@ -631,14 +646,15 @@ def floor_intervals(
 def floor_count(piece: Piece, machine: Machine, opt: Options) -> int | None:
     """The knot intervals of a piece on the knot floor (``KNOT_FLOOR_SAMPLES``), or None where the floor does not
     apply: an explicit ``Options.knot_spacing``; a piece under 1 / KNOT_FLOOR_STOP_SHARE stopping distances long;
-    knots (at least REST_MIN_INTERVALS) not at least KNOT_FLOOR_MIN_GAIN times coarser than the plan's."""
+    knots (at least REST_MIN_INTERVALS) not at least KNOT_FLOOR_MIN_GAIN times coarser than the plan's.  The top
+    feed and the stopping distance are at the piece's programmed feed (``Piece.feed``), under both methods."""
     if opt.knot_spacing is not None:
         return None
-    if machine.stopping_distance() > KNOT_FLOOR_STOP_SHARE * piece.length:
+    if machine.stopping_distance(piece.feed) > KNOT_FLOOR_STOP_SHARE * piece.length:
         return None
     n0 = plan_piece(piece, machine, opt).n_int
     n_f = max(REST_MIN_INTERVALS,
-              math.ceil(piece.length / (KNOT_FLOOR_SAMPLES * opt.sample_period * machine.top_feed()) - 1e-9))
+              math.ceil(piece.length / (KNOT_FLOOR_SAMPLES * opt.sample_period * machine.top_feed(piece.feed)) - 1e-9))
     if KNOT_FLOOR_MIN_GAIN * n_f > n0:
         return None
     return n_f
@@ -667,9 +683,13 @@ def piece_time_bound(toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int) ->
     KNOT_FLOOR_END_FIRST of it): the reach's 1 / sqrt(q) is singular at rest (q ~ sigma^(2/3) under the jerk),
     and one interval read the first one's time 1.5 x short.
 
+    With jerk rows, at each end the sum over [0, x_k] may give way to the S-curve's time over it, a lower bound
+    too (``_ramp_gain``): the reach leaves out the jerk's rounding into the cruise, so that a straight line that
+    cruises read 0.97-0.99 of its S-curve move at the router's feeds, and reads it now (with the step at rest).
+
     In bounded memory: the grid is walked KNOT_FLOOR_CHUNK intervals at a time, and the reach is taken only
     within ``_reach_extent`` of each end (beyond it, it is over every q_v); the end's running maxima come from a
-    pass over that stretch first."""
+    pass over that stretch first.  The S-curve's ends keep the points within ``_ramp_stretch`` of each end."""
     geometry = _local(toolpath, piece)
     L = piece.length
     ends = L / m * np.geomspace(KNOT_FLOOR_END_FIRST, 1.0, KNOT_FLOOR_END_POINTS, endpoint=False)
@@ -700,17 +720,22 @@ def piece_time_bound(toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int) ->
     total = 0.0
     A_run = J_run = 0.0
     a0_start = 0.0
+    # the S-curve's ends (``_ramp_gain``): the points within its stretch and a margin of each end
+    extent, margin = _ramp_stretch(lim, piece.feed)
+    near = min(L, extent + margin + L / m)  # (a uniform point past the margin of every candidate)
+    ends_at: list[list[FloatArray]] = [[], []]  # (head, tail): per chunk, [s, the sum up to s, q_va, A, J]
     for i0 in range(0, m, KNOT_FLOOR_CHUNK):
         i1 = min(m, i0 + KNOT_FLOOR_CHUNK)
         s = grid(i0, i1)
         g = geometry(s)
-        q = np.minimum(velocity_bound(g, lim), acceleration_bound(g, lim.amax))
+        q_va = np.minimum(velocity_bound(g, lim), acceleration_bound(g, lim.amax))
+        q = q_va.copy()
         if i0 == 0:
             a0_start = float(lp.tangential_bound(g.d1[:1], lim.a_rest)[0])
+        A_pt, J_pt = bounds(g)
         if s[0] <= reach:
-            A, J = bounds(g)
-            A = np.maximum(np.maximum.accumulate(A), A_run)
-            J = np.maximum(np.maximum.accumulate(J), J_run)
+            A = np.maximum(np.maximum.accumulate(A_pt), A_run)
+            J = np.maximum(np.maximum.accumulate(J_pt), J_run)
             A_run, J_run = float(A[-1]), float(J[-1])
             head = s <= reach
             q[head] = np.minimum(q[head], lp.reach_q(s[head], a0_start, J[head], A[head]))
@@ -719,8 +744,71 @@ def piece_time_bound(toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int) ->
             at = np.searchsorted(s_tail, s[tail])
             q[tail] = np.minimum(q[tail], lp.reach_q(L - s[tail], a0_end, J_tail[at], A_tail[at]))
         with np.errstate(divide="ignore"):
-            total += float(np.sum(np.diff(s) / np.sqrt(np.maximum(q[1:], q[:-1]))))
-    return total
+            terms = np.diff(s) / np.sqrt(np.maximum(q[1:], q[:-1]))
+        upto = total + np.concatenate([[0.0], np.cumsum(terms)])
+        total += float(np.sum(terms))
+        if lim.jerk:
+            new = s > s[0] if i0 > 0 else np.ones(s.size, dtype=bool)  # (a chunk's first point is the last one's)
+            for side, keep in enumerate((new & (s <= near), new & (s >= L - near))):
+                if keep.any():
+                    ends_at[side].append(np.stack([s[keep], upto[keep], q_va[keep], A_pt[keep], J_pt[keep]]))
+    gain = 0.0
+    if lim.jerk:
+        for side, a0 in enumerate((a0_start, a0_end)):
+            s, upto, q_va, A_pt, J_pt = np.concatenate(ends_at[side], axis=1)
+            if side == 1:  # (from the end: the distance to it, and the sum from it)
+                s, upto, q_va, A_pt, J_pt = L - s[::-1], total - upto[::-1], q_va[::-1], A_pt[::-1], J_pt[::-1]
+            gain += _ramp_gain(s, upto, q_va, A_pt, J_pt, a0, margin, min(L / 2.0, extent))
+    return total + gain
+
+
+def _ramp_stretch(lim: LimitSet, feed: float) -> tuple[float, float]:
+    """How far (mm) from a rest end ``_ramp_gain`` looks, and its margin (mm).
+
+    The extent: RAMP_EXTENT times the S-curve (``lp.s_curve``) to q_top^(1/2) under the smallest tangential bounds
+    any path has (as in ``_reach_extent``; q_top at most the piece's programmed feed squared too), the longest ramp
+    any point's bounds make (so that some points past it are candidates).  The margin: how far any feed can travel
+    while its tangential acceleration ramps down to 0, at most q_top^(1/2) for tau = max_x amax_x / jmax_x (the
+    tangential bounds' A / J, each taken at its largest over a stretch, is at most A_x / J_x at the point of the
+    largest A)."""
+    q_top = 3.0 * float(np.max(lim.vmax)) ** 2
+    if lim.feed_max is not None:
+        q_top = min(q_top, lim.feed_max**2)
+    V = math.sqrt(min(q_top, feed * feed))
+    _, D = lp.s_curve(np.array([V]), float(np.min(lim.a_rest)), np.array([float(np.min(lim.jmax))]),
+                      np.array([float(np.min(lim.amax))]))
+    extent = float(D[0]) if np.isfinite(D[0]) else 0.0
+    return RAMP_EXTENT * max(extent, _reach_extent(lim)), V * float(np.max(lim.amax / lim.jmax))
+
+
+def _ramp_gain(x: FloatArray, cum: FloatArray, q_va: FloatArray, A: FloatArray, J: FloatArray, a0: float,
+               margin: float, extent: float) -> float:
+    """What ``piece_time_bound`` may add at one rest end for the S-curve (``lp.s_curve``): the most, over the points
+    x_k <= extent (K,, mm from rest, increasing, x_0 = 0) whose stretch [0, x_k + margin] the points cover, of
+
+        T_S(x_k) - cum_k,     T_S(x_k) = T_r + (x_k - D_r) / V   (x_k >= D_r, the S-curve's ramp distance)
+
+    and 0: cum_k (K,) is what the bound's sum takes over [0, x_k], and T_S(x_k) a lower bound on the time of any
+    motion over [0, x_k] from rest too.  V, A and J are the largest over [0, x_k + margin] of q_va^(1/2) (K,, the
+    velocity and acceleration bounds on q), A (K,) and J (K,) (the tangential bounds): a motion with the tangential
+    acceleration a > 0 at x <= x_k ramps it down within ``margin`` and passes v + a^2 / (2 J) meanwhile, so it has
+    v + a^2 / (2 J) <= V on [0, x_k], which the S-curve covers fastest.  The margin is what the reach
+    (``lp.reach_q``) leaves out: on a straight line it takes a pointwise bound reading 0.95-0.99 of the S-curve to
+    the S-curve's own time."""
+    if x.size < 2:
+        return 0.0
+    reach = np.searchsorted(x, x + margin)  # (the first point at or past x_k + margin)
+    inside = (reach < x.size) & (x <= extent)
+    if not inside.any():
+        return 0.0
+    at = reach[inside]
+    V = np.sqrt(np.maximum.accumulate(q_va)[at])
+    T_r, D_r = lp.s_curve(V, a0, np.maximum.accumulate(J)[at], np.maximum.accumulate(A)[at])
+    xk = x[inside]
+    with np.errstate(invalid="ignore"):
+        gain = T_r + (xk - D_r) / V - cum[inside]
+        gain = np.where(np.isfinite(gain) & (D_r <= xk), gain, 0.0)
+    return max(0.0, float(np.max(gain)))
 
 
 def _reach_extent(lim: LimitSet) -> float:
