@@ -123,11 +123,13 @@ KNOT_FLOOR_TOL = 2e-3
 #: cost up to ~5 sample periods each on the floor's knots, 0.55 % of a 2.1 s piece under lp+nlp, whose LP has no
 #: rest shapes (bench seed 12 at an 8.3 mm/s cap: 209 floor intervals against a plan of 323,930)
 KNOT_FLOOR_LEVEL_STEP = 4
-#: ... on pieces at least 1 / KNOT_FLOOR_STOP_SHARE stopping distances long: on shorter ones the ramps at the rest
-#: ends are much of the motion, where the bound is the loosest (its reach leaves out the jerk's rounding into the
-#: cruise: a straight line at the router's feeds reads 0.95-0.99 of the S-curve) and the floor's coarse knots cost
-#: the most, and its profile was rarely kept (lp bench seeds 0-149: the pieces rejected had D / L 3.0e-3 to 7.8e-3,
-#: and 4 of 5 on 64-165 floor intervals; those kept 4.2e-4 and 1.2e-3; each rejected one a coarse solve wasted)
+#: ... on pieces at least 1 / KNOT_FLOOR_STOP_SHARE stopping distances long (at the piece's feed): on shorter ones
+#: the ramps at the rest ends are much of the motion, where the floor's coarse knots cost the most (and the LP's own
+#: pseudo-jerk ramps are over the S-curve even on the plan's knots), and its profile was rarely kept (lp bench seeds
+#: 0-149: the pieces rejected had D / L 3.0e-3 to 7.8e-3, and 4 of 5 on 64-165 floor intervals; those kept 4.2e-4
+#: and 1.2e-3; each rejected one a coarse solve wasted).  Since session 54 the bound holds the S-curve's ends (a
+#: cruising line reads its S-curve move), and still a share of 1e-2 did not pay: cam 0-79 lp+nlp, 60 floors
+#: rejected against 7, CPU 1.00x, 26 runs longer (at most +0.10 %), none shorter.
 KNOT_FLOOR_STOP_SHARE = 2e-3
 #: ``piece_time_bound``'s grid points per floor knot interval, and the most evaluated at once.
 KNOT_FLOOR_GRID = 4
