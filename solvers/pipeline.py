@@ -796,8 +796,8 @@ def _ramp_gain(x: FloatArray, cum: FloatArray, q_va: FloatArray, A: FloatArray, 
     acceleration a > 0 at x <= x_k ramps it down within ``margin`` and passes v + a^2 / (2 J) meanwhile, so it has
     v + a^2 / (2 J) <= V on [0, x_k], which the S-curve covers fastest.  (Its acceleration stays > 0 for at least
     a / J, the jerk being at most J there; a / J <= tau, and over that time it travels at most q_top^(1/2) tau, the
-    margin, and its feed gains at least a^2 / (2 J).)  What the reach (``lp.reach_q``) leaves out is the jerk's rounding into
-    the cruise: with it a straight line's bound reads its S-curve move instead of 0.95-0.99 of it."""
+    margin, and its feed gains at least a^2 / (2 J).)  What the reach (``lp.reach_q``) leaves out is the jerk's
+    rounding into the cruise: with it a straight line's bound reads its S-curve move instead of 0.95-0.99 of it."""
     if x.size < 2:
         return 0.0
     reach = np.searchsorted(x, x + margin)  # (the first point at or past x_k + margin)
