@@ -16,23 +16,19 @@ the synchronous API refuses over 20,000).
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 import statistics
 import time
 from typing import Any
 
-from bench._common import LIMIT_FACTOR, emit, env_info, row
-from bench.low_feed import worst
+from bench._common import LIMIT_FACTOR, emit, row
+from bench.low_feed import begin, worst
 from bench.stream_latency import pocket
 from geometry import Toolpath, gcode
-from geometry import examples as ex
 from solvers.machine import Machine, router
 from solvers.pipeline import KNOT_FLOOR_TOL, Options, least_intervals, schedule
 from tests.reliability import gen
-
-REPEATS = 1
 
 
 def cases() -> dict[str, tuple[Toolpath, Machine, str]]:
@@ -56,17 +52,13 @@ def _without_feeds(tp: Toolpath) -> Toolpath:
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeats", type=int, default=REPEATS)
-    args = ap.parse_args(argv)
-    out: dict[str, Any] = {"bench": "f_words", "env": env_info(), "cases": {}, "rows": []}
-    schedule(ex.flower(1), router(), Options(nlp_workers=1))  # warm-up: imports, the NLP's first shapes
+    repeats, out = begin("f_words", __doc__, argv)
     for name, (tp_on, m, method) in cases().items():
         opts = Options(method=method, nlp_workers=1)
         tps = {True: tp_on, False: _without_feeds(tp_on)}
         cpu: dict[bool, list[float]] = {False: [], True: []}
         res: dict[bool, dict[str, Any]] = {}
-        for _ in range(args.repeats):
+        for _ in range(repeats):
             for on in (True, False):
                 tp = tps[on]
                 t0 = time.process_time()

@@ -57,19 +57,25 @@ def worst(m: Machine, sch: Schedule, method: str) -> float:
     return float(max(np.max(np.abs(u) / dr["umax"]), np.max(np.abs(e) / dr["emax"])))
 
 
-def main(argv: list[str] | None = None) -> dict[str, Any]:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def begin(bench: str, doc: str | None, argv: list[str] | None) -> tuple[int, dict[str, Any]]:
+    """An on / off bench's start (this one's and ``bench.f_words``'): its ``--repeats``, its result record, and a
+    warm-up schedule (imports, the NLP's first shapes) before any timing."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=REPEATS)
     args = ap.parse_args(argv)
-    out: dict[str, Any] = {"bench": "low_feed", "env": env_info(), "cases": {}, "rows": []}
-    schedule(ex.flower(1), router(), Options(nlp_workers=1))  # warm-up: imports, the NLP's first shapes
+    schedule(ex.flower(1), router(), Options(nlp_workers=1))
+    return int(args.repeats), {"bench": bench, "env": env_info(), "cases": {}, "rows": []}
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    repeats, out = begin("low_feed", __doc__, argv)
     try:
         for name, (tp, cap, method) in cases().items():
             m = router().with_feed_max(cap)
             opts = Options(method=method, nlp_workers=1)
             cpu: dict[bool, list[float]] = {False: [], True: []}
             res: dict[bool, dict[str, Any]] = {}
-            for _ in range(args.repeats):
+            for _ in range(repeats):
                 for on in (True, False):
                     _set(on)
                     t0 = time.process_time()
