@@ -153,7 +153,8 @@ KNOT_SPACING_PER_STOP = 0.1
 #: 1.34 / 1.34 -> 7.79 / 4.18 / 1.95 s of CPU; random CAM programs (cam 0-79) -0.72 % in the geometric mean, none
 #: failed.  Coarser knots, 0.2-0.5 x the feed's stopping distance, kept less of it (F1800 104.66-104.97 s).  Method
 #: lp's steep rest shapes (``bspline.LP_REST_RISE_POWERS``) form the ramp in one interval: the same pocket -0.05 /
-#: -0.15 / +0.00 % at 3-6 x the CPU, so its knots stay the machine's (the knot floor follows the F words under both).
+#: -0.15 / +0.00 % at 6.4 / 4.0 / 1.1 x the CPU, so its knots stay the machine's (the knot floor follows the F words
+#: under both).
 PIECE_FEED_KNOTS = ("lp+nlp",)
 #: Default knots, knot phase: a sharp curvature peak (radius of curvature under PHASE_PEAK_RADIUS knot
 #: spacings) costs far more motion time where it falls on a knot than mid-interval (the quadratic
