@@ -327,7 +327,8 @@ class Options:
         method: "lp+nlp" (default: the LP's feed refined under the drive's control-signal and
             servo-error limits, spec §5) or "lp" (velocity/acceleration/pseudo-jerk only).
         sample_period: Ts of the output, s.
-        knot_spacing: feed-profile knot spacing d, mm; default 0.1 x stopping distance (2.3 mm on the router).
+        knot_spacing: feed-profile knot spacing d, mm; default 0.1 x stopping distance (2.3 mm on the router;
+            under lp+nlp at each piece's F words, ``PIECE_FEED_KNOTS``; the knot floor, ``floor_intervals``).
         checkpoints_per_interval: N, constraint checkpoints per knot interval.
         lp_window: LP window size in knot intervals; default DEFAULT_LP_WINDOW, and on a long piece with HiGHS
             up to LP_WINDOW_MAX (at least LP_WINDOWS_PER_PIECE windows a piece: ``lp_window``).
