@@ -14,6 +14,7 @@ import pytest
 
 from geometry import Toolpath
 from geometry import examples as ex
+from solvers import lp
 from solvers import pipeline as P
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
@@ -26,6 +27,8 @@ LIMIT_FACTOR = 1.01
 SQUARE_OVER_TRAVEL = 0.01
 #: The same square under a machine feed cap instead of F words: the same knots, the motion within this (relative).
 SAME_AS_FEED_MAX = 1e-9
+#: ``Machine.stopping_distance`` against ``lp.s_curve``'s ramp (relative).
+S_CURVE_RTOL = 1e-12
 
 SQUARE = [(0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (20.0, 20.0, 0.0), (0.0, 20.0, 0.0), (0.0, 0.0, 0.0)]
 
@@ -35,9 +38,8 @@ def _square(feeds: list[float | None] | None) -> Toolpath:
 
 
 def test_a_pieces_feed_is_the_highest_of_its_segments() -> None:
-    """Corners at each vertex of the square: one piece per leg; the closed square with a tangent join (a straight
-    leg split in two) keeps both halves in one piece, which takes the higher feed, and a segment without an F word
-    leaves its piece uncapped."""
+    """Corners at each vertex of the square: one piece per leg, and a segment without an F word leaves its piece
+    uncapped; a straight leg split in two segments (a tangent join, no corner) is one piece, with the higher feed."""
     assert [p.feed for p in _square([10.0, 20.0, 5.0, None]).pieces] == [10.0, 20.0, 5.0, math.inf]
     assert all(p.feed == math.inf for p in _square(None).pieces)
     split = Toolpath([ex.line((0.0, 0.0, 0.0), (5.0, 0.0, 0.0)), ex.line((5.0, 0.0, 0.0), (10.0, 0.0, 0.0)),
@@ -47,10 +49,15 @@ def test_a_pieces_feed_is_the_highest_of_its_segments() -> None:
 
 @pytest.mark.parametrize("feed", [1.0, 10.0, 100.0, 1e6])
 def test_the_stopping_distance_at_a_feed_is_the_one_under_that_feed_cap(feed: float) -> None:
+    """Against the machine under a feed cap of that value, and against the S-curve's ramp distance per axis
+    (``lp.s_curve`` from rest to min(vmax, feed): the jerk-limited stop, read backwards)."""
     m = router()
     capped = m.with_feed_max(feed)
     assert m.stopping_distance(feed) == capped.stopping_distance()
-    assert m.top_feed(feed) == capped.top_feed()
+    assert m.top_feed(feed) == capped.top_feed() == min(feed, max(a.limits.vmax for a in m.axes))
+    vmax, amax, jmax = m.limit_arrays()
+    _, ramp = lp.s_curve(np.minimum(vmax, feed), 0.0, jmax, amax)
+    assert m.stopping_distance(feed) == pytest.approx(float(np.max(ramp)), rel=S_CURVE_RTOL)
     assert m.stopping_distance(feed) <= m.stopping_distance()
 
 
