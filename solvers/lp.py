@@ -897,7 +897,7 @@ def s_curve(V: FloatArray, a0: float, J: FloatArray, A: FloatArray) -> tuple[Flo
         a0v = np.minimum(a0, A)
         a1 = np.minimum(A, np.sqrt((2.0 * J * V + a0v * a0v) / 2.0))
         t1 = (a1 - a0v) / J
-        v1, s1 = t1 * (a0v + J * t1 / 2.0), t1 * t1 * (a0v / 2.0 + J * t1 / 6.0)
+        s1, v1 = _ramp(t1, a0v, J)
         v2 = V - a1 * a1 / (2.0 * J)
         t2 = np.maximum(0.0, (v2 - v1) / a1)
         s2 = t2 * (v1 + v2) / 2.0

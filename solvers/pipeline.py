@@ -736,7 +736,9 @@ def piece_time_bound(toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int) ->
         q = q_va.copy()
         if i0 == 0:
             a0_start = float(lp.tangential_bound(g.d1[:1], lim.a_rest)[0])
-        A_pt, J_pt = bounds(g)
+        keep = lim.jerk and (s[0] <= near or s[-1] >= L - near)  # (the chunk holds points of the S-curve's ends)
+        if s[0] <= reach or keep:
+            A_pt, J_pt = bounds(g)
         if s[0] <= reach:
             A = np.maximum(np.maximum.accumulate(A_pt), A_run)
             J = np.maximum(np.maximum.accumulate(J_pt), J_run)
@@ -751,7 +753,7 @@ def piece_time_bound(toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int) ->
             terms = np.diff(s) / np.sqrt(np.maximum(q[1:], q[:-1]))
         upto = total + np.concatenate([[0.0], np.cumsum(terms)])
         total += float(np.sum(terms))
-        if lim.jerk:
+        if keep:
             new = s > s[0] if i0 > 0 else np.ones(s.size, dtype=bool)  # (a chunk's first point is the last one's)
             for side, keep in enumerate((new & (s <= near), new & (s >= L - near))):
                 if keep.any():
@@ -775,10 +777,7 @@ def _ramp_stretch(lim: LimitSet, feed: float) -> tuple[float, float]:
     while its tangential acceleration ramps down to 0, at most q_top^(1/2) for tau = max_x amax_x / jmax_x (the
     tangential bounds' A / J, each taken at its largest over a stretch, is at most A_x / J_x at the point of the
     largest A)."""
-    q_top = 3.0 * float(np.max(lim.vmax)) ** 2
-    if lim.feed_max is not None:
-        q_top = min(q_top, lim.feed_max**2)
-    V = math.sqrt(min(q_top, feed * feed))
+    V = math.sqrt(_q_top(lim, feed))
     _, D = lp.s_curve(np.array([V]), float(np.min(lim.a_rest)), np.array([float(np.min(lim.jmax))]),
                       np.array([float(np.min(lim.amax))]))
     extent = float(D[0]) if np.isfinite(D[0]) else 0.0
@@ -821,11 +820,15 @@ def _reach_extent(lim: LimitSet) -> float:
     sqrt(q_top) under the smallest tangential bounds any path has (an axis' limit over |x_s,x| <= 1: the least of
     the axes' a_rest, amax, jmax), q_top = min(Fmax^2, 3 max_x vmax_x^2) (velocity_bound is min_x vmax_x^2 / x_s,x^2,
     and some |x_s,x| >= 1 / sqrt(3))."""
-    q_top = 3.0 * float(np.max(lim.vmax)) ** 2
-    if lim.feed_max is not None:
-        q_top = min(q_top, lim.feed_max**2)
     J = float(np.min(lim.jmax)) if lim.jerk else REACH_NO_JERK
-    return lp.reach_distance(math.sqrt(q_top), float(np.min(lim.a_rest)), J, float(np.min(lim.amax)))
+    return lp.reach_distance(math.sqrt(_q_top(lim)), float(np.min(lim.a_rest)), J, float(np.min(lim.amax)))
+
+
+def _q_top(lim: LimitSet, feed: float = math.inf) -> float:
+    """The largest q any point of any path has under ``lim`` (``_reach_extent``): min(Fmax^2, 3 max_x vmax_x^2), and
+    ``feed`` (mm/s, a piece's programmed feed) squared."""
+    q_top = min(3.0 * float(np.max(lim.vmax)) ** 2, feed * feed)
+    return q_top if lim.feed_max is None else min(q_top, lim.feed_max**2)
 
 
 def _local(toolpath: Toolpath, piece: Piece) -> Any:
