@@ -725,7 +725,7 @@ def piece_time_bound(toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int) ->
     A_run = J_run = 0.0
     a0_start = 0.0
     # the S-curve's ends (``_ramp_gain``): the points within its stretch and a margin of each end
-    extent, margin = _ramp_stretch(lim, piece.feed)
+    extent, margin = _ramp_stretch(lim, piece.feed, reach)
     near = min(L, extent + margin + L / m)  # (a uniform point past the margin of every candidate)
     ends_at: list[list[FloatArray]] = [[], []]  # (head, tail): per chunk, [s, the sum up to s, q_va, A, J]
     for i0 in range(0, m, KNOT_FLOOR_CHUNK):
@@ -755,9 +755,9 @@ def piece_time_bound(toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int) ->
         total += float(np.sum(terms))
         if keep:
             new = s > s[0] if i0 > 0 else np.ones(s.size, dtype=bool)  # (a chunk's first point is the last one's)
-            for side, keep in enumerate((new & (s <= near), new & (s >= L - near))):
-                if keep.any():
-                    ends_at[side].append(np.stack([s[keep], upto[keep], q_va[keep], A_pt[keep], J_pt[keep]]))
+            for side, at_end in enumerate((new & (s <= near), new & (s >= L - near))):
+                if at_end.any():
+                    ends_at[side].append(np.stack([s[at_end], upto[at_end], q_va[at_end], A_pt[at_end], J_pt[at_end]]))
     gain = 0.0
     if lim.jerk:
         for side, a0 in enumerate((a0_start, a0_end)):
@@ -768,8 +768,8 @@ def piece_time_bound(toolpath: Toolpath, piece: Piece, lim: LimitSet, m: int) ->
     return total + gain
 
 
-def _ramp_stretch(lim: LimitSet, feed: float) -> tuple[float, float]:
-    """How far (mm) from a rest end ``_ramp_gain`` looks, and its margin (mm).
+def _ramp_stretch(lim: LimitSet, feed: float, reach: float) -> tuple[float, float]:
+    """How far (mm) from a rest end ``_ramp_gain`` looks, and its margin (mm); ``reach``: ``_reach_extent(lim)``.
 
     The extent: RAMP_EXTENT times the S-curve (``lp.s_curve``) to q_top^(1/2) under the smallest tangential bounds
     any path has (as in ``_reach_extent``; q_top at most the piece's programmed feed squared too), the longest ramp
@@ -781,7 +781,7 @@ def _ramp_stretch(lim: LimitSet, feed: float) -> tuple[float, float]:
     _, D = lp.s_curve(np.array([V]), float(np.min(lim.a_rest)), np.array([float(np.min(lim.jmax))]),
                       np.array([float(np.min(lim.amax))]))
     extent = float(D[0]) if np.isfinite(D[0]) else 0.0
-    return RAMP_EXTENT * max(extent, _reach_extent(lim)), V * float(np.max(lim.amax / lim.jmax))
+    return RAMP_EXTENT * max(extent, reach), V * float(np.max(lim.amax / lim.jmax))
 
 
 def _ramp_gain(x: FloatArray, cum: FloatArray, q_va: FloatArray, A: FloatArray, J: FloatArray, a0: float,

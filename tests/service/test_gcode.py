@@ -8,6 +8,7 @@ from fastapi.testclient import TestClient
 
 from solvers.machine import router
 from tests.service.test_inprocess import assert_problem
+from tests.solvers.test_optimality import ramp_from_rest
 
 #: A 60 x 40 mm rectangle at F1200 (20 mm/s) after a rapid to its corner, then a G2 quarter circle at F3000.
 PROGRAM = """(rectangle and an arc)
@@ -183,13 +184,12 @@ SQUARE_OVER_TRAVEL = 0.01
 
 def test_f_words_set_lp_nlps_knots_through_the_service(client: TestClient) -> None:
     """The F words reach the knot plan: each leg's knots are 0.1 x the router's stopping distance at 10 mm/s (the
-    spec's D = v / 2 (v / a + a / j) per axis, the largest; ~14 um against the machine's 2.3 mm), and the ramps at
-    its corners cost under 1 % of L / F."""
+    largest S-curve ramp of an axis to 10 mm/s, ``test_optimality.ramp_from_rest``; ~14 um against the machine's
+    2.3 mm), and the ramps at its corners cost under 1 % of L / F."""
     r = client.post("/v1/schedule", json={"toolpath": {"gcode": SQUARE_F600}, "options": {"method": "lp+nlp"}})
     assert r.status_code == 200, r.text
     summary = r.json()["summary"]
     v = 10.0
-    D = max(v / 2.0 * (v / ax.limits.amax + ax.limits.amax / ax.limits.jmax) if v >= ax.limits.amax**2 / ax.limits.jmax
-            else v * (v / ax.limits.jmax) ** 0.5 for ax in router().axes)
+    D = max(ramp_from_rest(v, ax.limits.amax, ax.limits.jmax)[1] for ax in router().axes)
     assert summary["knot_spacing"] == pytest.approx(20.0 / np.ceil(20.0 / (0.1 * D)), rel=1e-9)
     assert summary["motion_time"] <= (1.0 + SQUARE_OVER_TRAVEL) * 80.0 / v

@@ -8,7 +8,6 @@ the same path on the default knots, and their samples by finite differences."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -22,7 +21,7 @@ from solvers import pipeline as P
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
 from tests.fdcheck import fd_drive, utilisation
-from tests.solvers.test_optimality import s_curve_time
+from tests.solvers.test_optimality import ramp_from_rest, s_curve_time
 
 #: ``acceleration_bound`` against scipy's LP optimum (relative).
 BOUND_RTOL = 1e-7
@@ -78,18 +77,12 @@ def test_the_time_bound_of_a_line_is_just_under_its_s_curve(length: float, cap: 
         assert got == pytest.approx(move, rel=LINE_CRUISE_BOUND_RTOL)
 
 
-def _ramp_from_rest(peak: float, A: float, J: float) -> tuple[float, float]:
-    """(time, distance) of the S-curve from rest to ``peak`` (as ``test_optimality.s_curve_time``'s)."""
-    t = peak / A + A / J if peak >= A * A / J else 2.0 * math.sqrt(peak / J)
-    return t, 0.5 * peak * t
-
-
 def _stepped_ramp(V: float, A: float, J: float, a0: float) -> tuple[float, float]:
     """(time, distance) of the S-curve to V from rest with the acceleration step a0: the one from rest to
     V' = V + a0^2 / (2 J) entered where that one reaches a0 (t0 = a0 / J, at v0 = a0^2 / (2 J)), less the feed v0
     throughout: T = T_0(V') - t0, D = D_0(V') - J t0^3 / 6 - v0 T."""
     t0, v0 = a0 / J, a0 * a0 / (2.0 * J)
-    T0, D0 = _ramp_from_rest(V + v0, A, J)
+    T0, D0 = ramp_from_rest(V + v0, A, J)
     return T0 - t0, D0 - J * t0**3 / 6.0 - v0 * (T0 - t0)
 
 

@@ -46,14 +46,19 @@ def test_flower_lp_within_one_percent_of_toppra() -> None:
     assert abs(ours - theirs) / theirs < TOPPRA_GAP, (ours, theirs)
 
 
+def ramp_from_rest(peak: float, a: float, j: float) -> tuple[float, float]:
+    """(time, distance) of the fastest ramp from rest to ``peak`` at zero acceleration under |a| <= a, |jerk| <= j
+    (the S-curve's; its distance is the spec's stopping distance from ``peak``)."""
+    t = peak / a + a / j if peak >= a * a / j else 2.0 * math.sqrt(peak / j)
+    return t, 0.5 * peak * t
+
+
 def s_curve_time(length: float, v: float, a: float, j: float) -> float:
     """Time-optimal rest-to-rest move of ``length`` mm in one axis under |v| <= v, |a| <= a, |jerk| <= j
     (the 7-phase S-curve, in closed form; the cruise-free case by bisection on the peak speed)."""
 
     def ramp(peak: float) -> tuple[float, float]:
-        """(time, distance) of the fastest ramp from rest to ``peak`` at zero acceleration."""
-        t = peak / a + a / j if peak >= a * a / j else 2.0 * math.sqrt(peak / j)
-        return t, 0.5 * peak * t
+        return ramp_from_rest(peak, a, j)
 
     t_v, d_v = ramp(v)
     if length >= 2.0 * d_v:
