@@ -23,7 +23,7 @@ from geometry import GeometryError, NurbsSegment, Toolpath, arcblend, gcode, pri
 from service.errors import too_large
 from service.schemas import ArcIn, LineIn, MachineIn, NurbsIn, PolylineIn, ScheduleRequest
 from solvers.machine import AXES, Axis, AxisLimits, DriveModel, Machine, derive_limits, preset
-from solvers.pipeline import Options, Schedule, TimeSamples, least_intervals, motion_time_floor
+from solvers.pipeline import Options, Schedule, TimeSamples, fit_intervals, motion_time_floor, total_intervals
 from solvers.timing import PieceProfile
 
 FloatArray = NDArray[np.float64]
@@ -140,9 +140,13 @@ def control_point_count(req: ScheduleRequest) -> int:
     return n
 
 
-def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) -> None:
-    """Raise a 413 ServiceError when the work certainly exceeds ``budget`` (estimates are lower bounds)."""
-    intervals = sum(least_intervals(tp, p, machine, opts) for p in tp.pieces)
+def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) -> Options:
+    """The options to solve with: ``opts``, with lp+nlp's F-word knots coarsened where their count is over
+    ``budget`` and the machine's knots are not (``solvers.pipeline.fit_intervals``; the summary's
+    ``knot_feed_floor``).  Raise a 413 ServiceError when the work certainly exceeds ``budget`` (estimates are
+    lower bounds)."""
+    opts = fit_intervals(tp, machine, opts, budget.max_intervals)
+    intervals = total_intervals(tp, machine, opts)
     if intervals > budget.max_intervals:
         raise too_large(
             f"{intervals} knot intervals exceed the {budget.max_intervals} allowed in {budget.where}",
@@ -158,6 +162,7 @@ def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) 
             field="options.sample_period", value=opts.sample_period,
             rule=f"motion time / sample period must be <= {budget.max_samples}",
         )
+    return opts
 
 
 def columns_of(smp: TimeSamples) -> dict[str, FloatArray]:

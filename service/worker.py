@@ -41,7 +41,7 @@ class Cancelled(Exception):
 def compute(request: dict[str, Any], budget: Budget, progress: Callable[[float], None] | None = None) -> Result:
     req = ScheduleRequest.model_validate(request)
     tp, machine, opts = to_problem(req)
-    check_budget(tp, machine, opts, budget)
+    opts = check_budget(tp, machine, opts, budget)  # (lp+nlp's F-word knots coarsened to fit its intervals)
     opts = replace(opts, max_samples=budget.max_samples)  # (the exact count, once the motion time is known)
     return from_schedule(schedule(tp, machine, opts, progress=progress))
 
@@ -54,7 +54,7 @@ def compute_ndjson(
     "diagnostics"}), the same values as ``compute``'s.  Raises what ``compute`` raises."""
     req = ScheduleRequest.model_validate(request)
     tp, machine, opts = to_problem(req)
-    check_budget(tp, machine, opts, budget)
+    opts = check_budget(tp, machine, opts, budget)  # (lp+nlp's F-word knots coarsened to fit its intervals)
     opts = replace(opts, max_samples=budget.max_samples)  # (the exact count, once the motion time is known)
     for item in schedule_stream(tp, machine, opts, progress=progress):
         if isinstance(item, SampleBlock):

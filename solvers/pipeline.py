@@ -156,6 +156,8 @@ KNOT_SPACING_PER_STOP = 0.1
 #: -0.15 / +0.00 % at 6.4 / 4.0 / 1.1 x the CPU, so its knots stay the machine's (the knot floor follows the F words
 #: under both).
 PIECE_FEED_KNOTS = ("lp+nlp",)
+#: ``fit_intervals``: the bisection on ``Options.knot_feed_floor`` stops once its bracket is this narrow (hi / lo - 1).
+KNOT_FEED_FLOOR_REL = 1e-3
 #: Default knots, knot phase: a sharp curvature peak (radius of curvature under PHASE_PEAK_RADIUS knot
 #: spacings) costs far more motion time where it falls on a knot than mid-interval (the quadratic
 #: feed's C1 joint there cannot form the narrow dip the peak wants).  Flower, one loop, its 5 petal
@@ -329,6 +331,10 @@ class Options:
         sample_period: Ts of the output, s.
         knot_spacing: feed-profile knot spacing d, mm; default 0.1 x stopping distance (2.3 mm on the router;
             under lp+nlp at each piece's F words, ``PIECE_FEED_KNOTS``; the knot floor, ``floor_intervals``).
+        knot_feed_floor: under lp+nlp's default knots, the lowest feed (mm/s) whose stopping distance sizes a
+            piece's knots and overlaps: a piece whose F words are lower is planned as if they were this
+            (``knot_feed``).  None: no floor.  ``fit_intervals`` sets it to fit a budget of knot intervals
+            (the service's), and the schedule's summary reports it.
         checkpoints_per_interval: N, constraint checkpoints per knot interval.
         lp_window: LP window size in knot intervals; default DEFAULT_LP_WINDOW, and on a long piece with HiGHS
             up to LP_WINDOW_MAX (at least LP_WINDOWS_PER_PIECE windows a piece: ``lp_window``).
@@ -361,6 +367,7 @@ class Options:
     method: str = "lp+nlp"
     sample_period: float = 1e-3
     knot_spacing: float | None = None
+    knot_feed_floor: float | None = None
     checkpoints_per_interval: int = 5
     lp_window: int | None = None
     lp_overlap: int | None = None
@@ -386,6 +393,8 @@ class Options:
             raise InvalidOptionsError("must be <= 0.1 s", field="options.sample_period", value=self.sample_period)
         if self.knot_spacing is not None:
             _pos(self.knot_spacing, "options.knot_spacing")
+        if self.knot_feed_floor is not None:
+            _pos(self.knot_feed_floor, "options.knot_feed_floor")
         if not (isinstance(self.checkpoints_per_interval, int) and 1 <= self.checkpoints_per_interval <= 64):
             raise InvalidOptionsError(
                 "must be an integer in [1, 64]", field="options.checkpoints_per_interval",
@@ -551,8 +560,8 @@ def plan_piece(
     """Knots and window sizes of one piece; ``n_int`` overrides the knot count (a refined piece).  With
     ``toolpath`` and the default knot spacing, the knot count is phased to the piece's curvature peaks
     (``phase_intervals``; method lp+nlp only, see PHASE_SEARCH).  The stopping distance D that sizes the default
-    knots and the overlaps is the machine's, under lp+nlp at the piece's programmed feed (``PIECE_FEED_KNOTS``)."""
-    D = machine.stopping_distance(piece.feed if opt.method in PIECE_FEED_KNOTS else math.inf)
+    knots and the overlaps is the machine's, under lp+nlp at the piece's programmed feed (``knot_feed``)."""
+    D = machine.stopping_distance(knot_feed(piece, opt))
     d_target = opt.knot_spacing if opt.knot_spacing is not None else KNOT_SPACING_PER_STOP * D
     if n_int is None:
         n_int = max(MIN_INTERVALS, math.ceil(piece.length / d_target - 1e-9))
@@ -567,6 +576,50 @@ def plan_piece(
     use_long = opt.nlp_window is None and long >= 4 * nlp_overlap and n_int >= NLP_LONG_WINDOW_MIN_COUNT * long
     return WindowPlan(d, n_int, window, overlap, max(nlp_window, 2 * nlp_overlap), nlp_overlap,
                       long if use_long else None)
+
+
+def knot_feed(piece: Piece, opt: Options) -> float:
+    """The feed (mm/s) whose stopping distance sizes a piece's default knots and overlaps (``plan_piece``): under
+    the methods of PIECE_FEED_KNOTS its programmed feed (``Piece.feed``), at least ``Options.knot_feed_floor``;
+    else inf (the machine's own)."""
+    if opt.method not in PIECE_FEED_KNOTS:
+        return math.inf
+    return piece.feed if opt.knot_feed_floor is None else max(piece.feed, opt.knot_feed_floor)
+
+
+def total_intervals(toolpath: Toolpath, machine: Machine, opt: Options) -> int:
+    """The fewest knot intervals the whole toolpath is solved on (``least_intervals`` over its pieces)."""
+    return sum(least_intervals(toolpath, p, machine, opt) for p in toolpath.pieces)
+
+
+def fit_intervals(toolpath: Toolpath, machine: Machine, opt: Options, max_intervals: int) -> Options:
+    """``opt``, with the knots coarsened if needed so that ``total_intervals`` is at most ``max_intervals``.
+
+    Only lp+nlp's default knots at the pieces' F words (``knot_feed``) are coarsened: ``Options.knot_feed_floor``
+    is raised, by bisection on its logarithm (to KNOT_FEED_FLOOR_REL), from the lowest F word towards the machine's
+    top feed, where the knots are the machine's own.  The floor returned is one whose count fits (the count is not
+    monotone in it everywhere: the knot floor, ``floor_count``, may stop applying as the plan coarsens).  ``opt``
+    is returned as it is where it fits already, where the knots are not the F words' (an explicit
+    ``knot_spacing``, method lp), or where even the machine's knots are over: the caller refuses the work then.
+    """
+    if total_intervals(toolpath, machine, opt) <= max_intervals:
+        return opt
+    feeds = [p.feed for p in toolpath.pieces if math.isfinite(p.feed)]
+    hi = machine.top_feed()
+    lo = min(feeds, default=hi)
+    if opt.knot_spacing is not None or opt.method not in PIECE_FEED_KNOTS or lo >= hi:
+        return opt
+    if opt.knot_feed_floor is not None:
+        lo = max(lo, opt.knot_feed_floor)
+    if total_intervals(toolpath, machine, replace(opt, knot_feed_floor=hi)) > max_intervals:
+        return opt
+    while hi > lo * (1.0 + KNOT_FEED_FLOOR_REL):
+        mid = math.sqrt(lo * hi)
+        if total_intervals(toolpath, machine, replace(opt, knot_feed_floor=mid)) <= max_intervals:
+            hi = mid
+        else:
+            lo = mid
+    return replace(opt, knot_feed_floor=hi)
 
 
 def lp_window(n_int: int, opt: Options) -> int:
@@ -2331,6 +2384,8 @@ def _schedule_stream(
         "control_points": int(sum(p.c.size for p in profiles)),
         "checkpoints": int(sum(p.n_int * opt.checkpoints_per_interval + 1 for p in profiles)),
         "knot_spacing": float(min(p.d for p in profiles)),
+        # lp+nlp's knots planned as if no F word were lower (mm/s; ``Options.knot_feed_floor``), or None
+        "knot_feed_floor": opt.knot_feed_floor,
         "samples": n_released,
         "sample_period": opt.sample_period,
         "peak_utilisation": peaks,

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any
+
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from service.app import create_app
+from service.config import Settings
 from solvers.machine import router
 from tests.service.test_inprocess import assert_problem
 from tests.solvers.test_optimality import ramp_from_rest
@@ -193,3 +198,27 @@ def test_f_words_set_lp_nlps_knots_through_the_service(client: TestClient) -> No
     D = max(ramp_from_rest(v, ax.limits.amax, ax.limits.jmax)[1] for ax in router().axes)
     assert summary["knot_spacing"] == pytest.approx(20.0 / np.ceil(20.0 / (0.1 * D)), rel=1e-9)
     assert summary["motion_time"] <= (1.0 + SQUARE_OVER_TRAVEL) * 80.0 / v
+
+
+#: A square of 2 mm legs at F600: 144 intervals a leg on its F word's knots (0.1 x 0.14 mm), 16 on the machine's.
+SMALL_SQUARE_F600 = SQUARE_F600.replace("X20", "X2").replace("Y20", "Y2")
+
+
+def test_f_word_knots_over_the_budget_are_coarsened_to_fit_not_refused(tmp_path: Path) -> None:
+    """A synchronous budget of 400 intervals: the F words' knots (576) are over it, the machine's (64) are not. The
+    service coarsens them to 100 a leg (``pipeline.fit_intervals``), reports the feed that sized them in
+    ``summary.knot_feed_floor``, and serves the program at its F word; before, it answered 413.  An explicit knot
+    spacing is the client's and is still refused."""
+    app = create_app(Settings(data_dir=tmp_path, workers=1, sync_max_intervals=400))
+    body: dict[str, Any] = {"toolpath": {"gcode": SMALL_SQUARE_F600}, "options": {"method": "lp+nlp"}}
+    with TestClient(app, raise_server_exceptions=False) as c:
+        r = c.post("/v1/schedule", json=body)
+        assert r.status_code == 200, r.text
+        summary = r.json()["summary"]
+        floor = summary["knot_feed_floor"]
+        D = max(ramp_from_rest(min(ax.limits.vmax, floor), ax.limits.amax, ax.limits.jmax)[1] for ax in router().axes)
+        assert 10.0 < floor and summary["knot_spacing"] == pytest.approx(2.0 / 100, rel=1e-12)
+        assert np.ceil(2.0 / (0.1 * D) - 1e-9) == 100
+        assert max(r.json()["samples"]["feed"]) <= 1.01 * 10.0
+        body["options"]["knot_spacing"] = 0.004  # 500 a leg
+        assert_problem(c.post("/v1/schedule", json=body), 413, "options.knot_spacing")
