@@ -221,8 +221,9 @@ class OptionsIn(BaseModel):
     sample_period: Annotated[Number, Field(ge=1e-5, le=0.1)] = Field(default=0.001, description="s")
     knot_spacing: Annotated[Number, Field(ge=1e-3, le=1e4)] | None = Field(
         default=None, description="mm; default 0.1 x the machine's stopping distance (under method lp+nlp, at each "
-        "piece's programmed feed; under a low feed cap or F word a piece is first solved on knots the top feed covers "
-        "in 10 sample periods, kept if within 0.2 % of its motion's lower bound)"
+        "piece's programmed feed, coarsened to fit the request's budget of knot intervals: summary.knot_feed_floor; "
+        "under a low feed cap or F word a piece is first solved on knots the top feed covers in 10 sample periods, "
+        "kept if within 0.2 % of its motion's lower bound)"
     )
     checkpoints_per_interval: StrictInt = Field(default=5, ge=1, le=64)
     jerk: bool = True
