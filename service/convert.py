@@ -145,8 +145,10 @@ def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) 
     ``budget`` and the machine's knots are not (``solvers.pipeline.fit_intervals``; the summary's
     ``knot_feed_floor``).  Raise a 413 ServiceError when the work certainly exceeds ``budget`` (estimates are
     lower bounds)."""
-    opts = fit_intervals(tp, machine, opts, budget.max_intervals)
     intervals = total_intervals(tp, machine, opts)
+    if intervals > budget.max_intervals:
+        opts = fit_intervals(tp, machine, opts, budget.max_intervals)
+        intervals = total_intervals(tp, machine, opts)
     if intervals > budget.max_intervals:
         raise too_large(
             f"{intervals} knot intervals exceed the {budget.max_intervals} allowed in {budget.where}",

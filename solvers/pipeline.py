@@ -602,12 +602,11 @@ def fit_intervals(toolpath: Toolpath, machine: Machine, opt: Options, max_interv
     is returned as it is where it fits already, where the knots are not the F words' (an explicit
     ``knot_spacing``, method lp), or where even the machine's knots are over: the caller refuses the work then.
     """
-    if total_intervals(toolpath, machine, opt) <= max_intervals:
-        return opt
     feeds = [p.feed for p in toolpath.pieces if math.isfinite(p.feed)]
     hi = machine.top_feed()
     lo = min(feeds, default=hi)
-    if opt.knot_spacing is not None or opt.method not in PIECE_FEED_KNOTS or lo >= hi:
+    if (opt.knot_spacing is not None or opt.method not in PIECE_FEED_KNOTS or lo >= hi
+            or total_intervals(toolpath, machine, opt) <= max_intervals):
         return opt
     if opt.knot_feed_floor is not None:
         lo = max(lo, opt.knot_feed_floor)
