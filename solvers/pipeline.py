@@ -1097,6 +1097,14 @@ def _refined(
     return result[0], result[1]
 
 
+#: LP windows are not solved along a straight stretch at a constant velocity bound that the walk enters at that
+#: bound (``_WindowWalk.cruise``): there q = the bound is the LP's optimum (every checkpoint at its upper bound, the
+#: acceleration and jerk rows 0), so the control points are set to it, and the next window starts OVERLAP before the
+#: stretch ends (as far as a window's artificial end: the stop it plans for is forgotten by then).  The walk enters
+#: at the bound when q and q' = 0 at its join are within CRUISE_TOL of it; the stretch is straight while the
+#: curvature's acceleration and jerk at the bound stay under CRUISE_TOL of every axis's limits.  Why: lp+nlp's F-word
+#: knots put 35-60 % of the CPU of the router's pocket at F1800 / F600 in such windows, ~10 % on random CAM programs.
+CRUISE_TOL = 1e-9
 #: A piece whose LP plan (method lp) has at least this many windows is solved as two chains of windows
 #: joined by a seam window (``_solve_windows``): the second chain in a forked process when
 #: ``Options.nlp_workers`` > 1, else after the first in this one (the same feed either way).
@@ -1224,6 +1232,57 @@ class _WindowWalk:
             k0 = k_next
             if stop is not None and k0 >= stop:
                 return joins, _WalkState(k0, start, prev_qstar, prev_c)
+            # (not in a chain split's first chain: the seam window starts where the plan's windows do)
+            jump = self.cruise(k0, start) if stop is None else None
+            if jump is not None:
+                k_jump, q_top = jump
+                c[k0 + 2 : k_jump + 2] = q_top
+                stats["lp_cruise_jumps"] = stats.get("lp_cruise_jumps", 0) + 1
+                stats["lp_cruise_intervals"] = stats.get("lp_cruise_intervals", 0) + k_jump - k0
+                joins.append(k_jump)
+                if on_window is not None:
+                    on_window(k_jump * plan.d)
+                if on_lp is not None:
+                    on_lp(c, joins)
+                start = (q_top, q_top)
+                flat = np.full(plan.window + 2, q_top)
+                prev_qstar, prev_c = (k_jump, flat), (k_jump, flat)
+                k0 = k_jump
+
+    def cruise(self, k0: int, start: tuple[float, float]) -> tuple[int, float] | None:
+        """(k_jump, q_top): where the walk from knot k0 at state ``start`` (c_k0, c_k0+1) may go on past a cruise
+        (see CRUISE_TOL), with q = q_top over [k0, k_jump]; None where it may not save a window (``walk``).
+
+        The stretch is scanned from k0 in windows' lengths of knot intervals (the geometry at the windows' own
+        checkpoints) until an interval is not straight, changes the velocity bound, holds a curvature break or a
+        verification point, or the piece ends; k_jump is an overlap and 3 intervals before that interval, and
+        at least a window's final stretch (window - overlap) past k0."""
+        plan, lim, N = self.plan, self.lim, self.opt.checkpoints_per_interval
+        q_top = start[0]
+        if not (q_top > 0.0 and abs(start[1] - q_top) <= CRUISE_TOL * q_top):
+            return None
+        need = plan.window - plan.overlap
+        k = k0
+        while k < plan.n_int:
+            k_hi = min(k + plan.window, plan.n_int)
+            s = np.linspace(k * plan.d, k_hi * plan.d, (k_hi - k) * N + 1)
+            g = self.geometry(s)
+            ok = np.abs(velocity_bound(g, lim) - q_top) <= CRUISE_TOL * q_top
+            ok &= np.all(np.abs(g.d2) * q_top <= CRUISE_TOL * lim.amax, axis=1)
+            ok &= np.all(np.abs(g.d3) * q_top**1.5 <= CRUISE_TOL * lim.jmax, axis=1)
+            for extra in (self.breaks, self.verify):
+                if extra is not None and extra.size:
+                    inside = extra[(extra > s[0]) & (extra <= s[-1])]
+                    ok[np.searchsorted(s, inside)] = False
+            bad = np.flatnonzero(~ok)
+            if bad.size:
+                k_end = k + int(bad[0] - 1) // N if bad[0] > 0 else k - 1
+                break
+            k = k_hi
+        else:
+            k_end = plan.n_int
+        k_jump = k_end - plan.overlap - 3
+        return (k_jump, q_top) if k_jump - k0 >= need else None
 
 
 @dataclass(frozen=True)
@@ -2157,7 +2216,7 @@ def _schedule_stream(
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
         "unverified": 0, "window_times": [], "sample_repairs": 0, "lp_chains": 0, "lp_seam_fallbacks": 0,
         "rest_shape_fallbacks": 0, "rest_step_floor_walks": 0, "knot_floor_pieces": 0, "knot_floor_fallbacks": 0,
-        "knot_floor_levels": 0,
+        "knot_floor_levels": 0, "lp_cruise_jumps": 0, "lp_cruise_intervals": 0,
     }
     if opt.method == "lp+nlp" and not machine.has_drives:
         raise InvalidMachineError(
@@ -2368,6 +2427,10 @@ def _schedule_stream(
         # those of them whose second chain or seam failed (the first chain then walked on alone)
         "lp_chains": stats["lp_chains"],
         "lp_seam_fallbacks": stats["lp_seam_fallbacks"],
+        # stretches the LP windows were not solved on (at a constant velocity bound on a straight line,
+        # ``_WindowWalk.cruise``), and their knot intervals
+        "lp_cruise_jumps": stats["lp_cruise_jumps"],
+        "lp_cruise_intervals": stats["lp_cruise_intervals"],
         # knot plans of method lp walked again with a floor on the step at rest, whose q dipped to 0 next to rest
         # with the rest shapes, and those walked without the shapes at last (``_solve_windows``)
         "rest_step_floor_walks": stats["rest_step_floor_walks"],
