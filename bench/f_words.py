@@ -10,7 +10,7 @@ floor from the machine's top feed.  Cases: the router's pocket (``bench.stream_l
 at F600, F1800 and F6000, and a random CAM program on a fast machine (cam-bench seed 48: 14 g, F words at 10-30 %
 of its top feed).  The settings alternate in one process, one NLP worker; CPU is ``time.process_time`` of
 ``schedule()`` (the median).  Each schedule's samples are checked by finite differences (tests/fdcheck.py): v, a, j
-(lp) or u, e (lp+nlp).  "intervals" is the service's budget count (``pipeline.least_intervals`` over the pieces:
+(lp) or u, e (lp+nlp).  "intervals" is the service's budget count (``pipeline.total_intervals``:
 the synchronous API's budget is 20,000).  A lp+nlp case over that budget gets one more row: the service's answer
 since session 55, its knots coarsened to fit (``pipeline.fit_intervals``) against the job's and the machine's.
 """
@@ -104,6 +104,8 @@ def _fitted_row(out: dict[str, Any], name: str, tp: Toolpath, m: Machine, opts: 
     fit (``pipeline.fit_intervals``, as ``service.convert.check_budget`` does), against the full F-word knots (a job)
     and the machine's (before session 54; session 54's service answered 413)."""
     fitted = fit_intervals(tp, m, opts, SYNC_MAX_INTERVALS)
+    if fitted.knot_feed_floor is None:  # (over even on the machine's knots: the service refuses it)
+        return
     cpu: list[float] = []
     for _ in range(repeats):
         t0 = time.process_time()
