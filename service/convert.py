@@ -143,8 +143,9 @@ def control_point_count(req: ScheduleRequest) -> int:
 def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) -> Options:
     """The options to solve with: ``opts``, with lp+nlp's F-word knots coarsened where their count is over
     ``budget`` and the machine's knots are not (``solvers.pipeline.fit_intervals``; the summary's
-    ``knot_feed_floor``).  Raise a 413 ServiceError when the work certainly exceeds ``budget`` (estimates are
-    lower bounds)."""
+    ``knot_feed_floor``), and the budget's sample count as ``Options.max_samples`` (checked exactly once the motion
+    time is known).  Raise a 413 ServiceError when the work certainly exceeds ``budget`` (estimates are lower
+    bounds)."""
     intervals = total_intervals(tp, machine, opts)
     if intervals > budget.max_intervals:
         opts = fit_intervals(tp, machine, opts, budget.max_intervals)
@@ -164,7 +165,7 @@ def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) 
             field="options.sample_period", value=opts.sample_period,
             rule=f"motion time / sample period must be <= {budget.max_samples}",
         )
-    return opts
+    return replace(opts, max_samples=budget.max_samples)
 
 
 def columns_of(smp: TimeSamples) -> dict[str, FloatArray]:

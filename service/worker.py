@@ -12,7 +12,6 @@ import os
 import threading
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -41,8 +40,7 @@ class Cancelled(Exception):
 def compute(request: dict[str, Any], budget: Budget, progress: Callable[[float], None] | None = None) -> Result:
     req = ScheduleRequest.model_validate(request)
     tp, machine, opts = to_problem(req)
-    opts = check_budget(tp, machine, opts, budget)  # (lp+nlp's F-word knots coarsened to fit its intervals)
-    opts = replace(opts, max_samples=budget.max_samples)  # (the exact count, once the motion time is known)
+    opts = check_budget(tp, machine, opts, budget)  # (F-word knots fitted to the budget; its sample cap)
     return from_schedule(schedule(tp, machine, opts, progress=progress))
 
 
@@ -54,8 +52,7 @@ def compute_ndjson(
     "diagnostics"}), the same values as ``compute``'s.  Raises what ``compute`` raises."""
     req = ScheduleRequest.model_validate(request)
     tp, machine, opts = to_problem(req)
-    opts = check_budget(tp, machine, opts, budget)  # (lp+nlp's F-word knots coarsened to fit its intervals)
-    opts = replace(opts, max_samples=budget.max_samples)  # (the exact count, once the motion time is known)
+    opts = check_budget(tp, machine, opts, budget)  # (F-word knots fitted to the budget; its sample cap)
     for item in schedule_stream(tp, machine, opts, progress=progress):
         if isinstance(item, SampleBlock):
             yield from (("rows", chunk) for chunk in ndjson_rows(columns_of(item.samples)))
