@@ -71,7 +71,17 @@ from solvers.nlp import CONTEXT_SAMPLES as NLP_CONTEXT_SAMPLES
 from solvers.nlp import CONTEXT_STEP as NLP_CONTEXT_STEP
 from solvers.nlp import V_STEP_SHARE as NLP_V_STEP_SHARE
 from solvers.nlp import VERIFY_TOL as NLP_VERIFY_TOL
-from solvers.nlp import ChainPipeline, Motion, NlpLimits, NlpRefiner, NlpStats, chain_spans, rest_profile
+from solvers.nlp import (
+    ChainPipeline,
+    ChainPool,
+    GeometryFn,
+    Motion,
+    NlpLimits,
+    NlpRefiner,
+    NlpStats,
+    chain_spans,
+    rest_profile,
+)
 from solvers.timing import (
     PieceProfile,
     PieceTiming,
@@ -1749,25 +1759,52 @@ def _refiner(
 ) -> NlpRefiner:
     """The refiner of the piece's NLP window shape on n_int knot intervals (from ``refiners``, or new)."""
     plan = plan_piece(piece, machine, opt, n_int)
-    key = (plan.nlp_window, plan.nlp_overlap, plan.nlp_long_window)
+    return _shape_refiner((plan.nlp_window, plan.nlp_overlap, plan.nlp_long_window), opt, nlp_lim, refiners, stats)
+
+
+def _shape_refiner(
+    key: tuple[int, int, int | None], opt: Options, nlp_lim: NlpLimits,
+    refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats,
+) -> NlpRefiner:
+    """The refiner of NLP window plan ``key`` (nlp_window, nlp_overlap, nlp_long_window) from ``refiners``, or new."""
     if key not in refiners:
-        refiners[key] = NlpRefiner(nlp_lim, opt.nlp_checkpoints_per_interval, plan.nlp_window, plan.nlp_overlap,
-                                   fault=opt.nlp_fault, stats=stats, long_window=plan.nlp_long_window)
+        refiners[key] = NlpRefiner(nlp_lim, opt.nlp_checkpoints_per_interval, key[0], key[1],
+                                   fault=opt.nlp_fault, stats=stats, long_window=key[2])
     return refiners[key]
+
+
+#: A piece's key in the schedule's ``ChainPool``: (piece index, its refiner's ``refiners`` key).
+_PoolKey = tuple[int, tuple[int, int, int | None]]
+
+
+def _chain_pool(
+    toolpath: Toolpath, opt: Options, nlp_lim: NlpLimits, refiners: dict[tuple[int, int, int | None], NlpRefiner],
+    stats: NlpStats,
+) -> ChainPool:
+    """The schedule's NLP workers (``_workers(opt)`` of them), reading a piece's refiner and geometry from its
+    ``_PoolKey`` (in a worker: its forked copy of ``refiners``, new refiners added there)."""
+
+    def context(key: _PoolKey) -> tuple[NlpRefiner, GeometryFn]:
+        index, shape = key
+        return _shape_refiner(shape, opt, nlp_lim, refiners, stats), _local(toolpath, toolpath.pieces[index])
+
+    return ChainPool(_workers(opt), context)
 
 
 def _chain_pipeline(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, nlp_lim: NlpLimits,
     refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats, n_int: int | None,
-    lead_in: Motion | None = None,
+    pool: ChainPool, lead_in: Motion | None = None,
 ) -> ChainPipeline:
-    """NLP chains solved in opt.nlp_workers forked processes as the LP's windows make them final, on the
+    """NLP chains solved by the schedule's workers (``pool``) as the LP's windows make them final, on the
     piece's first knot plan, ``n_int`` intervals (None: its plan's; ``_refine_piece`` falls back to solving
     after the LP if the LP ends on other knots)."""
     plan = plan_piece(piece, machine, opt, n_int, toolpath)
-    refiner = _refiner(piece, machine, opt, plan.n_int, nlp_lim, refiners, stats)
-    return ChainPipeline(refiner, _local(toolpath, piece), plan.d, plan.n_int, _breaks(toolpath, piece),
-                         _workers(opt), _standing_ends(toolpath, piece), lead_in)
+    shape = (plan.nlp_window, plan.nlp_overlap, plan.nlp_long_window)
+    refiner = _shape_refiner(shape, opt, nlp_lim, refiners, stats)
+    key: _PoolKey = (piece.index, shape)
+    return ChainPipeline(refiner, _local(toolpath, piece), plan.d, plan.n_int, _breaks(toolpath, piece), pool, key,
+                         _standing_ends(toolpath, piece), lead_in)
 
 
 def _lead_in(toolpath: Toolpath, piece: Piece, prof: PieceProfile, timing: PieceTiming, Ts: float) -> Motion:
@@ -2271,142 +2308,149 @@ def _schedule_stream(
     n_released = 0
     peaks: dict[str, float] = {}
     lead_in: Motion | None = None  # the previous piece's motion up to the corner (lp+nlp: ``_lead_in``)
-    for piece in toolpath.pieces:
-        i = piece.index
-        last = i == n_pieces - 1
-        emit("piece_start", i)
-        cache: WindowCache = {}
+    # one pool of NLP workers for the whole schedule (forked at its first chain; ``nlp.ChainPool``)
+    pool = (_chain_pool(toolpath, opt, nlp_lim, refiners, nlp_stats)
+            if nlp_stats is not None and nlp_lim is not None and _workers(opt) > 1 else None)
+    try:
+        for piece in toolpath.pieces:
+            i = piece.index
+            last = i == n_pieces - 1
+            emit("piece_start", i)
+            cache: WindowCache = {}
 
-        def on_window(s_done: float, s0: float = piece.s_start) -> None:
-            report((s0 + lp_share * s_done) / total)
+            def on_window(s_done: float, s0: float = piece.s_start) -> None:
+                report((s0 + lp_share * s_done) / total)
 
-        first, first_bound = first_plan(toolpath, piece, machine, opt, lim)
-        # with NLP workers, the chains go to them while the LP still solves the later windows
-        pipe = (_chain_pipeline(toolpath, piece, machine, opt, nlp_lim, refiners, nlp_stats, first, lead_in)
-                if nlp_stats is not None and nlp_lim is not None and _workers(opt) > 1 else None)
-        plain: list[tuple[PieceProfile, list[int]]] = []
-        try:
-            t0 = time.perf_counter()
-            fallbacks = stats.get("rest_plan_fallbacks", 0)
-            lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache,
-                                         pipe.lp_progress if pipe is not None else None, first,
-                                         plain if nlp_stats is not None else None, first_bound)
-            t_lp += time.perf_counter() - t0
-            # repairs start from the knots the first solve started from
-            if first_bound is not None:
-                on_floor = stats.get("rest_plan_fallbacks", 0) == fallbacks
-                stats["knot_floor_pieces" if on_floor else "knot_floor_fallbacks"] += 1
-                if on_floor:
-                    first = lp_prof.n_int  # (the level kept: its repairs start there)
-            if stats.get("rest_plan_fallbacks", 0) != fallbacks:
-                first = first_bound = None
-            prof = lp_prof
-            if nlp_stats is not None and nlp_lim is not None:
-                def on_chain(s_done: float, s0: float = piece.s_start, length: float = piece.length) -> None:
-                    report((s0 + lp_share * length + (1.0 - lp_share) * s_done) / total)
-
+            first, first_bound = first_plan(toolpath, piece, machine, opt, lim)
+            # with NLP workers, the chains go to them while the LP still solves the later windows
+            pipe = (_chain_pipeline(toolpath, piece, machine, opt, nlp_lim, refiners, nlp_stats, first, pool, lead_in)
+                    if pool is not None and nlp_stats is not None and nlp_lim is not None else None)
+            plain: list[tuple[PieceProfile, list[int]]] = []
+            try:
                 t0 = time.perf_counter()
-                n_failed = len(nlp_stats.failures)
-                prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
-                                     on_chain, pipe=pipe, lead_in=lead_in)
-                if plain and len(nlp_stats.failures) > n_failed:
-                    lp_prof, prof = _nlp_on_coarser_knots(toolpath, piece, machine, opt, (lp_prof, prof), plain,
-                                                       nlp_lim, refiners, nlp_stats, n_failed, lead_in)
-                t_nlp += time.perf_counter() - t0
-        finally:
-            if pipe is not None:
-                pipe.close()
-        emit("piece_solved", i)
-        verify_s = np.zeros(0)
-        rounds = 0
-        while True:
-            timing = PieceTiming.build(prof)
-            t_next = t_end + timing.duration
-            k_hi = max(k_next, math.ceil(t_next / Ts - 1e-9) + 1) if last else first_sample_at(t_next, Ts)
-            if opt.max_samples is not None and k_hi > opt.max_samples:
-                raise OutputTooLargeError(
-                    f"the schedule needs at least {k_hi} time samples ({t_next:.6g} s of motion up to the end of "
-                    f"piece {i}, every {Ts:g} s), over the {opt.max_samples} allowed",
-                    field="options.max_samples", value=opt.max_samples,
+                fallbacks = stats.get("rest_plan_fallbacks", 0)
+                lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache,
+                                             pipe.lp_progress if pipe is not None else None, first,
+                                             plain if nlp_stats is not None else None, first_bound)
+                t_lp += time.perf_counter() - t0
+                # repairs start from the knots the first solve started from
+                if first_bound is not None:
+                    on_floor = stats.get("rest_plan_fallbacks", 0) == fallbacks
+                    stats["knot_floor_pieces" if on_floor else "knot_floor_fallbacks"] += 1
+                    if on_floor:
+                        first = lp_prof.n_int  # (the level kept: its repairs start there)
+                if stats.get("rest_plan_fallbacks", 0) != fallbacks:
+                    first = first_bound = None
+                prof = lp_prof
+                if nlp_stats is not None and nlp_lim is not None:
+                    def on_chain(s_done: float, s0: float = piece.s_start, length: float = piece.length) -> None:
+                        report((s0 + lp_share * length + (1.0 - lp_share) * s_done) / total)
+
+                    t0 = time.perf_counter()
+                    n_failed = len(nlp_stats.failures)
+                    prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
+                                         on_chain, pipe=pipe, lead_in=lead_in)
+                    if plain and len(nlp_stats.failures) > n_failed:
+                        lp_prof, prof = _nlp_on_coarser_knots(toolpath, piece, machine, opt, (lp_prof, prof), plain,
+                                                           nlp_lim, refiners, nlp_stats, n_failed, lead_in)
+                    t_nlp += time.perf_counter() - t0
+            finally:
+                if pipe is not None:
+                    pipe.close()
+            emit("piece_solved", i)
+            verify_s = np.zeros(0)
+            rounds = 0
+            while True:
+                timing = PieceTiming.build(prof)
+                t_next = t_end + timing.duration
+                k_hi = max(k_next, math.ceil(t_next / Ts - 1e-9) + 1) if last else first_sample_at(t_next, Ts)
+                if opt.max_samples is not None and k_hi > opt.max_samples:
+                    raise OutputTooLargeError(
+                        f"the schedule needs at least {k_hi} time samples ({t_next:.6g} s of motion up to the end of "
+                        f"piece {i}, every {Ts:g} s), over the {opt.max_samples} allowed",
+                        field="options.max_samples", value=opt.max_samples,
+                    )
+                n_block = block if block is not None else max(1, k_hi - k_next)
+                kept: list[tuple[TimeSamples, _Recheck, _Carry, bool]] = []  # (a piece in one block)
+                bad: list[FloatArray] = []
+                worst: tuple[str, str, float, float, float] = ("", "", -np.inf, 0.0, 0.0)
+                for item in _piece_blocks(toolpath, piece, prof, timing, t_end, k_next, k_hi, n_block, carry, last,
+                                          limits, lim, Ts, _workers(opt), precise):
+                    seq, chk, _, final = item
+                    # (bench seed 1291: the jerk 1.29 x of a piece's last samples, found only once they were
+                    # checked with the next piece, which could not repair them)
+                    bad.append(_repair_points(seq, np.concatenate([chk.repair, chk.held_over]), last and final))
+                    kind, axis, util, k = chk.rows.worst(0, chk.n_released)
+                    if util > worst[2]:
+                        worst = (kind, axis, util, float(seq.s[k]), float(seq.t[k]))
+                    if k_hi - k_next <= n_block:  # (one block: released as checked)
+                        kept.append(item)
+                    del seq, chk, item
+                s_bad = np.concatenate(bad)
+                owner = np.clip(np.searchsorted(starts, s_bad, side="right") - 1, 0, n_pieces - 1)
+                s_loc = s_bad[owner == i] - piece.s_start
+                s_loc = s_loc[(s_loc > 0.0) & (s_loc < piece.length)]
+                if not s_loc.size or rounds == SAMPLE_REPAIR_ROUNDS:
+                    break
+                # the piece again with those points verified (LP windows before the first changed one are
+                # reused), then re-sampled
+                rounds += 1
+                verify_s = np.union1d(verify_s, s_loc)
+                lim_r = _repair_limits(lim, rounds)
+                if nlp and rounds == SAMPLE_REPAIR_ROUNDS:  # the steps at REPAIR_STEP_SHARE of the budget
+                    share = REPAIR_STEP_SHARE / REST_SHARE
+                    lim_r = replace(lim_r, a_rest=lim.a_rest * share,
+                                    a_step=None if lim.a_step is None else lim.a_step * share)
+                    cache = {}  # (its windows were solved with the full share)
+                lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim_r, stats, None, verify_s, cache,
+                                             None, first, first_bound=first_bound)
+                prof = lp_prof
+                if nlp_stats is not None and nlp_lim is not None:
+                    prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, {}, nlp_stats,
+                                         None, verify_s, lead_in=lead_in)
+            stats["sample_repairs"] = max(stats["sample_repairs"], rounds)
+            kind, axis, util, s_worst, t_worst = worst
+            if util > 1.0 + verify.FAIL_TOL:
+                raise LimitViolationError(
+                    f"the sampled {kind.replace('_', ' ')} reaches {util:.4f} x its limit after "
+                    f"{rounds} repair rounds (limits are promised within {1.0 + verify.FAIL_TOL:g} x)",
+                    field="toolpath", value={"s": s_worst, "t": t_worst, "utilisation": util},
+                    axis=axis or None,
                 )
-            n_block = block if block is not None else max(1, k_hi - k_next)
-            kept: list[tuple[TimeSamples, _Recheck, _Carry, bool]] = []  # (a piece in one block)
-            bad: list[FloatArray] = []
-            worst: tuple[str, str, float, float, float] = ("", "", -np.inf, 0.0, 0.0)
-            for item in _piece_blocks(toolpath, piece, prof, timing, t_end, k_next, k_hi, n_block, carry, last,
-                                      limits, lim, Ts, _workers(opt), precise):
-                seq, chk, _, final = item
-                # (bench seed 1291: the jerk 1.29 x of a piece's last samples, found only once they were
-                # checked with the next piece, which could not repair them)
-                bad.append(_repair_points(seq, np.concatenate([chk.repair, chk.held_over]), last and final))
-                kind, axis, util, k = chk.rows.worst(0, chk.n_released)
-                if util > worst[2]:
-                    worst = (kind, axis, util, float(seq.s[k]), float(seq.t[k]))
-                if k_hi - k_next <= n_block:  # (one block: released as checked)
-                    kept.append(item)
-                del seq, chk, item
-            s_bad = np.concatenate(bad)
-            owner = np.clip(np.searchsorted(starts, s_bad, side="right") - 1, 0, n_pieces - 1)
-            s_loc = s_bad[owner == i] - piece.s_start
-            s_loc = s_loc[(s_loc > 0.0) & (s_loc < piece.length)]
-            if not s_loc.size or rounds == SAMPLE_REPAIR_ROUNDS:
-                break
-            # the piece again with those points verified (LP windows before the first changed one are
-            # reused), then re-sampled
-            rounds += 1
-            verify_s = np.union1d(verify_s, s_loc)
-            lim_r = _repair_limits(lim, rounds)
-            if nlp and rounds == SAMPLE_REPAIR_ROUNDS:  # the steps at REPAIR_STEP_SHARE of the budget
-                share = REPAIR_STEP_SHARE / REST_SHARE
-                lim_r = replace(lim_r, a_rest=lim.a_rest * share,
-                                a_step=None if lim.a_step is None else lim.a_step * share)
-                cache = {}  # (its windows were solved with the full share)
-            lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim_r, stats, None, verify_s, cache,
-                                         None, first, first_bound=first_bound)
-            prof = lp_prof
-            if nlp_stats is not None and nlp_lim is not None:
-                prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, {}, nlp_stats,
-                                     None, verify_s, lead_in=lead_in)
-        stats["sample_repairs"] = max(stats["sample_repairs"], rounds)
-        kind, axis, util, s_worst, t_worst = worst
-        if util > 1.0 + verify.FAIL_TOL:
-            raise LimitViolationError(
-                f"the sampled {kind.replace('_', ' ')} reaches {util:.4f} x its limit after "
-                f"{rounds} repair rounds (limits are promised within {1.0 + verify.FAIL_TOL:g} x)",
-                field="toolpath", value={"s": s_worst, "t": t_worst, "utilisation": util},
-                axis=axis or None,
-            )
-        lp_profiles.append(lp_prof)
-        profiles.append(prof)
-        if nlp:
-            lp_motion_time += PieceTiming.build(lp_prof, inverse=False).duration
-            lead_in = _lead_in(toolpath, piece, prof, timing, Ts)
-        k_lo = k_next
-        t0_piece = t_end
-        t_end, k_next = t_next, k_hi
-        report(piece.s_end / total)
-        # the piece held at once is released as checked; a longer one is sampled again, block by block
-        blocks = kept if kept else _piece_blocks(toolpath, piece, prof, timing, t0_piece, k_lo, k_hi, n_block,
-                                                 carry, last, limits, lim, Ts, _workers(opt), precise)
-        for seq, chk, carry_b, _ in blocks:
-            n_rel = chk.n_released
-            carry = carry_b
-            if not n_rel:
-                continue
-            out = _rows(seq, 0, n_rel)
-            if drives is not None:
-                u, e = drive_outputs(drives, out.velocity, out.acceleration, out.jerk)
-                out = replace(out, control_signal=u, servo_error=e)
-            _merge_peaks(peaks, _peak_utilisation(out, lim, drives, _feed_cap(lim, toolpath, out.s)))
-            released = SampleBlock(n_released, i, out)
-            n_released += n_rel
-            del seq, chk, out
-            emit("block", i)
-            t_y = time.perf_counter()
-            yield released
-            paused += time.perf_counter() - t_y
-            del released  # (the consumer's now: not held while the next block is sampled)
-        del blocks, kept  # (not held while the next piece is solved)
+            lp_profiles.append(lp_prof)
+            profiles.append(prof)
+            if nlp:
+                lp_motion_time += PieceTiming.build(lp_prof, inverse=False).duration
+                lead_in = _lead_in(toolpath, piece, prof, timing, Ts)
+            k_lo = k_next
+            t0_piece = t_end
+            t_end, k_next = t_next, k_hi
+            report(piece.s_end / total)
+            # the piece held at once is released as checked; a longer one is sampled again, block by block
+            blocks = kept if kept else _piece_blocks(toolpath, piece, prof, timing, t0_piece, k_lo, k_hi, n_block,
+                                                     carry, last, limits, lim, Ts, _workers(opt), precise)
+            for seq, chk, carry_b, _ in blocks:
+                n_rel = chk.n_released
+                carry = carry_b
+                if not n_rel:
+                    continue
+                out = _rows(seq, 0, n_rel)
+                if drives is not None:
+                    u, e = drive_outputs(drives, out.velocity, out.acceleration, out.jerk)
+                    out = replace(out, control_signal=u, servo_error=e)
+                _merge_peaks(peaks, _peak_utilisation(out, lim, drives, _feed_cap(lim, toolpath, out.s)))
+                released = SampleBlock(n_released, i, out)
+                n_released += n_rel
+                del seq, chk, out
+                emit("block", i)
+                t_y = time.perf_counter()
+                yield released
+                paused += time.perf_counter() - t_y
+                del released  # (the consumer's now: not held while the next block is sampled)
+            del blocks, kept  # (not held while the next piece is solved)
+    finally:
+        if pool is not None:
+            pool.close()
     motion_time = t_end
     if not nlp:
         lp_motion_time = motion_time  # (with method lp the LP profiles are the sampled ones)

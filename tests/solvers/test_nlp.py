@@ -30,6 +30,8 @@ SEAM_REL_TOL = 1e-6
 MIN_GAIN = 0.25
 #: Windowed NLP vs one full-horizon NLP window (issue: within 1%).
 WINDOW_COST = 0.01
+#: Pools a schedule on 2 workers may fork: again after this process built a new NLP shape (``nlp.ChainPool``).
+MAX_POOL_FORKS = 2
 
 
 def _drive(m: Machine) -> dict[str, np.ndarray]:
@@ -235,6 +237,64 @@ def test_parallel_chains_give_the_same_schedule(monkeypatch: pytest.MonkeyPatch)
     for k in ("nlp_windows", "nlp_iterations", "nlp_cut_rounds", "nlp_failures"):
         assert par.summary[k] == seq.summary[k], k
     _check_drive(m, par)
+
+
+def _zigzag(legs: int, feed: float) -> Toolpath:
+    """A zigzag of ``legs`` 108 mm lines in x and y at F ``feed`` mm/min: a corner, so rest, between every two."""
+    from geometry import gcode
+
+    pts = "\n".join(f"G1 X{100 * k} Y{40 * (k % 2)}" for k in range(1, legs + 1))
+    return gcode.parse(f"G90 G21\nG1 X0 Y0 F{feed:g}\n{pts}").toolpath()
+
+
+def test_one_pool_of_workers_serves_every_piece(monkeypatch: pytest.MonkeyPatch) -> None:
+    """On 2 workers, a path of many pieces forks one pool for the whole schedule (``nlp.ChainPool``), not one
+    per piece (until session 56: ~20 ms each to start and stop, 2 workers slower than 1 on the router's pocket);
+    the feed is the one solved in this process bit for bit, and no worker outlives the schedule."""
+    import multiprocessing
+    import os
+
+    tp = _zigzag(6, 1800.0)
+    m = router()
+    seq = schedule(tp, m, Options(method="lp+nlp", nlp_workers=1))
+    forks: list[int] = []
+    fork = os.fork
+
+    def counted() -> int:
+        pid = fork()
+        if pid:
+            forks.append(pid)
+        return pid
+
+    monkeypatch.setattr(os, "fork", counted)
+    log = _pipeline_log(monkeypatch)
+    par = schedule(tp, m, Options(method="lp+nlp", nlp_workers=2))
+    assert len(tp.pieces) == 6
+    # every piece handed a chain to the workers while its LP ran, and 2 processes served them all
+    assert len(log["early"]) == 6 and min(log["early"]) >= 1
+    assert len(forks) <= 2 * MAX_POOL_FORKS < 2 * 6
+    assert multiprocessing.active_children() == []
+    np.testing.assert_array_equal(par.samples.position, seq.samples.position)
+    for k in ("nlp_windows", "nlp_iterations", "nlp_cut_rounds", "nlp_failures"):
+        assert par.summary[k] == seq.summary[k], k
+    _check_drive(m, par)
+
+
+def test_a_cancelled_schedule_leaves_no_worker() -> None:
+    """A schedule stopped mid-path (its progress callback raises, as a cancelled job's does) stops its NLP
+    workers with it."""
+    import multiprocessing
+
+    class Cancelled(Exception):
+        pass
+
+    def progress(fraction: float) -> None:
+        if fraction > 0.5:
+            raise Cancelled
+
+    with pytest.raises(Cancelled):
+        schedule(_zigzag(4, 1800.0), router(), Options(method="lp+nlp", nlp_workers=2), progress=progress)
+    assert multiprocessing.active_children() == []
 
 
 def _daemon_schedule(conn: Any) -> None:
