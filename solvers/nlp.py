@@ -1600,7 +1600,7 @@ class NlpRefiner:
         joins: list[int],
         breaks: FloatArray,
         on_chain: Callable[[float], None] | None = None,
-        workers: int = 1,
+        pool: tuple[ChainPool, Any] | None = None,
         verify: FloatArray | None = None,
         bump: tuple[bool, bool] = (True, True),
         lead_in: Motion | None = None,
@@ -1614,8 +1614,9 @@ class NlpRefiner:
         ``c``: the LP's q control points over the piece; ``joins``: knots where LP
         windows meet (chains end and start there); ``breaks``: piece-local s of
         geometry knots; ``on_chain(s)`` is called after each chain with the piece-local
-        arc length done (it may raise to cancel).  Chains are independent given the
-        LP: with ``workers`` > 1 they are solved in that many forked processes.
+        arc length (mm) done (it may raise to cancel).  Chains are independent given the
+        LP: with ``pool`` (the schedule's workers and the piece's key there) they are solved in its forked
+        processes.
         ``verify``: more piece-local s to verify (sampled points found over a limit); ``bump``: whether the
         first / last rest interval may have its bump (``self.bump``); ``lead_in``: the motion before the piece
         (``self.lead_in``).
@@ -1630,8 +1631,8 @@ class NlpRefiner:
         parts = [part for A, B in chain_spans(n_int, joins) for part in self._chain_parts(geometry, c, d, A, B, breaks)]
         solve = [(A, B) for A, B, k in parts if not k]
         results: Iterator[list[Span]]
-        if workers > 1 and len(solve) > 1:
-            results = iter(_parallel_spans(self, geometry, c, d, breaks, solve, workers))
+        if pool is not None and len(solve) > 1:
+            results = pool[0].spans(pool[1], self, geometry, c, d, breaks, solve)
         else:
             results = (self._spans(geometry, c, d, A, B, breaks) for A, B in solve)
         rise: list[Rise] = [(), ()]
@@ -3403,11 +3404,7 @@ def _third_derivative_envelope(
     return top, bot
 
 
-# ----- chains in parallel (fork) -------------------------------------------------
-#: What the forked workers read: (refiner, geometry, c, d, breaks), set just before the pool forks.
-_FORK_STATE: tuple[NlpRefiner, GeometryFn, FloatArray, float, FloatArray] | None = None
-
-
+# ----- chains in forked workers ------------------------------------------------------
 def _die_with_parent() -> None:
     """Pool initializer: the worker gets SIGKILL when its parent dies (Linux), so a killed job leaves no solver."""
     try:
@@ -3417,41 +3414,6 @@ def _die_with_parent() -> None:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
-
-
-def _chain_task(chain: tuple[int, int]) -> tuple[list[Span], NlpStats]:
-    if _FORK_STATE is None:  # pragma: no cover - set by _parallel_spans before the pool forks
-        raise RuntimeError("NLP worker started without its state")
-    refiner, geometry, c, d, breaks = _FORK_STATE
-    refiner.stats = NlpStats()
-    spans = refiner._spans(geometry, c, d, chain[0], chain[1], breaks)
-    return spans, refiner.stats
-
-
-def _parallel_spans(
-    refiner: NlpRefiner,
-    geometry: GeometryFn,
-    c: FloatArray,
-    d: float,
-    breaks: FloatArray,
-    chains: list[tuple[int, int]],
-    workers: int,
-) -> Iterator[list[Span]]:
-    """Spans of each chain, in order, solved by ``workers`` forked processes; their counters are merged
-    into ``refiner.stats``."""
-    global _FORK_STATE
-    import multiprocessing
-
-    refiner.prebuild(geometry, d, *chains[0], c.size - 2)
-    _FORK_STATE = (refiner, geometry, c, d, breaks)
-    ctx = multiprocessing.get_context("fork")
-    try:
-        with ctx.Pool(min(workers, len(chains)), initializer=_die_with_parent) as pool:
-            for spans, st in pool.imap(_chain_task, chains):
-                _merge_stats(refiner.stats, st)
-                yield spans
-    finally:
-        _FORK_STATE = None
 
 
 def _merge_stats(into: NlpStats, st: NlpStats) -> None:
@@ -3488,9 +3450,12 @@ _POOL_CONTEXT: PieceContext | None = None
 #: A pool worker's contexts of the pieces it solved chains of, the last POOL_WORKER_PIECES of them.
 _WORKER_PIECES: OrderedDict[Any, tuple[NlpRefiner, GeometryFn]] = OrderedDict()
 POOL_WORKER_PIECES = 2
-#: (key, A, B, c, c_final, d, breaks, bump, lead_in): a chain of the piece ``key`` and the LP's control points as
-#: handed out (NaN from c_final on), with the piece's knot spacing, breaks and rest ends (``NlpRefiner.refine``'s)
-_PipeTask = tuple[Any, int, int, FloatArray, int, float, FloatArray, tuple[bool, bool], "Motion | None"]
+#: (key, A, B, c, c_final, d, breaks, bump, lead_in, verify, whole): a chain of the piece ``key`` and the LP's
+#: control points as handed out (NaN from c_final on), with the piece's knot spacing, breaks, rest ends and verified
+#: points (``NlpRefiner.refine``'s); ``whole``: solve [A, B) as it is (``refine``'s chains), not split into the
+#: LP's kept and solved parts first (``ChainPipeline``'s)
+_PipeTask = tuple[Any, int, int, FloatArray, int, float, FloatArray, tuple[bool, bool], "Motion | None", FloatArray,
+                  bool]
 
 
 def _pool_worker(context: PieceContext) -> None:
@@ -3506,16 +3471,18 @@ def _pipe_task(task: _PipeTask) -> tuple[bool | None, list[Span], NlpStats]:
     that were not final yet (``LpNotFinal``: solved again once the LP is done)."""
     if _POOL_CONTEXT is None:  # pragma: no cover - set by the pool's initializer
         raise RuntimeError("NLP pool worker started without its context")
-    key, A, B, c, c_final, d, breaks, bump, lead_in = task
+    key, A, B, c, c_final, d, breaks, bump, lead_in, verify, whole = task
     if key not in _WORKER_PIECES:
         _WORKER_PIECES[key] = _POOL_CONTEXT(key)
         while len(_WORKER_PIECES) > POOL_WORKER_PIECES:
             _WORKER_PIECES.popitem(last=False)
     refiner, geometry = _WORKER_PIECES[key]
     refiner.stats = NlpStats()
-    refiner.verify, refiner.bump, refiner.lead_in = np.zeros(0), bump, lead_in
+    refiner.verify, refiner.bump, refiner.lead_in = verify, bump, lead_in
     refiner.c_final = c_final
     try:
+        if whole:
+            return False, refiner._spans(geometry, c, d, A, B, breaks), refiner.stats
         parts = refiner._chain_parts(geometry, c, d, A, B, breaks)
         spans = [sp for a, b, k in parts if not k for sp in refiner._spans(geometry, c, d, a, b, breaks)]
         return all(k for _, _, k in parts), spans, refiner.stats
@@ -3526,25 +3493,29 @@ def _pipe_task(task: _PipeTask) -> tuple[bool | None, list[Span], NlpStats]:
 
 
 class ChainPool:
-    """Forked workers that solve the NLP chains of every piece of one schedule (``ChainPipeline``).
+    """Forked workers that solve the NLP chains of every piece of one schedule: those handed out while the LP runs
+    (``ChainPipeline``) and those of ``NlpRefiner.refine`` after it (``spans``).
 
-    The pool forks at the first chain handed out, and forks again only when this process has built an NLP shape
-    since (``_SHAPE_BUILDS``: the workers would each build it themselves) or after a piece abandoned chains still
-    running (``abandon``); ``close`` stops it at the schedule's end.  A worker reads a piece's refiner and geometry
-    through ``context(key)``, inherited by the fork; a task carries the rest (``_PipeTask``).  Until session 56
-    each piece forked a pool of its own: ~13 ms to start and ~7.5 ms to stop, so on the router's pocket at F1800
-    (40 pieces, lp+nlp) 2 workers took 3.7 s of wall against 2.6-3.0 s on 1."""
+    The pool forks at the first chain handed out.  It forks again when this process has built an NLP shape since
+    (``_SHAPE_BUILDS``: the workers would each build it themselves) and no chain is running, or after a piece
+    abandoned chains still running (``ChainPipeline.close``); ``close`` stops it at the schedule's end.  A worker
+    reads a piece's refiner and geometry through ``context(key)``, inherited by the fork; a task carries the rest
+    (``_PipeTask``).  Until session 56 each piece forked a pool of its own (and ``refine`` another): ~13 ms to
+    start and ~7.5 ms to stop, so on the router's pocket at F1800 (40 pieces, lp+nlp) 2 workers took 3.7 s of
+    wall against 2.6-3.0 s on 1."""
 
     def __init__(self, workers: int, context: PieceContext) -> None:
         self.workers, self.context = workers, context
         self.pool: Any = None
         self.builds = -1  # _SHAPE_BUILDS when the pool forked
         self.forks = 0
+        self.pending: list[Any] = []  # the AsyncResults not known to be ready
 
     def submit(self, task: _PipeTask) -> Any:
         """The chain's ``AsyncResult`` of (kept, spans, counters) (``_pipe_task``)."""
-        if self.pool is not None and self.builds != _SHAPE_BUILDS:
-            self.close()
+        self.pending = [res for res in self.pending if not res.ready()]
+        if self.pool is not None and self.builds != _SHAPE_BUILDS and not self.pending:
+            self.close()  # (with chains still running the workers keep on, building the new shape themselves)
         if self.pool is None:
             import multiprocessing
 
@@ -3552,7 +3523,23 @@ class ChainPool:
                 self.workers, initializer=_pool_worker, initargs=(self.context,))
             self.builds = _SHAPE_BUILDS
             self.forks += 1
-        return self.pool.apply_async(_pipe_task, (task,))
+        res = self.pool.apply_async(_pipe_task, (task,))
+        self.pending.append(res)
+        return res
+
+    def spans(
+        self, key: Any, refiner: NlpRefiner, geometry: GeometryFn, c: FloatArray, d: float, breaks: FloatArray,
+        chains: list[tuple[int, int]],
+    ) -> Iterator[list[Span]]:
+        """``refiner._spans`` of each chain over the final c, in order, solved by the workers (``refine``: its
+        ``verify``, ``bump`` and ``lead_in`` as set); their counters are merged into ``refiner.stats``."""
+        refiner.prebuild(geometry, d, *chains[0], c.size - 2)
+        sent = [self.submit((key, A, B, c, c.size, d, breaks, refiner.bump, refiner.lead_in, refiner.verify, True))
+                for A, B in chains]
+        for res in sent:
+            _, spans, st = res.get()
+            _merge_stats(refiner.stats, st)
+            yield spans
 
     def close(self) -> None:
         """Stop the workers (the schedule's end; the next ``submit`` forks again)."""
@@ -3560,6 +3547,7 @@ class ChainPool:
             self.pool.terminate()
             self.pool.join()
             self.pool = None
+            self.pending = []
 
 
 class ChainPipeline:
@@ -3613,7 +3601,8 @@ class ChainPipeline:
         A, B, c, c_final = task
         if not self.sent:  # (the piece's first chain: its shapes built here, before the pool forks with them)
             self.refiner.prebuild(self.geometry, self.d, A, B, self.n_int)
-        return self.pool.submit((self.key, A, B, c, c_final, self.d, self.breaks, self.bump, self.lead_in))
+        return self.pool.submit((self.key, A, B, c, c_final, self.d, self.breaks, self.bump, self.lead_in,
+                                 np.zeros(0), False))
 
     def finish(
         self, c: FloatArray, joins: list[int], on_chain: Callable[[float], None] | None = None
@@ -3624,7 +3613,7 @@ class ChainPipeline:
         if not sent or sent != self.chains(joins)[: len(sent)]:
             # nothing handed out (the LP was one window), or not the chains the LP ended with: as after the LP
             self.close()
-            return self.refiner.refine(self.geometry, c, self.d, joins, self.breaks, on_chain, self.pool.workers,
+            return self.refiner.refine(self.geometry, c, self.d, joins, self.breaks, on_chain, (self.pool, self.key),
                                        bump=self.bump, lead_in=self.lead_in)
         self.lp_progress(c, joins, True)
         p = np.zeros(self.n_int + 2)

@@ -1603,6 +1603,7 @@ def _nlp_on_coarser_knots(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, refined: tuple[PieceProfile, PieceProfile],
     coarser: list[tuple[PieceProfile, list[int]]], nlp_lim: NlpLimits,
     refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats, n_failed: int, lead_in: Motion | None,
+    pool: ChainPool | None = None,
 ) -> tuple[PieceProfile, PieceProfile]:
     """The NLP on coarser knots where it fell back on a piece the LP refined for a floor (``refined``: that LP
     profile and the NLP's): ``coarser`` holds the LP's profiles and joins of the levels it solved on fewer
@@ -1613,11 +1614,12 @@ def _nlp_on_coarser_knots(
     Bench seeds 153 and 154 (session 39): the NLP fell back ("unverified") on the refined knots and kept their
     LP feed, 0.286 and 0.399 s, where on the plan's knots it refined a floored LP feed to 0.156 and 0.184 s.
     Bench seeds 428 and 566 (session 40, cap 512): it fell back on 256 intervals, where 128 gives 0.082 and
-    0.145 s against the plan knots' 0.188 and 0.218 s."""
+    0.145 s against the plan knots' 0.188 and 0.218 s.  ``pool``: as ``_refine_piece``'s."""
     best = (PieceTiming.build(refined[1], inverse=False).duration, refined, stats.failures[n_failed:])
     del stats.failures[n_failed:]
     for lp_prof, joins in coarser:
-        prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, stats, lead_in=lead_in)
+        prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, stats, lead_in=lead_in,
+                             pool=pool)
         duration = PieceTiming.build(prof, inverse=False).duration
         mine = stats.failures[n_failed:]
         del stats.failures[n_failed:]
@@ -1633,16 +1635,17 @@ def _refine_piece(
     toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lp_prof: PieceProfile, joins: list[int],
     nlp_lim: NlpLimits, refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats,
     on_chain: Callable[[float], None] | None = None, verify_s: FloatArray | None = None,
-    pipe: ChainPipeline | None = None, lead_in: Motion | None = None,
+    pipe: ChainPipeline | None = None, lead_in: Motion | None = None, pool: ChainPool | None = None,
 ) -> PieceProfile:
     """The NLP stage (spec §5-6) on one piece: its LP feed refined under the drive limits.
 
-    ``refiners`` maps an NLP window shape to its refiner (compiled NLPs and the hand-over QP, whose
-    warm start carries over from one piece to the next: share it along the path in order);
+    ``refiners`` maps an NLP window plan to its refiner (the keys of the shapes it used; a chain's feed does not
+    depend on what the refiner solved before, so the pool's workers solve chains on their own copies);
     ``on_chain(s_done)``, if given, is called after each NLP chain with the piece-local arc length
     (mm) done; ``verify_s``: piece-local s verified besides the fine grid; ``pipe``: the chains
     already handed out while the LP ran (``_chain_pipeline``; used if the LP kept its first knot plan);
-    ``lead_in``: the previous piece's motion up to the corner the piece starts at (``_lead_in``)."""
+    ``lead_in``: the previous piece's motion up to the corner the piece starts at (``_lead_in``); ``pool``: the
+    schedule's NLP workers (``_chain_pool``; None: the chains are solved in this process)."""
     geometry, breaks = _local(toolpath, piece), _breaks(toolpath, piece)
     if pipe is not None and verify_s is None and pipe.n_int == lp_prof.n_int and pipe.d == lp_prof.d:
         refiner = pipe.refiner
@@ -1650,9 +1653,11 @@ def _refine_piece(
     else:
         if pipe is not None:
             pipe.close()  # (its chains were on other knots)
-        refiner = _refiner(piece, machine, opt, lp_prof.n_int, nlp_lim, refiners, stats)
-        p, mask, rise = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain, _workers(opt),
-                                       verify_s, _standing_ends(toolpath, piece), lead_in)
+        shape, refiner = _refiner(piece, machine, opt, lp_prof.n_int, nlp_lim, refiners, stats)
+        key: _PoolKey = (piece.index, shape)
+        p, mask, rise = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain,
+                                       None if pool is None else (pool, key), verify_s,
+                                       _standing_ends(toolpath, piece), lead_in)
     # the rest intervals the NLP solved (``solvers.nlp.REST_ENDS``) as q control points; a span reverted to
     # the LP's feed below takes the LP's rest interval next to it back too
     c, mask, g, h = rest_profile(lp_prof.c, p, mask, lp_prof.d, rise)
@@ -1756,10 +1761,12 @@ def _slower_spans(lp_prof: PieceProfile, prof: PieceProfile, joins: list[int]) -
 def _refiner(
     piece: Piece, machine: Machine, opt: Options, n_int: int | None, nlp_lim: NlpLimits,
     refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats,
-) -> NlpRefiner:
-    """The refiner of the piece's NLP window shape on n_int knot intervals (from ``refiners``, or new)."""
+) -> tuple[tuple[int, int, int | None], NlpRefiner]:
+    """The piece's NLP window plan on n_int knot intervals (nlp_window, nlp_overlap, nlp_long_window) and its
+    refiner (from ``refiners``, or new)."""
     plan = plan_piece(piece, machine, opt, n_int)
-    return _shape_refiner((plan.nlp_window, plan.nlp_overlap, plan.nlp_long_window), opt, nlp_lim, refiners, stats)
+    shape = (plan.nlp_window, plan.nlp_overlap, plan.nlp_long_window)
+    return shape, _shape_refiner(shape, opt, nlp_lim, refiners, stats)
 
 
 def _shape_refiner(
@@ -2349,10 +2356,10 @@ def _schedule_stream(
                     t0 = time.perf_counter()
                     n_failed = len(nlp_stats.failures)
                     prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
-                                         on_chain, pipe=pipe, lead_in=lead_in)
+                                         on_chain, pipe=pipe, lead_in=lead_in, pool=pool)
                     if plain and len(nlp_stats.failures) > n_failed:
                         lp_prof, prof = _nlp_on_coarser_knots(toolpath, piece, machine, opt, (lp_prof, prof), plain,
-                                                           nlp_lim, refiners, nlp_stats, n_failed, lead_in)
+                                                           nlp_lim, refiners, nlp_stats, n_failed, lead_in, pool)
                     t_nlp += time.perf_counter() - t0
             finally:
                 if pipe is not None:
@@ -2407,7 +2414,7 @@ def _schedule_stream(
                 prof = lp_prof
                 if nlp_stats is not None and nlp_lim is not None:
                     prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, {}, nlp_stats,
-                                         None, verify_s, lead_in=lead_in)
+                                         None, verify_s, lead_in=lead_in, pool=pool)
             stats["sample_repairs"] = max(stats["sample_repairs"], rounds)
             kind, axis, util, s_worst, t_worst = worst
             if util > 1.0 + verify.FAIL_TOL:

@@ -280,6 +280,32 @@ def test_one_pool_of_workers_serves_every_piece(monkeypatch: pytest.MonkeyPatch)
     _check_drive(m, par)
 
 
+def test_chains_solved_after_the_lp_go_to_the_same_pool(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where no chain was handed out while the LP ran (here: none ever is), ``NlpRefiner.refine`` hands the
+    piece's chains to the schedule's pool after the LP (``ChainPool.spans``): the feed solved in this process bit
+    for bit, the same counters."""
+    from solvers import nlp, pipeline
+
+    tp = ex.flower(2)
+    m = router()
+    seq = schedule(tp, m, Options(method="lp+nlp", lp_window=60, nlp_workers=1))
+    chains: list[int] = []
+    spans = nlp.ChainPool.spans
+
+    def logged(self: Any, key: Any, refiner: Any, geometry: Any, c: Any, d: Any, breaks: Any,
+               todo: list[tuple[int, int]]) -> Any:
+        chains.append(len(todo))
+        return spans(self, key, refiner, geometry, c, d, breaks, todo)
+
+    monkeypatch.setattr(nlp.ChainPool, "spans", logged)
+    monkeypatch.setattr(pipeline, "_chain_pipeline", lambda *args, **kwargs: None)
+    par = schedule(tp, m, Options(method="lp+nlp", lp_window=60, nlp_workers=2))
+    assert chains and chains[0] >= 2
+    np.testing.assert_array_equal(par.samples.position, seq.samples.position)
+    for k in ("nlp_windows", "nlp_iterations", "nlp_cut_rounds", "nlp_failures"):
+        assert par.summary[k] == seq.summary[k], k
+
+
 def test_a_cancelled_schedule_leaves_no_worker() -> None:
     """A schedule stopped mid-path (its progress callback raises, as a cancelled job's does) stops its NLP
     workers with it."""
