@@ -181,6 +181,8 @@ CONTEXT_STEP = 1.0 / 16.0
 SLOT_OVERSHOOT = 1.05
 #: Scale-down steps of the LP hand-over until it meets the NLP's limits.
 HANDOVER_SHRINK = 0.97
+#: OSQP's ADMM step for the hand-over fit (its default), set up with and restored after every fit that adapted it.
+HANDOVER_RHO = 0.1
 HANDOVER_MAX_STEPS = 30
 #: A chain whose LP feed is already what the NLP would give, at its feed bound (Fmax, the path's feed
 #: limit, vmax / |x_s|) to this share on the chain's fine grid, is not solved: the NLP cannot move
@@ -1002,9 +1004,9 @@ class _Shape:
         self.fit = osqp.OSQP()
         self.fit.setup(
             Pm, np.zeros(ncols), A, np.full(ncols + K, -np.inf), np.full(ncols + K, np.inf),
-            verbose=False, eps_abs=1e-6, eps_rel=1e-6, polishing=True,
+            verbose=False, eps_abs=1e-6, eps_rel=1e-6, polishing=True, rho=HANDOVER_RHO,
             # no warm start from the previous fit: shapes are reused across schedules (_cached_shape)
-            # and a result must not depend on what this thread solved before
+            # and a result must not depend on what this thread solved before (nor may rho: ``handover``)
             warm_starting=False,
         )
 
@@ -1416,6 +1418,11 @@ class _Shape:
             lo[i] = hi[i] = val
         self.fit.update(q=-(self.B0.T @ y), l=lo, u=hi)
         res = self.fit.solve(raise_error=False)
+        if res.info.rho_updates:
+            # OSQP keeps the step it adapted to for the next solve: restored, so that the next fit does not depend
+            # on this one (cam seed 97 lp+nlp: the NLP's feed differed by 1e-10 on 1 and 2 workers, whose shapes
+            # had fitted other chains before)
+            self.fit.update_settings(rho=HANDOVER_RHO)
         x = np.asarray(res.x, dtype=np.float64)
         if x.size != ncols or not np.all(np.isfinite(x)):
             x = np.interp(np.arange(ncols) - 0.5, np.linspace(0, self.n, self.K), y)

@@ -323,6 +323,45 @@ def test_a_cancelled_schedule_leaves_no_worker() -> None:
     assert multiprocessing.active_children() == []
 
 
+def test_a_hand_over_fit_does_not_depend_on_the_fits_before(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A shape's hand-over fit (OSQP, ``_Shape.handover``) gives the same control points bit for bit whatever
+    the shape fitted before: OSQP keeps the ADMM step it adapted to for its next solve, so it is restored
+    (``nlp.HANDOVER_RHO``).  Cam seed 97 lp+nlp adapts it; before, its feed differed by 1e-10 on 1 and 2 NLP
+    workers, whose shapes had fitted other chains before.  Each fit of its schedule is made on a fresh shape, then
+    again on that shape after every fit of the schedule on it."""
+    import osqp
+
+    from solvers import nlp
+    from tests.reliability import gen
+
+    calls: list[tuple[Any, np.ndarray, dict[int, float]]] = []
+    adapted: list[int] = []
+    handover, solve = nlp._Shape.handover, osqp.OSQP.solve
+
+    def recorded(self: Any, y: np.ndarray, fixed: dict[int, float]) -> Any:
+        calls.append((self, y.copy(), dict(fixed)))
+        return handover(self, y, fixed)
+
+    def solved(self: Any, *args: Any, **kwargs: Any) -> Any:
+        res = solve(self, *args, **kwargs)
+        adapted.append(res.info.rho_updates)
+        return res
+
+    monkeypatch.setattr(nlp._Shape, "handover", recorded)
+    monkeypatch.setattr(osqp.OSQP, "solve", solved)
+    case = gen.case(97, "cam")
+    schedule(case.toolpath(), case.machine, Options(method="lp+nlp", nlp_workers=1))
+    monkeypatch.undo()
+    assert calls and max(adapted) > 0  # (the case adapts the step)
+    for shape, y, fixed in calls:
+        fresh = nlp._Shape(shape.n, shape.N, shape.axes, shape.with_aj, shape.slotted, shape.head, shape.tail)
+        first = fresh.handover(y, fixed)
+        for other, y2, fixed2 in calls:
+            if other is shape:
+                fresh.handover(y2, fixed2)
+        np.testing.assert_array_equal(fresh.handover(y, fixed), first)
+
+
 def _daemon_schedule(conn: Any) -> None:
     """In a daemonic process: the default workers, and the flower x2's feed asked with 2 workers."""
     sch = schedule(ex.flower(2), router(), Options(method="lp+nlp", lp_window=60, nlp_workers=2))
