@@ -3458,11 +3458,11 @@ _POOL_CONTEXT: PieceContext | None = None
 _WORKER_PIECES: OrderedDict[Any, tuple[NlpRefiner, GeometryFn]] = OrderedDict()
 POOL_WORKER_PIECES = 2
 #: (key, A, B, c, c_final, d, breaks, bump, lead_in, verify, whole): a chain of the piece ``key`` and the LP's
-#: control points as handed out (NaN from c_final on), with the piece's knot spacing, breaks, rest ends and verified
-#: points (``NlpRefiner.refine``'s); ``whole``: solve [A, B) as it is (``refine``'s chains), not split into the
-#: LP's kept and solved parts first (``ChainPipeline``'s)
-_PipeTask = tuple[Any, int, int, FloatArray, int, float, FloatArray, tuple[bool, bool], "Motion | None", FloatArray,
-                  bool]
+#: control points as handed out (NaN from c_final on; None: all final), with the piece's knot spacing, breaks, rest
+#: ends and verified points (``NlpRefiner.refine``'s); ``whole``: solve [A, B) as it is (``refine``'s chains), not
+#: split into the LP's kept and solved parts first (``ChainPipeline``'s)
+_PipeTask = tuple[Any, int, int, FloatArray, "int | None", float, FloatArray, tuple[bool, bool], "Motion | None",
+                  FloatArray, bool]
 
 
 def _pool_worker(context: PieceContext) -> None:
@@ -3541,7 +3541,7 @@ class ChainPool:
         """``refiner._spans`` of each chain over the final c, in order, solved by the workers (``refine``: its
         ``verify``, ``bump`` and ``lead_in`` as set); their counters are merged into ``refiner.stats``."""
         refiner.prebuild(geometry, d, *chains[0], c.size - 2)
-        sent = [self.submit((key, A, B, c, c.size, d, breaks, refiner.bump, refiner.lead_in, refiner.verify, True))
+        sent = [self.submit((key, A, B, c, None, d, breaks, refiner.bump, refiner.lead_in, refiner.verify, True))
                 for A, B in chains]
         for res in sent:
             _, spans, st = res.get()
