@@ -3515,7 +3515,6 @@ class ChainPool:
         self.workers, self.context = workers, context
         self.pool: Any = None
         self.builds = -1  # _SHAPE_BUILDS when the pool forked
-        self.forks = 0
         self.pending: list[Any] = []  # the AsyncResults not known to be ready
 
     def submit(self, task: _PipeTask) -> Any:
@@ -3529,7 +3528,6 @@ class ChainPool:
             self.pool = multiprocessing.get_context("fork").Pool(
                 self.workers, initializer=_pool_worker, initargs=(self.context,))
             self.builds = _SHAPE_BUILDS
-            self.forks += 1
         res = self.pool.apply_async(_pipe_task, (task,))
         self.pending.append(res)
         return res

@@ -1807,8 +1807,7 @@ def _chain_pipeline(
     piece's first knot plan, ``n_int`` intervals (None: its plan's; ``_refine_piece`` falls back to solving
     after the LP if the LP ends on other knots)."""
     plan = plan_piece(piece, machine, opt, n_int, toolpath)
-    shape = (plan.nlp_window, plan.nlp_overlap, plan.nlp_long_window)
-    refiner = _shape_refiner(shape, opt, nlp_lim, refiners, stats)
+    shape, refiner = _refiner(piece, machine, opt, plan.n_int, nlp_lim, refiners, stats)
     key: _PoolKey = (piece.index, shape)
     return ChainPipeline(refiner, _local(toolpath, piece), plan.d, plan.n_int, _breaks(toolpath, piece), pool, key,
                          _standing_ends(toolpath, piece), lead_in)
