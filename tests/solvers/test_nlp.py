@@ -306,9 +306,24 @@ def test_chains_solved_after_the_lp_go_to_the_same_pool(monkeypatch: pytest.Monk
         assert par.summary[k] == seq.summary[k], k
 
 
-def test_a_cancelled_schedule_leaves_no_worker() -> None:
+def _closed_pools(monkeypatch: pytest.MonkeyPatch) -> list[bool]:
+    """Record each ``ChainPool.close``: whether its workers were running."""
+    from solvers import nlp
+
+    closed: list[bool] = []
+    close = nlp.ChainPool.close
+
+    def logged(self: Any) -> None:
+        closed.append(self.pool is not None)
+        close(self)
+
+    monkeypatch.setattr(nlp.ChainPool, "close", logged)
+    return closed
+
+
+def test_a_cancelled_schedule_leaves_no_worker(monkeypatch: pytest.MonkeyPatch) -> None:
     """A schedule stopped mid-path (its progress callback raises, as a cancelled job's does) stops its NLP
-    workers with it."""
+    workers with it (``ChainPool.close``, not the pool's garbage collection)."""
     import multiprocessing
 
     class Cancelled(Exception):
@@ -318,8 +333,27 @@ def test_a_cancelled_schedule_leaves_no_worker() -> None:
         if fraction > 0.5:
             raise Cancelled
 
+    closed = _closed_pools(monkeypatch)
     with pytest.raises(Cancelled):
         schedule(_zigzag(4, 1800.0), router(), Options(method="lp+nlp", nlp_workers=2), progress=progress)
+    assert True in closed
+    assert multiprocessing.active_children() == []
+
+
+def test_a_stream_closed_after_its_first_block_leaves_no_worker(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A consumer that stops reading a stream (``schedule_stream``) and closes it, as a client that hangs up does,
+    stops the schedule's NLP workers with it (the pool lives as long as the schedule, not one piece)."""
+    import multiprocessing
+
+    from solvers.pipeline import SampleBlock, schedule_stream
+
+    closed = _closed_pools(monkeypatch)
+    stream = schedule_stream(_zigzag(4, 1800.0), router(), Options(method="lp+nlp", nlp_workers=2))
+    first = next(stream)
+    assert isinstance(first, SampleBlock) and first.piece == 0
+    assert multiprocessing.active_children() and True not in closed  # (the pool serves the pieces to come)
+    stream.close()
+    assert True in closed
     assert multiprocessing.active_children() == []
 
 
