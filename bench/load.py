@@ -210,12 +210,14 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_server(data_dir: str) -> tuple[subprocess.Popen[bytes], str]:
+def start_server(data_dir: str, root: Path = ROOT) -> tuple[subprocess.Popen[bytes], str]:
+    """uvicorn serving ``root``'s service (another checkout's, to measure an older commit) with its data in
+    ``data_dir``; the process and its URL once /healthz answers."""
     port = free_port()
     url = f"http://127.0.0.1:{port}"
-    env = {"FEEDSCHED_DATA_DIR": data_dir, **os.environ}
+    env = {**os.environ, "FEEDSCHED_DATA_DIR": data_dir}
     proc = subprocess.Popen([sys.executable, "-m", "uvicorn", "service.app:app", "--host", "127.0.0.1",
-                             "--port", str(port), "--log-level", "warning"], cwd=ROOT, env=env)
+                             "--port", str(port), "--log-level", "warning"], cwd=root, env=env)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         try:

@@ -22,7 +22,7 @@ from typing import Any
 from bench._common import emit
 
 BENCHES = ("toppra_vel_acc", "copp_jerk", "ruckig_lines", "lp_switch", "long_path", "nlp_gain", "fresh_job",
-           "dense_gcode", "low_feed", "f_words", "nlp_workers")
+           "dense_gcode", "low_feed", "f_words", "nlp_workers", "job_memory")
 ROOT = Path(__file__).resolve().parents[1]
 OUT_JSON = ROOT / "bench" / "results.json"
 OUT_MD = ROOT / "bench" / "results.md"

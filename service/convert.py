@@ -20,7 +20,9 @@ import orjson
 from numpy.typing import NDArray
 
 from geometry import GeometryError, NurbsSegment, Toolpath, arcblend, gcode, primitives
+from service import resultfile
 from service.errors import too_large
+from service.resultfile import ResultWriter
 from service.schemas import ArcIn, LineIn, MachineIn, NurbsIn, PolylineIn, ScheduleRequest
 from solvers.machine import AXES, Axis, AxisLimits, DriveModel, Machine, derive_limits, preset
 from solvers.pipeline import Options, Schedule, TimeSamples, fit_intervals, motion_time_floor, total_intervals
@@ -29,6 +31,11 @@ from solvers.timing import PieceProfile
 FloatArray = NDArray[np.float64]
 #: Rows per chunk when streaming CSV/NDJSON.
 CHUNK_ROWS = 2000
+#: Numbers per piece of a JSON body sent in pieces (``iter_json``): ~1.2 MB.
+JSON_CHUNK_VALUES = 65_536
+#: Samples above which a JSON result is sent in pieces (``iter_json``) rather than encoded whole: ~30 MB of
+#: body, about the synchronous API's budget of 300,000 samples.
+JSON_STREAM_ROWS = 300_000
 #: Samples of the LP feed kept for the LP vs LP+NLP comparison (diagnostics.lp_feed).
 LP_FEED_POINTS = 1200
 
@@ -224,6 +231,20 @@ def encode_json(res: Result, plots: dict[str, str] | None = None) -> bytes:
     return orjson.dumps(body, option=orjson.OPT_SERIALIZE_NUMPY)
 
 
+def iter_json(res: Result, plots: dict[str, str] | None = None) -> Iterator[bytes]:
+    """``encode_json``'s bytes in pieces, never the whole body at once: the samples column by column,
+    JSON_CHUNK_VALUES numbers at a time (a stored result is read from its memory map as it goes)."""
+    opt = orjson.OPT_SERIALIZE_NUMPY
+    yield b'{"summary":' + orjson.dumps(res.summary, option=opt) + b',"diagnostics":' \
+        + orjson.dumps(res.diagnostics, option=opt) + b',"samples":{'
+    for i, (name, col) in enumerate(res.columns.items()):
+        yield (b"," if i else b"") + orjson.dumps(name) + b":["
+        for a in range(0, len(col), JSON_CHUNK_VALUES):
+            yield (b"," if a else b"") + orjson.dumps(col[a : a + JSON_CHUNK_VALUES], option=opt)[1:-1]
+        yield b"]"
+    yield b"}" + (b',"plots":' + orjson.dumps(plots) if plots is not None else b"") + b"}"
+
+
 def _rows(res: Result, a: int, b: int) -> tuple[list[str], Iterator[tuple[float, ...]]]:
     names = list(res.columns)
     return names, zip(*(res.columns[n][a:b].tolist() for n in names), strict=True)
@@ -280,13 +301,20 @@ def result_bytes(res: Result) -> bytes:
 
 
 def save_result(res: Result, path: Path) -> None:
-    tmp = path.with_suffix(".tmp")
-    tmp.write_bytes(result_bytes(res))
-    tmp.replace(path)
+    """A result held in memory (a Dask task's) as the file a solver process streams (``service.resultfile``)."""
+    writer = ResultWriter(path)
+    try:
+        writer.append(res.columns)
+        writer.finish(res.summary, res.diagnostics)
+    except BaseException:
+        writer.abort()
+        raise
 
 
 def load_result(path: Path) -> Result:
-    return result_from_bytes(path.read_bytes())
+    """A stored result; its columns are read-only views of a memory map of the file (``resultfile.load``)."""
+    summary, diagnostics, columns = resultfile.load(path)
+    return Result(summary=summary, diagnostics=diagnostics, columns=columns)
 
 
 def result_from_bytes(data: bytes) -> Result:

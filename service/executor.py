@@ -9,7 +9,9 @@
   re-run elsewhere by Dask; cancellation sets a Dask Event the task polls
   after every LP window and cancels the future.
 
-``run`` returns a ``Result`` or raises ``WorkFailed`` (problem dict),
+``run`` returns a ``Result``; ``run_to_file`` (jobs) writes it to a result file (``service.resultfile``) and
+returns its summary: the local executor's solver process writes the file as the samples are released, so
+neither process holds the whole result.  Both raise ``WorkFailed`` (problem dict),
 ``WorkTimeout``, ``WorkerLost`` or ``asyncio.CancelledError``.  ``stream``
 yields the result as NDJSON while it is computed: ("rows", bytes) chunks of
 sample lines, then ("end", {"summary", "diagnostics"}); it raises the same
@@ -29,10 +31,11 @@ import threading
 from collections.abc import AsyncGenerator, Callable
 from concurrent.futures import ThreadPoolExecutor
 from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import Any, Protocol
 
-from service import worker
-from service.convert import Budget, Result, ndjson_rows, result_from_bytes
+from service import resultfile, worker
+from service.convert import Budget, Result, ndjson_rows, result_from_bytes, save_result
 from service.errors import WorkerLost, WorkFailed, WorkTimeout
 
 Progress = Callable[[float], None]
@@ -47,6 +50,9 @@ class Executor(Protocol):
 
     async def run(self, request: dict[str, Any], budget: Budget, timeout: float,
                   progress: Progress | None = None, tag: str = "") -> Result: ...
+
+    async def run_to_file(self, request: dict[str, Any], budget: Budget, timeout: float, path: Path,
+                          progress: Progress | None = None, tag: str = "") -> dict[str, Any]: ...
 
     def stream(self, request: dict[str, Any], budget: Budget, timeout: float,
                tag: str = "") -> AsyncGenerator[tuple[str, Any], None]: ...
@@ -162,14 +168,35 @@ class LocalProcessExecutor:
             await self.start()
         assert self._sem is not None
         async with self._sem:
-            return await self._run_one(request, budget, timeout, progress, tag or secrets.token_hex(8))
+            res = await self._run_one(request, budget, timeout, progress, tag or secrets.token_hex(8))
+        assert isinstance(res, Result)
+        return res
+
+    async def run_to_file(self, request: dict[str, Any], budget: Budget, timeout: float, path: Path,
+                          progress: Progress | None = None, tag: str = "") -> dict[str, Any]:
+        if self._sem is None:
+            await self.start()
+        assert self._sem is not None
+        async with self._sem:
+            try:
+                summary = await self._run_one(request, budget, timeout, progress, tag or secrets.token_hex(8),
+                                              path)
+            except BaseException:
+                # (a killed process leaves its parts; one that failed removed them itself)
+                await asyncio.shield(asyncio.to_thread(resultfile.remove_partial, path))
+                raise
+        assert isinstance(summary, dict)
+        return summary
 
     async def _run_one(self, request: dict[str, Any], budget: Budget, timeout: float,
-                       progress: Progress | None, tag: str) -> Result:
+                       progress: Progress | None, tag: str, path: Path | None = None) -> Any:
+        """The task in a solver process: ``worker.child_main`` (a Result), or with ``path``
+        ``worker.child_job_main`` (the summary; the result in the file)."""
         loop = asyncio.get_running_loop()
         recv_end, send_end = self._ctx.Pipe(duplex=False)
-        proc = self._ctx.Process(target=worker.child_main, args=(send_end, request, budget), daemon=True,
-                                 name=f"feedsched-{tag}")
+        target, args = ((worker.child_main, (send_end, request, budget)) if path is None
+                        else (worker.child_job_main, (send_end, request, budget, str(path))))
+        proc = self._ctx.Process(target=target, args=args, daemon=True, name=f"feedsched-{tag}")
         await loop.run_in_executor(self._threads, proc.start)
         send_end.close()
         with self._lock:
@@ -188,7 +215,6 @@ class LocalProcessExecutor:
             except TimeoutError:
                 raise WorkTimeout(f"solver work took longer than {timeout:g} s") from None
             if kind == "ok":
-                assert isinstance(payload, Result)
                 return payload
             if kind == "error":
                 raise WorkFailed(payload)
@@ -342,6 +368,13 @@ class DaskExecutor:
             self._progress.pop(key, None)
             self._pids.pop(self._tags.pop(key, ""), None)
 
+
+    async def run_to_file(self, request: dict[str, Any], budget: Budget, timeout: float, path: Path,
+                          progress: Progress | None = None, tag: str = "") -> dict[str, Any]:
+        """``run``, then the result written to ``path`` here (a Dask task returns its result whole)."""
+        res = await self.run(request, budget, timeout, progress, tag)
+        await asyncio.to_thread(save_result, res, path)
+        return res.summary
 
     async def stream(self, request: dict[str, Any], budget: Budget, timeout: float,
                      tag: str = "") -> AsyncGenerator[tuple[str, Any], None]:

@@ -11,7 +11,16 @@ from starlette.exceptions import HTTPException
 from starlette.responses import Response, StreamingResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.convert import Result, encode_json, iter_csv, iter_ndjson, ndjson_error, ndjson_summary
+from service.convert import (
+    JSON_STREAM_ROWS,
+    Result,
+    encode_json,
+    iter_csv,
+    iter_json,
+    iter_ndjson,
+    ndjson_error,
+    ndjson_summary,
+)
 from service.errors import WorkerLost, problem_from_exception, problem_response
 from service.schemas import MEDIA_CSV, MEDIA_JSON, MEDIA_NDJSON
 
@@ -54,6 +63,8 @@ async def render(res: Result, media: str, headers: dict[str, str] | None = None,
         return StreamingResponse(iter_csv(res), media_type="text/csv; charset=utf-8", headers=hdrs)
     if media == MEDIA_NDJSON:
         return StreamingResponse(iter_ndjson(res), media_type=MEDIA_NDJSON, headers=hdrs)
+    if int(hdrs["X-Samples"]) > JSON_STREAM_ROWS:  # (a long job's result: never the whole body at once)
+        return StreamingResponse(iter_json(res, plots), media_type=MEDIA_JSON, headers=hdrs)
     body = await run_in_threadpool(encode_json, res, plots)
     return Response(body, media_type=MEDIA_JSON, headers=hdrs)
 

@@ -9,7 +9,7 @@ import time
 from typing import Any
 
 from service.config import Settings
-from service.convert import Budget, save_result
+from service.convert import Budget
 from service.errors import WorkerLost, problem_from_exception
 from service.executor import Executor
 from service.limits import busy
@@ -110,12 +110,19 @@ class JobManager:
                     if job is None or job.status not in ACTIVE:
                         return
                     self.store.mark_running(job_id)
+                    path = self.store.result_path(job_id)
                     try:
-                        res = await self.executor.run(job.request, self.budget, self.settings.job_timeout,
-                                                      lambda f: self._on_progress(job_id, f), tag=job_id)
+                        # (the solver process writes the result file as it goes: neither process holds it)
+                        summary = await self.executor.run_to_file(
+                            job.request, self.budget, self.settings.job_timeout, path,
+                            lambda f: self._on_progress(job_id, f), tag=job_id)
                     except asyncio.CancelledError:
+                        now = self.store.get(job_id)
+                        if now is None or now.status != "running":  # (not a shutdown, which re-runs it)
+                            path.unlink(missing_ok=True)  # (the process may have finished the file)
                         raise
                     except WorkerLost as exc:
+                        path.unlink(missing_ok=True)
                         if job.attempts + 1 < self.settings.job_max_attempts:
                             log.warning("job %s: %s; re-running", job_id, exc)
                             self.store.requeue(job_id)
@@ -123,12 +130,11 @@ class JobManager:
                         self.store.finish(job_id, "failed", error=problem_from_exception(exc))
                         return
                     except Exception as exc:
+                        path.unlink(missing_ok=True)
                         self.store.finish(job_id, "failed", error=problem_from_exception(exc))
                         return
-                    path = self.store.result_path(job_id)
-                    await asyncio.to_thread(save_result, res, path)
-                    if not self.store.finish(job_id, "succeeded", summary=res.summary):
-                        path.unlink(missing_ok=True)  # cancelled while saving
+                    if not self.store.finish(job_id, "succeeded", summary=summary):
+                        path.unlink(missing_ok=True)  # cancelled while it was written
                     return
         finally:
             self._progress.pop(job_id, None)
