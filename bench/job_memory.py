@@ -136,7 +136,7 @@ def download(url: str, fmt: str) -> tuple[int, str]:
 def run_job(samples: int, root: Path, every: float) -> dict[str, Any]:
     """One server, one job of ``samples`` samples and its three downloads; the peaks per phase."""
     with tempfile.TemporaryDirectory() as data:
-        proc, url = start_server(root, data)
+        proc, url = start_server(data, root)
         try:
             sampler = Sampler(proc.pid, every)
             time.sleep(1.0)
