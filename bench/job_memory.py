@@ -8,7 +8,8 @@ of the web process and of every process under it (the forkserver and the job's s
 /proc every ``--every`` s: VmRSS and RssAnon (anonymous pages: what the kernel cannot drop; file pages of a
 mapped result file are page cache).
 
-Reported per phase (job, json, csv, ndjson): the peak RSS and anonymous RSS of the web process, and the peak of
+Then the report page and three plots are fetched (rendered from the stored result).
+Reported per phase (job, json, csv, ndjson, plots): the peak RSS and anonymous RSS of the web process, and the peak of
 the largest other process; the job's wall time and the bytes of each download.  The downloads' SHA-256 are
 printed so that two commits can be checked to serve the same bytes.
 
@@ -162,6 +163,12 @@ def run_job(samples: int, root: Path, every: float) -> dict[str, Any]:
                 n, digest = download(f"{url}/v1/jobs/{jid}/result", fmt)
                 out["downloads"][fmt] = {"bytes": n, "sha256": digest, "wall_s": time.perf_counter() - t0}
                 time.sleep(1.0)
+            sampler.phase = "plots"  # (the report page and its three plots, rendered from the mapped file)
+            t0 = time.perf_counter()
+            for part in ("report", "plots/toolpath.svg", "plots/feed.svg", "plots/axes.png"):
+                httpx.get(f"{url}/v1/jobs/{jid}/{part}", timeout=3600).raise_for_status()
+            out["plots_wall_s"] = time.perf_counter() - t0
+            time.sleep(1.0)
             sampler.stop()
             out["peaks"] = sampler.peaks
         finally:
@@ -192,12 +199,17 @@ def main(sizes: tuple[int, ...], root: Path, every: float) -> dict[str, Any]:
             f"{cols[b['samples']]:.0f} MB", f"{child[1] / child[0]:.2f}x for {k:.1f}x the samples",
             "flat in the samples (< 1.2x)", verdict(child[1] / child[0] < 1.2)))
         phases = ("job", "json", "csv", "ndjson")
+        plots = (growth(a, "web_anon_mb", ("plots",)), growth(b, "web_anon_mb", ("plots",)))
         web = (growth(a, "web_anon_mb", phases), growth(b, "web_anon_mb", phases))
         rows.append(row(
             "job memory, web process peak anonymous RSS over idle, job and its JSON / CSV / NDJSON downloads",
             f"+{web[0]:.0f} / +{web[1]:.0f} MB", "the result's columns as above",
             f"{web[1] / cols[b['samples']]:.3f} of the larger result", "< 0.1 of the result",
             verdict(web[1] < 0.1 * cols[b["samples"]])))
+        rows.append(row(
+            "same, while the report page and the toolpath, feed and axes plots are rendered",
+            f"+{plots[0]:.0f} / +{plots[1]:.0f} MB", "the result's columns as above",
+            f"{plots[1] / cols[b['samples']]:.3f} of the larger result", "report", verdict(None)))
     return {"runs": runs, "rows": rows}
 
 
