@@ -22,7 +22,6 @@ from numpy.typing import NDArray
 from geometry import GeometryError, NurbsSegment, Toolpath, arcblend, gcode, primitives
 from service import resultfile
 from service.errors import too_large
-from service.resultfile import ResultWriter
 from service.schemas import ArcIn, LineIn, MachineIn, NurbsIn, PolylineIn, ScheduleRequest
 from solvers.machine import AXES, Axis, AxisLimits, DriveModel, Machine, derive_limits, preset
 from solvers.pipeline import Options, Schedule, TimeSamples, fit_intervals, motion_time_floor, total_intervals
@@ -302,7 +301,7 @@ def result_bytes(res: Result) -> bytes:
 
 def save_result(res: Result, path: Path) -> None:
     """A result held in memory (a Dask task's) as the file a solver process streams (``service.resultfile``)."""
-    writer = ResultWriter(path)
+    writer = resultfile.ResultWriter(path)
     try:
         writer.append(res.columns)
         writer.finish(res.summary, res.diagnostics)

@@ -14,6 +14,7 @@ names as uint8), so ``numpy.load`` reads it as before and files stored by earlie
 
 from __future__ import annotations
 
+import io
 import json
 import mmap
 import shutil
@@ -35,7 +36,8 @@ _LOCAL_SIGNATURE = b"PK\x03\x04"
 
 
 class ResultFileError(Exception):
-    """A stored result that cannot be read as one (``path``: the file; ``rule``: what it breaks)."""
+    """A stored result that cannot be read as one (``path``: the file); the service answers it as an internal
+    error (problem+json, 500): the file is the service's, not the client's."""
 
     def __init__(self, message: str, path: Path) -> None:
         super().__init__(f"{path.name}: {message}")
@@ -108,8 +110,6 @@ class ResultWriter:
 
 
 def _npy_header(dtype: np.dtype[Any], n: int) -> bytes:
-    import io
-
     buf = io.BytesIO()
     np.lib.format.write_array_header_1_0(buf, {"descr": np.lib.format.dtype_to_descr(dtype),
                                                 "fortran_order": False, "shape": (n,)})
@@ -143,13 +143,14 @@ def load(path: Path) -> tuple[dict[str, Any], dict[str, Any], dict[str, FloatArr
         except (KeyError, ValueError) as exc:
             raise ResultFileError(f"no readable metadata ({exc})", path) from None
         infos = {i.filename: i for i in zf.infolist()}
-        mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) if fh.seek(0, 2) else None
+        # (never of zero bytes: a zip holds at least its end record)
+        mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
         cols: dict[str, FloatArray] = {}
         for i, name in enumerate(names):
             info = infos.get(f"c{i}.npy")
             if info is None:
                 raise ResultFileError(f"column {name!r} (c{i}.npy) is missing", path)
-            if info.compress_type != zipfile.ZIP_STORED or mm is None:
+            if info.compress_type != zipfile.ZIP_STORED:
                 cols[name] = np.asarray(_read_member(zf, info.filename), dtype=np.float64)
                 continue
             cols[name] = _mapped(mm, fh, info, path)
