@@ -195,6 +195,17 @@ PHASE_GRID = 8
 _PHASE_CACHE: weakref.WeakKeyDictionary[Toolpath, dict[tuple[int, int], int]] = weakref.WeakKeyDictionary()
 #: Overlap safety factor over the stopping distance (spec §6).
 OVERLAP_SAFETY = 2.0
+#: Fewest knot intervals of an LP window's overlap (its last intervals, solved again by the next window).  Near a
+#: window's own end, where it must stop, the LP's optimum is not unique when the stop fits inside an interval with
+#: the acceleration and jerk rows slack (a low feed cap on the knot floor, or coarse explicit knots): every free
+#: control point weighs d in the integral of q, so an up-down pattern of control points that keeps q under its
+#: bound at the checkpoints costs nothing, and HiGHS returns one (1.3e-2 of q two intervals before the end,
+#: decaying ~4x per interval back).  The next window inherited it with its start state at the join, and its
+#: checkpoint rows turned it into a dip of 1.3 % of q two intervals after the join (session 57: a line at a
+#: 1 mm/s feed cap dipped 0.48 % in feed at every join, against the 0.01 % a constant feed may ripple, and its
+#: LP never cruised).  16 intervals back the pattern is ~1e-10 of q.  The default overlap is 23 at the default
+#: knots (OVERLAP_SAFETY / KNOT_SPACING_PER_STOP + 3), so this floor only lengthens coarser knots' overlaps.
+LP_OVERLAP_MIN = 16
 #: LP window (``Options.lp_window`` None): DEFAULT_LP_WINDOW knot intervals, and on a long piece of method lp
 #: n_int / LP_WINDOWS_PER_PIECE, at most LP_WINDOW_MAX (``lp_window``).  A window costs a fixed ~10 ms of row
 #: building, checks and HiGHS set-up besides its simplex work, and its overlap (twice the stopping distance) is
@@ -578,7 +589,8 @@ def plan_piece(
         if toolpath is not None and opt.knot_spacing is None and opt.method == "lp+nlp":
             n_int = phase_intervals(toolpath, piece, n_int)
     d = piece.length / n_int
-    overlap = opt.lp_overlap if opt.lp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
+    overlap = opt.lp_overlap if opt.lp_overlap is not None else max(LP_OVERLAP_MIN,
+                                                                     math.ceil(OVERLAP_SAFETY * D / d) + 3)
     window = max(opt.lp_window if opt.lp_window is not None else lp_window(n_int, opt), 3 * overlap)
     nlp_overlap = opt.nlp_overlap if opt.nlp_overlap is not None else math.ceil(OVERLAP_SAFETY * D / d) + 3
     nlp_window = opt.nlp_window if opt.nlp_window is not None else NLP_WINDOW_PER_OVERLAP * nlp_overlap
