@@ -72,15 +72,15 @@ def test_constant_feed_fluctuation() -> None:
     assert abs(np.median(plateau) - F) / F < FEED_FLUCTUATION
 
 
-@pytest.mark.parametrize(("feed", "method"), [(1.0, "lp"), (5.0, "lp"), (1.0, "lp+nlp")])
-def test_constant_feed_at_a_low_feed_cap(feed: float, method: str) -> None:
-    """A line under a low feed cap (its knots on the knot floor, the stop at a window's end inside one interval):
-    the sampled chord feed constant to 0.01 % across the LP windows' joins.  Session 57: with overlaps of 4-6
-    intervals each join inherited the LP's tied up-down pattern from the window before, and the feed dipped by
-    0.48 % (lp) / 0.36 % (lp+nlp) at every join (``pipeline.LP_OVERLAP_MIN``)."""
-    length = 40.0 * feed
-    sch = schedule(Toolpath([ex.line((0.0, 0.0, 0.0), (length, 0.0, 0.0))]), router().with_feed_max(feed),
-                   Options(method=method, nlp_workers=1))
+@pytest.mark.parametrize(("shape", "feed", "method"),
+                         [("line", 1.0, "lp"), ("line", 5.0, "lp"), ("line", 1.0, "lp+nlp"), ("circle", 1.0, "lp")])
+def test_constant_feed_at_a_low_feed_cap(shape: str, feed: float, method: str) -> None:
+    """A line or a circle under a low feed cap (its knots on the knot floor, the stop at a window's end inside one
+    interval): the sampled chord feed constant to 0.01 % across the LP windows' joins.  Session 57: with overlaps
+    of 4-6 intervals each join inherited the LP's tied up-down pattern from the window before, and the feed dipped
+    by 0.48 % (lp) / 0.36 % (lp+nlp) at every join (``pipeline.LP_OVERLAP_MIN``)."""
+    seg = ex.line((0.0, 0.0, 0.0), (40.0 * feed, 0.0, 0.0)) if shape == "line" else ex.circle(8.0 * feed)
+    sch = schedule(Toolpath([seg]), router().with_feed_max(feed), Options(method=method, nlp_workers=1))
     smp = sch.samples
     chord = np.linalg.norm(np.diff(smp.position, axis=0), axis=1) / TS
     plateau = chord[(smp.t[1:] > 2.0) & (smp.t[1:] < smp.t[-1] - 2.0)]
