@@ -155,11 +155,13 @@ def minmax_indices(y: FloatArray, bins: int = DECIMATE_BINS) -> IntArray:
     if n <= 2 * bins + 2:
         return np.arange(n, dtype=np.int64)
     w = -(-n // bins)
-    rows = -(-n // w)
-    padded = np.concatenate([y, np.full(rows * w - n, y[-1])]).reshape(rows, w)
-    base = np.arange(rows, dtype=np.int64) * w
-    idx = np.concatenate([base + np.argmin(padded, axis=1), base + np.argmax(padded, axis=1), [0, n - 1]])
-    return np.unique(np.minimum(idx, n - 1))
+    full = n // w
+    runs = y[: full * w].reshape(full, w)  # (a view: a stored result's column is not copied)
+    base = np.arange(full, dtype=np.int64) * w
+    parts = [base + np.argmin(runs, axis=1), base + np.argmax(runs, axis=1), np.array([0, n - 1], dtype=np.int64)]
+    if full * w < n:  # (the last, shorter run)
+        parts.append(full * w + np.array([np.argmin(y[full * w :]), np.argmax(y[full * w :])], dtype=np.int64))
+    return np.unique(np.concatenate(parts))
 
 
 def decimate(x: FloatArray, y: FloatArray, bins: int = DECIMATE_BINS) -> tuple[FloatArray, FloatArray]:
@@ -169,6 +171,23 @@ def decimate(x: FloatArray, y: FloatArray, bins: int = DECIMATE_BINS) -> tuple[F
 
 def _thin(a: FloatArray, most: int = MAX_MARKERS) -> FloatArray:
     return a if a.size <= most else a[np.linspace(0, a.size - 1, most).round().astype(np.int64)]
+
+
+def _peak(y: FloatArray) -> float:
+    """max |y| without an array of |y| (a column of a long result is tens of MB)."""
+    return float(max(np.max(y), -np.min(y)))
+
+
+def _max_ratio(cols: list[FloatArray], lim: tuple[float, float, float]) -> FloatArray:
+    """max over the axes of |col_i| / lim_i, sample by sample, in two arrays of a column's length."""
+    out = np.abs(cols[0])
+    out /= lim[0]
+    tmp = np.empty_like(out)
+    for col, li in zip(cols[1:], lim[1:], strict=True):
+        np.abs(col, out=tmp)
+        tmp /= li
+        np.maximum(out, tmp, out=out)
+    return out
 
 
 # --- what binds where ---------------------------------------------------------------
@@ -187,8 +206,7 @@ def binding(res: ResultLike, limits: Limits) -> dict[str, FloatArray]:
         lim = limits.per_axis.get(q.key)
         if q.key not in enf or lim is None or f"{q.column}_x" not in cols:
             continue
-        util = np.max(np.column_stack([np.abs(cols[f"{q.column}_{a}"]) / lim[i] for i, a in enumerate(AXES)]),
-                      axis=1)
+        util = _max_ratio([cols[f"{q.column}_{a}"] for a in AXES], lim)
         hit = cols["s"][util >= BINDING_UTILISATION]
         if hit.size:
             out[q.key] = np.asarray(hit, dtype=np.float64)
@@ -203,7 +221,7 @@ def utilisation(res: ResultLike, limits: Limits) -> dict[str, float]:
         if lim is None or f"{q.column}_x" not in res.columns:
             continue
         for i, a in enumerate(AXES):
-            out[f"{q.key}_{a}"] = float(np.max(np.abs(res.columns[f"{q.column}_{a}"]))) / lim[i]
+            out[f"{q.key}_{a}"] = _peak(res.columns[f"{q.column}_{a}"]) / lim[i]
     if limits.feed_max is not None:
         out["feed"] = float(np.max(res.columns["feed"])) / limits.feed_max
     return out
@@ -248,7 +266,7 @@ def _toolpath(res: ResultLike, limits: Limits) -> tuple[Figure, dict[str, Any]]:
     idx = minmax_indices(feed)
     xyz = np.column_stack([c["x"][idx], c["y"][idx], c["z"][idx]])
     fseg = 0.5 * (feed[idx][:-1] + feed[idx][1:]) if idx.size > 1 else feed[idx]
-    span = float(np.ptp(np.column_stack([c["x"], c["y"]]), axis=0).max()) if feed.size else 0.0
+    span = max(float(np.ptp(c["x"])), float(np.ptp(c["y"]))) if feed.size else 0.0
     has_z = feed.size > 0 and float(np.ptp(c["z"])) > 1e-6 * max(1.0, span)
     norm = Normalize(0.0, top)
     fig = _fig(15.0 if has_z else 9.5, 7.5)
@@ -369,7 +387,7 @@ def _axes(res: ResultLike, limits: Limits) -> tuple[Figure, dict[str, Any]]:
             ax.plot(xd, yd, color="#1f77b4", lw=0.9, gid=f"trace-{q.key}-{a}")
             ax.grid(True, alpha=0.3)
             ax.set_ylabel(f"{q.column}_{a} ({q.unit})", fontsize="small")
-            peak = float(np.max(np.abs(y))) if y.size else 0.0
+            peak = _peak(y) if y.size else 0.0
             if lim3 is not None and t.size:
                 lim = lim3[k]
                 is_enf = q.key in enf

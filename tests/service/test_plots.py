@@ -209,6 +209,32 @@ def test_minmax_decimation_keeps_every_peak() -> None:
         assert kept.max() == seg.max() and kept.min() == seg.min()
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_minmax_indices_are_each_runs_first_extremes(seed: int) -> None:
+    """Against a loop over the runs (the oracle): each run of w samples keeps the first index of its min and of its
+    max, the last run shorter when w does not divide n; ties (rounded values) and a last sample at the minimum
+    included.  The runs are views of the column (session 57: no padded copy of a stored result's column)."""
+    rng = np.random.default_rng(seed)
+    n, bins = int(rng.integers(1_000, 50_000)), int(rng.integers(3, 400))
+    y = np.round(3 * rng.standard_normal(n)) if seed % 2 else np.cumsum(rng.standard_normal(n))
+    y[-1] = y.min()
+    w = -(-n // bins)
+    want = {0, n - 1}
+    for a in range(0, n, w):
+        want |= {a + int(np.argmin(y[a:a + w])), a + int(np.argmax(y[a:a + w]))}
+    assert plots.minmax_indices(y, bins).tolist() == sorted(want)
+
+
+def test_peaks_and_ratios_without_temporaries_match_numpy() -> None:
+    rng = np.random.default_rng(5)
+    cols = [rng.standard_normal(10_001) * k for k in (1.0, 3.0, 0.5)]
+    lim = (0.7, 2.0, 9.0)
+    want = np.max(np.column_stack([np.abs(c) / li for c, li in zip(cols, lim, strict=True)]), axis=1)
+    assert np.array_equal(plots._max_ratio(cols, lim), want)
+    for c in (*cols, -np.abs(cols[0]), np.abs(cols[1]), np.zeros(4)):
+        assert plots._peak(c) == float(np.max(np.abs(c)))
+
+
 LIM = plots.Limits({"velocity": (150.0, 150.0, 150.0), "acceleration": (1e3, 1e3, 1e3), "jerk": (1e5, 1e5, 1e5)})
 
 
