@@ -55,6 +55,9 @@ AXES = ("x", "y", "z")
 BINDING_UTILISATION = 0.98
 #: Bins per drawn series: (min, max) kept per bin, so at most 2 x this many points (>= pixel columns at PNG_DPI).
 DECIMATE_BINS = 1500
+#: Samples per chunk of ``minmax_indices``'s per-run extremes (numpy copies a read-only array, such as a stored
+#: result's memory-mapped column, before an argmin along an axis: 24 MB for 3 M samples at once).
+MINMAX_CHUNK = 2**18
 #: Most binding markers drawn per kind (evenly thinned beyond).
 MAX_MARKERS = 80
 PNG_DPI = 100
@@ -157,8 +160,13 @@ def minmax_indices(y: FloatArray, bins: int = DECIMATE_BINS) -> IntArray:
     w = -(-n // bins)
     full = n // w
     runs = y[: full * w].reshape(full, w)  # (a view: a stored result's column is not copied)
+    lo, hi = np.empty(full, dtype=np.int64), np.empty(full, dtype=np.int64)
+    step = max(1, MINMAX_CHUNK // w)
+    for r in range(0, full, step):  # (argmin along an axis copies a read-only array, a mapped column: by chunks)
+        lo[r : r + step] = np.argmin(runs[r : r + step], axis=1)
+        hi[r : r + step] = np.argmax(runs[r : r + step], axis=1)
     base = np.arange(full, dtype=np.int64) * w
-    parts = [base + np.argmin(runs, axis=1), base + np.argmax(runs, axis=1), np.array([0, n - 1], dtype=np.int64)]
+    parts = [base + lo, base + hi, np.array([0, n - 1], dtype=np.int64)]
     if full * w < n:  # (the last, shorter run)
         parts.append(full * w + np.array([np.argmin(y[full * w :]), np.argmax(y[full * w :])], dtype=np.int64))
     return np.unique(np.concatenate(parts))
