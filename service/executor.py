@@ -164,29 +164,29 @@ class LocalProcessExecutor:
 
     async def run(self, request: dict[str, Any], budget: Budget, timeout: float,
                   progress: Progress | None = None, tag: str = "") -> Result:
-        if self._sem is None:
-            await self.start()
-        assert self._sem is not None
-        async with self._sem:
-            res = await self._run_one(request, budget, timeout, progress, tag or secrets.token_hex(8))
+        res = await self._run_limited(request, budget, timeout, progress, tag)
         assert isinstance(res, Result)
         return res
 
     async def run_to_file(self, request: dict[str, Any], budget: Budget, timeout: float, path: Path,
                           progress: Progress | None = None, tag: str = "") -> dict[str, Any]:
+        try:
+            summary = await self._run_limited(request, budget, timeout, progress, tag, path)
+        except BaseException:
+            # (a killed process leaves its parts; one that failed removed them itself)
+            await asyncio.shield(asyncio.to_thread(resultfile.remove_partial, path))
+            raise
+        assert isinstance(summary, dict)
+        return summary
+
+    async def _run_limited(self, request: dict[str, Any], budget: Budget, timeout: float,
+                           progress: Progress | None, tag: str, path: Path | None = None) -> Any:
+        """``_run_one`` once one of the ``workers`` slots is free."""
         if self._sem is None:
             await self.start()
         assert self._sem is not None
         async with self._sem:
-            try:
-                summary = await self._run_one(request, budget, timeout, progress, tag or secrets.token_hex(8),
-                                              path)
-            except BaseException:
-                # (a killed process leaves its parts; one that failed removed them itself)
-                await asyncio.shield(asyncio.to_thread(resultfile.remove_partial, path))
-                raise
-        assert isinstance(summary, dict)
-        return summary
+            return await self._run_one(request, budget, timeout, progress, tag or secrets.token_hex(8), path)
 
     async def _run_one(self, request: dict[str, Any], budget: Budget, timeout: float,
                        progress: Progress | None, tag: str, path: Path | None = None) -> Any:
