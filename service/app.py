@@ -17,7 +17,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
-from pydantic import ValidationError
+from pydantic import BeforeValidator, ValidationError
 from starlette.concurrency import run_in_threadpool
 from swagger_ui_bundle import swagger_ui_path
 
@@ -58,6 +58,10 @@ UNITS = {"vmax": "mm/s", "amax": "mm/s^2", "jmax": "mm/s^3", "M": "V s^2/mm", "b
 
 
 PROBLEM_CONTENT = {MEDIA_PROBLEM: {"schema": {"$ref": "#/components/schemas/Problem"}}}
+#: Response headers in the OpenAPI document.
+X_SAMPLES = {"X-Samples": {"description": "output samples in the body (JSON and CSV; NDJSON has it in its summary "
+                           "line)", "schema": {"type": "integer"}}}
+LOCATION = {"Location": {"description": "the job: /v1/jobs/{id}", "required": True, "schema": {"type": "string"}}}
 RETRY_AFTER = {"Retry-After": {"description": "seconds to wait before retrying", "required": True,
                                "schema": {"type": "integer", "minimum": 1}}}
 BUSY = {
@@ -109,6 +113,11 @@ class Service:
         await self.executor.close()
         self.plots.close()
         self.store.close()
+
+
+def _query_method(v: Any) -> Any:
+    """``method=lp+nlp`` typed into a URL unescaped arrives as "lp nlp" (a `+` in a query string is a space)."""
+    return "lp+nlp" if v == "lp nlp" else v
 
 
 def _svc(request: Request) -> Service:
@@ -226,8 +235,8 @@ def _routes(app: FastAPI) -> None:
     @app.post(
         "/v1/schedule",
         response_model=ScheduleResponse,
-        responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule (JSON columns, CSV or NDJSON rows "
-                         "by Accept)"}, **_problems(400, 406, 413, 422, busy="schedule")},
+        responses={200: {"content": SAMPLE_FORMATS, "headers": X_SAMPLES, "description": "the schedule (JSON "
+                         "columns, CSV or NDJSON rows by Accept)"}, **_problems(400, 406, 413, 422, busy="schedule")},
     )
     async def post_schedule(body: ScheduleRequest, request: Request) -> Response:
         """Schedule a toolpath now.  `Accept: text/csv` or `application/x-ndjson` for rows.
@@ -259,13 +268,16 @@ def _routes(app: FastAPI) -> None:
         "/v1/schedule/gcode",
         response_model=ScheduleResponse,
         openapi_extra={"requestBody": {"required": True, "content": {GCODE_MEDIA: {"schema": {"type": "string"}}}}},
-        responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule (JSON columns, CSV or NDJSON rows "
-                         "by Accept)"}, **_problems(400, 406, 413, 415, 422, busy="schedule")},
+        responses={200: {"content": SAMPLE_FORMATS, "headers": X_SAMPLES, "description": "the schedule (JSON "
+                         "columns, CSV or NDJSON rows by Accept)"},
+                   **_problems(400, 406, 413, 415, 422, busy="schedule")},
     )
     async def post_schedule_gcode(
         request: Request,
         machine: Annotated[str, Query(max_length=64, description="machine preset")] = "router",
-        method: Annotated[Literal["lp", "lp+nlp"], Query()] = "lp+nlp",
+        method: Annotated[Literal["lp", "lp+nlp"], BeforeValidator(_query_method), Query(
+            description="lp+nlp (default) or lp; a `+` left unescaped in the URL reads as a space: `lp nlp` is "
+                        "lp+nlp")] = "lp+nlp",
         sample_period: Annotated[float, Query(ge=1e-5, le=0.1, description="s")] = 0.001,
         corner_tolerance_deg: Annotated[float, Query(ge=0, le=180)] = 0.5,
         corner_blend_mm: Annotated[float, Query(ge=0, le=100, description="mm; 0 stops, else >= 0.001")] = 0.0,
@@ -295,7 +307,9 @@ def _routes(app: FastAPI) -> None:
         return await post_schedule(body, request)
 
     @app.post("/v1/jobs", status_code=202, response_model=JobOut,
-              responses={200: {"model": JobOut, "description": "an existing job (same Idempotency-Key)"},
+              responses={202: {"headers": LOCATION, "description": "queued"},
+                         200: {"model": JobOut, "headers": LOCATION, "description": "an existing job (same "
+                               "Idempotency-Key)"},
                          **_problems(400, 413, 422, busy="jobs")})
     async def post_job(
         body: ScheduleRequest, request: Request,
@@ -337,7 +351,7 @@ def _routes(app: FastAPI) -> None:
         return _job_out(svc, job)
 
     @app.get("/v1/jobs/{job_id}/result", response_model=ScheduleResponse,
-             responses={200: {"content": SAMPLE_FORMATS, "description": "the schedule"},
+             responses={200: {"content": SAMPLE_FORMATS, "headers": X_SAMPLES, "description": "the schedule"},
                         **_problems(404, 406, 409, 422)})
     async def get_result(job_id: JobId, request: Request, format: ResultFormat = None) -> Response:
         svc = _svc(request)

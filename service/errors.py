@@ -119,6 +119,14 @@ def _entry(field: str | None, value: Any, rule: str) -> dict[str, Any]:
 def validation_problem(errors: Sequence[Any]) -> dict[str, Any]:
     out = []
     for e in errors:
+        if e.get("type") == "json_invalid":  # (loc ("body", character offset): not a field of the body)
+            loc = e.get("loc", ())
+            at = loc[-1] if len(loc) > 1 and isinstance(loc[-1], int) else None
+            why = (e.get("ctx") or {}).get("error")
+            rule = "the body must be JSON" + (f": {why}" if why else "") + ("" if at is None else f" at character {at}")
+            out.append({"field": "body", "pointer": "#", "value": None if at is None else f"character {at}",
+                        "rule": rule})
+            continue
         text, pointer = field_path(e.get("loc", ()))
         out.append({"field": text, "pointer": pointer, "value": jsonable(e.get("input")), "rule": e.get("msg", "")})
     first: dict[str, Any] = out[0] if out else {"field": None, "rule": "invalid"}
@@ -184,11 +192,14 @@ def install_handlers(app: FastAPI) -> None:
         assert isinstance(exc, StarletteHTTPException)
         slug = {400: "bad-request", 404: "not-found", 405: "method-not-allowed", 406: "not-acceptable",
                 413: "too-large", 415: "unsupported-media-type"}.get(exc.status_code, "http-error")
-        title = {400: "Bad request", 404: "Not found", 405: "Method not allowed"}.get(exc.status_code, "HTTP error")
+        title = {400: "Bad request", 404: "Not found", 405: "Method not allowed", 413: "Request body too large",
+                 415: "Unsupported Media Type"}.get(exc.status_code, "HTTP error")
         rule = {400: "the body must be UTF-8 JSON", 404: "no such route",
                 405: "method not allowed on this route"}.get(exc.status_code, str(exc.detail))
         field = {400: "body", 404: "path", 405: "path", 413: "body"}.get(exc.status_code)
         value = None if exc.status_code in (400, 413) else request.url.path
+        # an exception that names its own entry (``service.http.BodyTooLarge``)
+        field, value, rule = (getattr(exc, "field", field), getattr(exc, "value", value), getattr(exc, "rule", rule))
         p = _problem(exc.status_code, slug, title, str(exc.detail), [_entry(field, value, rule)])
         return problem_response(p, request.url.path, headers=dict(exc.headers or {}))
 

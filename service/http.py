@@ -21,7 +21,7 @@ from service.convert import (
     ndjson_error,
     ndjson_summary,
 )
-from service.errors import WorkerLost, problem_from_exception, problem_response
+from service.errors import ServiceError, WorkerLost, problem_from_exception, problem_response
 from service.schemas import MEDIA_CSV, MEDIA_JSON, MEDIA_NDJSON
 
 FORMATS = (MEDIA_JSON, MEDIA_CSV, MEDIA_NDJSON)
@@ -52,7 +52,9 @@ def negotiate(accept: str | None) -> str:
             if best is None or cand[:2] > best[:2]:
                 best = cand
     if best is None:
-        raise HTTPException(406, f"Accept {accept!r} matches none of {', '.join(FORMATS)}")
+        raise ServiceError(406, "not-acceptable", "Not Acceptable", f"Accept {accept!r} matches none of "
+                           f"{', '.join(FORMATS)}", field="Accept", value=accept,
+                           rule=f"Accept must admit one of {', '.join(FORMATS)} (or */*)")
     return best[2]
 
 
@@ -140,8 +142,13 @@ class ClosingStream(StreamingResponse):
 
 
 class BodyTooLarge(HTTPException):
-    def __init__(self, limit: int) -> None:
+    """A body streamed past the cap (no Content-Length to refuse it by): raised while the route reads it."""
+
+    def __init__(self, limit: int, seen: int) -> None:
         super().__init__(413, f"request body larger than {limit} bytes (FEEDSCHED_MAX_BODY_BYTES)")
+        #: the problem's entry (``service.errors``' handler of HTTP exceptions reads these)
+        self.field, self.value = "body", f"more than {limit} bytes ({seen} read)"
+        self.rule = f"body must be <= {limit} bytes (FEEDSCHED_MAX_BODY_BYTES)"
 
 
 class BodyLimit:
@@ -174,15 +181,13 @@ class BodyLimit:
             if msg["type"] == "http.request":
                 seen += len(msg.get("body", b""))
                 if seen > self.max_bytes:
-                    raise BodyTooLarge(self.max_bytes)
+                    raise BodyTooLarge(self.max_bytes, seen)
             return msg
 
         await self.app(scope, limited, send)
 
 
 def _as_service_error(limit: int, size: Any) -> Exception:
-    from service.errors import ServiceError
-
     return ServiceError(413, "too-large", "Request body too large", f"request body of {size} bytes is larger than "
                         f"{limit} bytes", field="body", value=size, rule=f"body must be <= {limit} bytes "
                         "(FEEDSCHED_MAX_BODY_BYTES)")

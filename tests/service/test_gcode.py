@@ -60,6 +60,20 @@ def test_gcode_upload_text_x_gcode(client: TestClient) -> None:
     assert abs(float(last[3]) - 90) < 1e-9 and abs(float(last[4]) - 70) < 1e-9
 
 
+def test_gcode_upload_method_with_an_unescaped_plus(client: TestClient) -> None:
+    """``?method=lp+nlp`` typed into a URL reads as "lp nlp" (a `+` in a query string is a space): taken as
+    lp+nlp, the same schedule as ``lp%2Bnlp``; another method name is still a 422 naming the query parameter."""
+    short = "G21 G90\nG01 X10 F1200\n"
+    hdr = {"content-type": "text/x-gcode"}
+    plain = client.post("/v1/schedule/gcode?method=lp+nlp", content=short, headers=hdr)
+    escaped = client.post("/v1/schedule/gcode?method=lp%2Bnlp", content=short, headers=hdr)
+    assert plain.status_code == escaped.status_code == 200, plain.text
+    assert plain.json()["summary"]["method"] == "lp+nlp"
+    assert plain.json()["samples"]["x"] == escaped.json()["samples"]["x"]
+    b = assert_problem(client.post("/v1/schedule/gcode?method=nlp", content=short, headers=hdr), 422, "query.method")
+    assert b["errors"][0]["value"] == "nlp"
+
+
 def test_gcode_errors_name_line_and_column(client: TestClient) -> None:
     bad = "G21 G90\nG01 X10 F600\nG01 X20 Q5\n"
     b = assert_problem(client.post("/v1/schedule", json={"toolpath": {"gcode": bad}}), 422)

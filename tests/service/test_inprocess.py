@@ -77,7 +77,9 @@ def test_csv_and_ndjson_are_bit_identical_to_json(client: TestClient) -> None:
 def test_accept_negotiation(client: TestClient) -> None:
     r = client.post("/v1/schedule", json=EXAMPLE, headers={"Accept": "text/html;q=1, text/csv;q=0.5"})
     assert r.headers["content-type"].startswith("text/csv")
-    assert_problem(client.post("/v1/schedule", json=EXAMPLE, headers={"Accept": "image/png"}), 406)
+    b = assert_problem(client.post("/v1/schedule", json=EXAMPLE, headers={"Accept": "image/png"}), 406, "Accept")
+    assert b["errors"][0]["value"] == "image/png" and "text/csv" in b["errors"][0]["rule"]
+    assert b["title"] == "Not Acceptable"
 
 
 def _custom_machine(drive_only_z: bool) -> dict[str, Any]:
@@ -160,7 +162,12 @@ def test_boolean_nan_inf_string_numbers_rejected(client: TestClient) -> None:
 
 
 def test_malformed_json_is_problem(client: TestClient) -> None:
-    assert_problem(client.post("/v1/schedule", content=b"{nope", headers={"content-type": "application/json"}), 422)
+    """The decoder's error names the body and the character where it failed (not "[12]", a field it is not)."""
+    hdr = {"content-type": "application/json"}
+    b = assert_problem(client.post("/v1/schedule", content=b'{"toolpath":', headers=hdr), 422, "body")
+    assert b["errors"][0]["pointer"] == "#" and b["errors"][0]["value"] == "character 12"
+    assert "JSON" in b["errors"][0]["rule"] and "character 12" in b["errors"][0]["rule"]
+    assert_problem(client.post("/v1/schedule", content=b"{nope", headers=hdr), 422, "body")
 
 
 def test_body_size_cap(client: TestClient) -> None:
@@ -172,7 +179,10 @@ def test_body_size_cap(client: TestClient) -> None:
         for _ in range(30):
             yield b" " * 10_000
 
-    assert_problem(client.post("/v1/schedule", content=chunks(), headers={"content-type": "application/json"}), 413)
+    b = assert_problem(client.post("/v1/schedule", content=chunks(), headers={"content-type": "application/json"}),
+                       413, "body")
+    assert b["title"] == "Request body too large" and "FEEDSCHED_MAX_BODY_BYTES" in b["errors"][0]["rule"]
+    assert b["errors"][0]["value"].startswith("more than ")
 
 
 def test_sync_budget_points_to_jobs(client: TestClient) -> None:
