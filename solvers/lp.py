@@ -387,6 +387,12 @@ class LimitSet:
     #: by the room its acceleration step needs in the samples' third differences (``WindowLP._step_reach_factor``
     #: with END_STEP_KERNEL): a piece's first repair round for its samples (``pipeline._repair_limits``)
     rest_reach_ends: bool = False
+    #: method lp with jerk: the rest shapes in a piece's rest intervals (``WindowSpec.rest_shapes``,
+    #: ``pipeline._solve_windows``).  Off in a piece's last repair round for its samples where samples over a limit
+    #: lie in a rest interval (``pipeline._repair_limits``): there the rises' steep bends can hold off the cut rounds
+    #: (bench seed 14855: a rest interval of 6 mm, a_x 1.0105 x amax at r = 0.007 of it through both repair rounds,
+    #: 27 verification points still over after each window's 6 cut rounds).
+    rest_shapes: bool = True
     #: stage 2's floored windows take one LP step on the travel time (``WindowLP._time_stage``, with TIME_STAGE):
     #: method lp, whose feed is the output.  Not lp+nlp, whose NLP makes the feed: bench seeds 0-79 3 shorter (down
     #: to 0.973x), at up to 3.3x the CPU of a case (seed 10 0.31 -> 1.02 s)

@@ -316,6 +316,9 @@ REPAIR_REACH_ENDS = True
 #: 122 (a 2.2 mm path on 1.27 um knots) read 1.0124 x servo error at its second-last sample, the stop,
 #: through both repair rounds (1.0082 x before session 23's dfa0a7a moved the NLP's iterates by rounding).
 REPAIR_STEP_SHARE = 0.6
+#: A piece's last repair round solves it without the LP's rest shapes where samples over a limit lie in one of its
+#: rest intervals (``_repair_limits``, ``LimitSet.rest_shapes``).
+REPAIR_REST_SHAPES_OFF = True
 #: Points verified per sample gap next to a sample found over a limit.
 REPAIR_SUBDIV = 8
 #: Samples computed per chunk (bounds memory in the reconstruction).
@@ -1391,7 +1394,7 @@ def _solve_windows(
     between the points the LP holds it at (``timing.rest_dips``), the piece is walked again with a floor on the
     acceleration step at rest (``lp.REST_STEP_FLOOR_SHARE``; counted in ``stats["rest_step_floor_walks"]``), and
     should that dip, stall or fail too, without them (counted in ``stats["rest_shape_fallbacks"]``)."""
-    shaped = LP_REST_SHAPES and opt.method == "lp" and opt.jerk and not rest_floor
+    shaped = LP_REST_SHAPES and opt.method == "lp" and opt.jerk and not rest_floor and lim.rest_shapes
     prof, joins = _walk_plan(toolpath, piece, plan, opt, lim, stats, on_window, verify, cache, rest_floor, floored,
                              on_lp, shaped)
     if shaped and rest_dips(prof):
@@ -2012,18 +2015,26 @@ def _limit_set(machine: Machine, opt: Options) -> LimitSet:
     return lim if opt.method == "lp" else replace(lim, rest_reach=False)
 
 
-def _repair_limits(lim: LimitSet, rounds: int) -> LimitSet:
-    """The LP's limits in a piece's repair round ``rounds`` (1, 2, ..) for its samples (``SAMPLE_REPAIR_ROUNDS``).
+def _in_rest_intervals(s_loc: FloatArray, prof: PieceProfile) -> bool:
+    """Whether any of the piece-local s lies in the piece's first or last knot interval (its rest intervals)."""
+    return bool(np.any((s_loc < prof.d) | (s_loc > prof.length - prof.d)))
+
+
+def _repair_limits(lim: LimitSet, rounds: int, at_rest: bool = False) -> LimitSet:
+    """The LP's limits in a piece's repair round ``rounds`` (1, 2, ..) for its samples (``SAMPLE_REPAIR_ROUNDS``);
+    ``at_rest``: samples over a limit lie in a rest interval of the piece.
 
     The cap on q* next to rest ends (``lp.QSTAR_REST_REACH``, ``LimitSet.rest_reach``) lets the jerk rows read the
     jerk leaving rest as it is, and on top of the acceleration step there the samples' third differences can
     exceed jmax (bench seed 125, lp: 1.025 x at its start).  The first round keeps the cap but leaves the step its
     room within 3 Ts of travel of the path ends too (``LimitSet.rest_reach_ends``; corners have it always), the
     last goes without the cap.  Without the cap in every round (session 48) the repaired pieces were longer: lp
-    bench seeds 0-149 against it, 8 shorter (seeds 55 0.975x, 51 0.987x, 5 0.988x), none longer."""
+    bench seeds 0-149 against it, 8 shorter (seeds 55 0.975x, 51 0.987x, 5 0.988x), none longer.
+    The last round also goes without the rest shapes where ``at_rest`` (``LimitSet.rest_shapes``; method lp,
+    whose LP has them): a rest interval whose cut rounds could not hold the rises' bends is then a quadratic."""
     if REPAIR_REACH_ENDS and rounds < SAMPLE_REPAIR_ROUNDS:
         return replace(lim, rest_reach_ends=True)
-    return replace(lim, rest_reach=False)
+    return replace(lim, rest_reach=False, rest_shapes=not (REPAIR_REST_SHAPES_OFF and at_rest))
 
 
 def _speed_bound(vmax: FloatArray | None, opt: Options, machine: Machine) -> FloatArray | None:
@@ -2272,8 +2283,8 @@ def _schedule_stream(
     stats: dict[str, Any] = {
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
         "unverified": 0, "window_times": [], "sample_repairs": 0, "lp_chains": 0, "lp_seam_fallbacks": 0,
-        "rest_shape_fallbacks": 0, "rest_step_floor_walks": 0, "knot_floor_pieces": 0, "knot_floor_fallbacks": 0,
-        "knot_floor_levels": 0, "lp_cruise_jumps": 0, "lp_cruise_intervals": 0,
+        "rest_shape_fallbacks": 0, "rest_shape_repairs": 0, "rest_step_floor_walks": 0, "knot_floor_pieces": 0,
+        "knot_floor_fallbacks": 0, "knot_floor_levels": 0, "lp_cruise_jumps": 0, "lp_cruise_intervals": 0,
     }
     if opt.method == "lp+nlp" and not machine.has_drives:
         raise InvalidMachineError(
@@ -2414,7 +2425,10 @@ def _schedule_stream(
                 # reused), then re-sampled
                 rounds += 1
                 verify_s = np.union1d(verify_s, s_loc)
-                lim_r = _repair_limits(lim, rounds)
+                lim_r = _repair_limits(lim, rounds, _in_rest_intervals(s_loc, prof))
+                if not lim_r.rest_shapes:
+                    cache = {}  # (its windows were solved with the rest shapes)
+                    stats["rest_shape_repairs"] += 1
                 if nlp and rounds == SAMPLE_REPAIR_ROUNDS:  # the steps at REPAIR_STEP_SHARE of the budget
                     share = REPAIR_STEP_SHARE / REST_SHARE
                     lim_r = replace(lim_r, a_rest=lim.a_rest * share,
@@ -2499,6 +2513,7 @@ def _schedule_stream(
         # with the rest shapes, and those walked without the shapes at last (``_solve_windows``)
         "rest_step_floor_walks": stats["rest_step_floor_walks"],
         "rest_shape_fallbacks": stats["rest_shape_fallbacks"],
+        "rest_shape_repairs": stats["rest_shape_repairs"],
         # pieces first solved on the knot floor (``KNOT_FLOOR_SAMPLES``) and kept on it, and those solved again
         # on their plan's knots (the floor's motion over its bound)
         "knot_floor_pieces": stats["knot_floor_pieces"],

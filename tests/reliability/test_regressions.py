@@ -1171,3 +1171,20 @@ def test_windows_whose_highs_runs_stall_fail_fast() -> None:
     finally:
         w.close()
     assert row["ok"], row
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_rest_interval_the_cut_rounds_cannot_hold_is_repaired_without_rest_shapes(monkeypatch: pytest.MonkeyPatch
+                                                                                   ) -> None:
+    """Bench seed 14855 (lp, session 58): a piece from a corner on 6 mm knots, x amax 1,100 mm/s^2 against y's
+    229,000.  Its first window's rest interval left 27 verification points over amax after each of its 6 cut rounds
+    (the rises' bend at r ~ 0.006 of the interval, between the quarter-octave rows), and the samples read a_x
+    1.0105 x amax at r = 0.007 through both repair rounds: a 422.  The last repair round solves such a piece without
+    the rest shapes (``pipeline.REPAIR_REST_SHAPES_OFF``).  Checked by the independent checker; without it the
+    schedule still fails."""
+    case = gen.case(14855, "bench")
+    out = harness.run(case, "lp")
+    assert out.ok, out.describe()
+    monkeypatch.setattr(pipeline, "REPAIR_REST_SHAPES_OFF", False)
+    with pytest.raises(ScheduleError, match="after 2 repair rounds"):
+        schedule(case.toolpath(), case.lp_machine, Options(method="lp", sample_period=TS))
