@@ -55,7 +55,7 @@ whole of it at the end of a chain, and never more than a quarter turn of an arc.
 When no blend passes every check (closure residual <= 1e-10 L, sigma1, sigma2 > 0, each
 spiral turning less than pi with |c| L^2 >= 1e-12, deviation <= eps, rooms) the corner is
 left as it is and reported (``Unblended``): e.g. an arc radius too small for the tolerance
-leaves only L below MIN_CLOTHOID_LENGTH_MM. A wrong blend is never produced.
+leaves only L below MIN_BLEND_SPIRAL_MM. A wrong blend is never produced.
 
 Limits: both curves must lie in one plane (lines in the arc's plane, arcs with parallel
 normals, |cos| <= COPLANAR_TOL); others stay rest points ("not coplanar"). Junctions without
@@ -77,7 +77,7 @@ from geometry import primitives
 from geometry.clothoid import (
     MAX_BLEND_ANGLE_MARGIN_RAD,
     MIN_BLEND_ANGLE_RAD,
-    MIN_CLOTHOID_LENGTH_MM,
+    MIN_BLEND_SPIRAL_MM,
     ClothoidSegment,
     blend_factors,
     blend_polyline_legs,
@@ -441,8 +441,8 @@ def solve_corner(
     hi = math.inf
     reason = "no clothoid pair closes the corner"
     for _ in range(MAX_STEPS):
-        if not L > MIN_CLOTHOID_LENGTH_MM:
-            reason = f"the spirals would be shorter than {MIN_CLOTHOID_LENGTH_MM} mm"
+        if not L > MIN_BLEND_SPIRAL_MM:
+            reason = f"the spirals would be shorter than {MIN_BLEND_SPIRAL_MM} mm"
             break
         p = _solve(theta, k1, k2, L, guess)
         rho = math.inf

@@ -20,8 +20,9 @@ from functools import partial
 
 import numpy as np
 
+from geometry.errors import GeometryError
 from geometry.nurbs import FloatArray
-from geometry.quadrature import MonotoneTable
+from geometry.quadrature import MonotoneTable, TableTooLarge
 from geometry.segment import Segment
 
 #: The Hermite guess of u(s) is refined until it is within this distance (mm).
@@ -45,8 +46,20 @@ class ArcLengthTable:
 
     @classmethod
     def build(cls, seg: Segment) -> ArcLengthTable:
-        return cls(seg, MonotoneTable.build(seg.speed, seg.breakpoints, guess_tol=GUESS_TOL_MM,
-                                            df=partial(speed_slope, seg)))
+        """Raises GeometryError naming the segment where the table does not converge (``TableTooLarge``: a
+        parameterisation so uneven that round-off holds the quadrature off, e.g. weights 1e-16 : 1 : 1e-16)."""
+        try:
+            return cls(seg, MonotoneTable.build(seg.speed, seg.breakpoints, guess_tol=GUESS_TOL_MM,
+                                                df=partial(speed_slope, seg)))
+        except TableTooLarge as exc:
+            w = getattr(seg, "weights", None)
+            ratio = float(np.max(w) / np.min(w)) if w is not None else None
+            raise GeometryError(
+                str(getattr(seg, "name", "segment")),
+                {"quadrature_intervals": exc.intervals} if ratio is None else {"weights_max_over_min": ratio},
+                f"its arc length does not converge to 1e-13 within {exc.budget} quadrature intervals: the speed "
+                "|C'(u)| varies too unevenly along u for float64 (weights spanning more than ~1e15, or knot spans "
+                "far apart in size)") from exc
 
     @property
     def length(self) -> float:

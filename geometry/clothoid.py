@@ -72,6 +72,12 @@ MIN_BLEND_ANGLE_RAD: Final = 1e-9
 MAX_BLEND_ANGLE_MARGIN_RAD: Final = 1e-6
 #: Shortest clothoid (mm).
 MIN_CLOTHOID_LENGTH_MM: Final = 1e-9
+#: Shortest spiral a corner blend makes (mm); a corner whose blend would be shorter stays a corner (the path stops
+#: there).  A blend that short turns at ~theta / L: a 1e-7 mm jog between two 90 degree corners, blended at
+#: 0.05 mm, made spirals of ~1e-7 mm and a feed that stalls in them (a 422 under both methods; 1e-6 mm under
+#: lp+nlp), where the same corners unblended schedule (session 58's API probe).  Jogs of 1e-5 mm and more blend
+#: and schedule.  Far under any machine's resolution either way.
+MIN_BLEND_SPIRAL_MM: Final = 1e-5
 #: Frame vectors must be unit and orthogonal to this (dimensionless).
 FRAME_TOL: Final = 1e-12
 
@@ -222,7 +228,7 @@ def blend_corner(
     n = _normal(t_in[None, :], t_out[None, :], np.array([cos_t]))[0]
     g, h = blend_factors(theta)
     L = min(tolerance_mm / h, max_setback_mm / g)
-    if not L > MIN_CLOTHOID_LENGTH_MM:
+    if not L > MIN_BLEND_SPIRAL_MM:
         return None
     d = g * L
     c = theta / (L * L)
@@ -275,7 +281,7 @@ def blend_polyline_legs(
     th = np.where(ok, theta, 1.0)  # placeholder turn where no blend is made (keeps the arithmetic finite)
     g, h = _blend_factors(th)
     L = np.minimum(tolerance_mm / h, room / g)
-    ok &= L > MIN_CLOTHOID_LENGTH_MM
+    ok &= L > MIN_BLEND_SPIRAL_MM
     L = np.where(ok, L, 1.0)
     n = _normal(t_in, t_out, cos_t)
     d = g * L

@@ -120,7 +120,7 @@ import numpy as np
 
 from geometry import arcblend, primitives
 from geometry.errors import GeometryError
-from geometry.nurbs import FloatArray, NurbsSegment
+from geometry.nurbs import MAX_DEGREE, FloatArray, NurbsSegment
 from geometry.toolpath import CORNER_TOL_DEG, Toolpath
 
 MM_PER_INCH: Final = 25.4
@@ -934,6 +934,9 @@ class _Interpreter:
                 if not (_val(lw).is_integer() and _val(lw) >= LINUXCNC_ORDER_DEFAULT):
                     raise GcodeError(ln, lw.col, lw.text, "NURBS order L must be an integer >= 3 (LinuxCNC uses 3 "
                                      "for smaller L)")
+                if _val(lw) > MAX_DEGREE + 1:
+                    raise GcodeError(ln, lw.col, lw.text, f"NURBS order L must be <= {MAX_DEGREE + 1} (degree "
+                                     f"<= {MAX_DEGREE})")
                 order = int(_val(lw))
             cur = _LinuxCnc(ln, g52.col, order)
             self.lcnc = cur

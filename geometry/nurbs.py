@@ -31,6 +31,11 @@ from geometry.errors import GeometryError
 
 FloatArray = NDArray[np.float64]
 
+#: Highest degree a segment may have (the API's schema says the same).  A G5.2 program's order L = 170 ran the
+#: sync budget out in the geometry, and degrees of 80-150 read jerks 98-2 x 10^6 x the limit in the samples (session
+#: 58's API probe): evaluation of such a basis is not what a CNC path needs.
+MAX_DEGREE = 12
+
 #: A segment whose control points all lie within this distance (mm) of each
 #: other is degenerate: it has no length to travel.
 DEGENERATE_SPAN_MM = 1e-9
@@ -510,6 +515,8 @@ def _check_degree(degree: object, name: str) -> int:
     p = int(degree)
     if p < 1:
         raise GeometryError(f"{name}.degree", p, "degree must be >= 1")
+    if p > MAX_DEGREE:
+        raise GeometryError(f"{name}.degree", p, f"degree must be <= {MAX_DEGREE}")
     return p
 
 

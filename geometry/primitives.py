@@ -70,6 +70,9 @@ MIN_RADIUS_MM: Final = 1e-9
 PLANES: Final[dict[str, tuple[int, int, int]]] = {"G17": (0, 1, 2), "G18": (2, 0, 1), "G19": (1, 2, 0)}
 DIRECTIONS: Final[dict[str, int]] = {"ccw": 1, "cw": -1}
 _QUARTER = 0.5 * math.pi
+#: Most extra full turns of an arc (the API's schema says the same; a G-code P word is turns + 1): P1000000 took a
+#: gigabyte in 15 s building its quarter arcs (session 58's API probe).
+MAX_TURNS = 1000
 
 
 def line(start: object, end: object, name: str = "line") -> NurbsSegment:
@@ -336,6 +339,8 @@ def _turns(value: object, fld: str) -> int:
     v = float(value)
     if not (math.isfinite(v) and v.is_integer() and v >= 0):
         raise GeometryError(fld, value, "turns must be an integer >= 0")
+    if v > MAX_TURNS:
+        raise GeometryError(fld, value, f"turns must be <= {MAX_TURNS}")
     return int(v)
 
 

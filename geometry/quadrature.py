@@ -55,6 +55,21 @@ QUINTIC_TOL = 2e-13
 
 _GL = {n: np.polynomial.legendre.leggauss(n) for n in (GL_ORDER, GL_ORDER_PARTIAL)}
 
+#: A table may have at most this many intervals, or TABLE_GROWTH times those it starts from if more.  Where
+#: round-off keeps an interval from converging it is split at every level, and the intervals double up to
+#: MAX_BISECTIONS times: weights of 1e-16 : 1 : 1e-16 built 27 M breakpoints in a minute, a time table over 1e9 s
+#: of motion (an axis at 1e-8 mm/s) never finished (session 58's API probe).  Past it ``TableTooLarge``.
+MAX_TABLE_INTERVALS = 1 << 20
+TABLE_GROWTH = 64
+
+
+class TableTooLarge(ValueError):
+    """The table did not converge within its interval budget (``MAX_TABLE_INTERVALS``)."""
+
+    def __init__(self, intervals: int, budget: int) -> None:
+        self.intervals, self.budget = intervals, budget
+        super().__init__(f"the table needs more than {budget} intervals ({intervals} so far) to converge")
+
 
 #: Intervals per evaluation of the integrand (GL_ORDER points each): a time table over a 183.5 m piece
 #: evaluated 1.3 M points at once, ~0.5 GB of transients in the feed's evaluation.
@@ -131,7 +146,11 @@ class MonotoneTable:
         out_a: list[FloatArray] = []
         out_i: list[FloatArray] = []
         whole = gauss_legendre(f, a, b)
+        budget = max(MAX_TABLE_INTERVALS, TABLE_GROWTH * a.size)
+        done = 0
         for _ in range(MAX_BISECTIONS):
+            if done + 2 * a.size > budget:
+                raise TableTooLarge(done + 2 * a.size, budget)
             m = 0.5 * (a + b)
             left = gauss_legendre(f, a, m)
             right = gauss_legendre(f, m, b)
@@ -142,6 +161,7 @@ class MonotoneTable:
             ok |= ~np.isfinite(halves)
             out_a.extend([a[ok], m[ok]])
             out_i.extend([left[ok], right[ok]])
+            done += 2 * int(ok.sum())
             if ok.all():
                 break
             nk = ~ok
@@ -167,6 +187,8 @@ class MonotoneTable:
             table, todo = table._refine_for_inverse(guess_tol, todo)
             if not todo.any():
                 break
+            if table.x_b.size - 1 + int(todo.sum()) > budget:
+                raise TableTooLarge(table.x_b.size - 1 + int(todo.sum()), budget)
         return table
 
     def _one_sided(self, jumps: FloatArray, eps: float) -> MonotoneTable:

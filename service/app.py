@@ -12,7 +12,7 @@ from contextlib import ExitStack, asynccontextmanager
 from dataclasses import asdict
 from typing import Annotated, Any, Literal
 
-from fastapi import FastAPI, Header, Path, Query, Request
+from fastapi import Depends, FastAPI, Header, Path, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse, Response
@@ -118,6 +118,15 @@ class Service:
 def _query_method(v: Any) -> Any:
     """``method=lp+nlp`` typed into a URL unescaped arrives as "lp nlp" (a `+` in a query string is a space)."""
     return "lp+nlp" if v == "lp nlp" else v
+
+
+def _json_content(request: Request) -> None:
+    """415 for a JSON route's body sent as another media type or none (``curl -d`` without a content-type header
+    sends a form; without any, the body's bytes failed validation as "not an object")."""
+    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ctype != "application/json" and not ctype.endswith("+json"):
+        raise ServiceError(415, "unsupported-media-type", "Unsupported Media Type", f"send the request as {MEDIA_JSON}",
+                           field="content-type", value=ctype or None, rule="content-type must be application/json")
 
 
 def _svc(request: Request) -> Service:
@@ -235,8 +244,10 @@ def _routes(app: FastAPI) -> None:
     @app.post(
         "/v1/schedule",
         response_model=ScheduleResponse,
+        dependencies=[Depends(_json_content)],
         responses={200: {"content": SAMPLE_FORMATS, "headers": X_SAMPLES, "description": "the schedule (JSON "
-                         "columns, CSV or NDJSON rows by Accept)"}, **_problems(400, 406, 413, 422, busy="schedule")},
+                         "columns, CSV or NDJSON rows by Accept)"},
+                   **_problems(400, 406, 413, 415, 422, busy="schedule")},
     )
     async def post_schedule(body: ScheduleRequest, request: Request) -> Response:
         """Schedule a toolpath now.  `Accept: text/csv` or `application/x-ndjson` for rows.
@@ -279,7 +290,7 @@ def _routes(app: FastAPI) -> None:
             description="lp+nlp (default) or lp; a `+` left unescaped in the URL reads as a space: `lp nlp` is "
                         "lp+nlp")] = "lp+nlp",
         sample_period: Annotated[float, Query(ge=1e-5, le=0.1, description="s")] = 0.001,
-        corner_tolerance_deg: Annotated[float, Query(ge=0, le=180)] = 0.5,
+        corner_tolerance_deg: Annotated[float, Query(ge=0, lt=180)] = 0.5,
         corner_blend_mm: Annotated[float, Query(ge=0, le=100, description="mm; 0 stops, else >= 0.001")] = 0.0,
     ) -> Response:
         """Schedule a G-code program uploaded as `text/x-gcode` (machine preset and options as query parameters).
@@ -306,14 +317,14 @@ def _routes(app: FastAPI) -> None:
             raise RequestValidationError(exc.errors()) from exc
         return await post_schedule(body, request)
 
-    @app.post("/v1/jobs", status_code=202, response_model=JobOut,
+    @app.post("/v1/jobs", status_code=202, response_model=JobOut, dependencies=[Depends(_json_content)],
               responses={202: {"headers": LOCATION, "description": "queued"},
                          200: {"model": JobOut, "headers": LOCATION, "description": "an existing job (same "
                                "Idempotency-Key)"},
-                         **_problems(400, 413, 422, busy="jobs")})
+                         **_problems(400, 413, 415, 422, busy="jobs")})
     async def post_job(
         body: ScheduleRequest, request: Request,
-        idempotency_key: Annotated[str | None, Header(alias="Idempotency-Key", max_length=200)] = None,
+        idempotency_key: Annotated[str | None, Header(alias="Idempotency-Key", min_length=1, max_length=200)] = None,
     ) -> JSONResponse:
         """Queue a toolpath; poll the job at `Location`."""
         svc = _svc(request)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -20,6 +21,7 @@ import orjson
 from numpy.typing import NDArray
 
 from geometry import GeometryError, NurbsSegment, Toolpath, arcblend, gcode, primitives
+from geometry.segment import Segment
 from service import resultfile
 from service.errors import too_large
 from service.schemas import ArcIn, LineIn, MachineIn, NurbsIn, PolylineIn, ScheduleRequest
@@ -82,13 +84,22 @@ def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
             raise GeometryError("toolpath.gcode", None, "the program has no motion")
         tp = prog.toolpath(corner_tol, blend_mm=float(req.toolpath.corner_blend_mm))
     else:
-        segs = to_segments(req.toolpath.segments or [])
+        items = req.toolpath.segments or []
+        segs = to_segments(items)
         blend = float(req.toolpath.corner_blend_mm)
-        if blend > 0.0:
-            bp = arcblend.blend_path(segs, blend)
-            tp = Toolpath(bp.segments, corner_tol_deg=corner_tol, unblended=bp.unblended)
-        else:
-            tp = Toolpath(segs, corner_tol_deg=corner_tol)
+        passed: Sequence[Segment] = segs
+        try:
+            if blend > 0.0:
+                bp = arcblend.blend_path(segs, blend)
+                passed = bp.segments
+                tp = Toolpath(bp.segments, corner_tol_deg=corner_tol, unblended=bp.unblended)
+            else:
+                tp = Toolpath(segs, corner_tol_deg=corner_tol)
+        except GeometryError as exc:
+            fld = _request_field(exc.field, items, [seg.name for seg in passed], blend > 0.0)
+            if fld == exc.field:
+                raise
+            raise GeometryError(fld, exc.value, exc.rule, exc.segment) from exc
     machine = to_machine(req.machine)
     o = req.options
     if o.feed_max is not None:
@@ -104,6 +115,26 @@ def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
         nlp_workers=1,
     )
     return tp, machine, opts
+
+
+def _request_field(field: str, items: Sequence[NurbsIn | LineIn | ArcIn | PolylineIn], names: Sequence[str],
+                   blended: bool) -> str:
+    """A ``Toolpath`` error's field (``segments[i]...`` of the segments it was given, ``corner_tolerance_deg``: the
+    geometry's own names) as the request's path: the segment's name (``toolpath.segments[k]``, or a blend's part
+    of it), and unblended, a segment's start as its own kind names it (a NURBS's ``control_points[0]``, a
+    polyline's ``points[0]``, a line's or arc's ``start``)."""
+    m = re.match(r"segments\[(\d+)\](\.control_points\[0\])?(.*)$", field)
+    if m is None:
+        return f"toolpath.{field}" if field == "corner_tolerance_deg" else field
+    i = int(m.group(1))
+    if i >= len(names):
+        return f"toolpath.{field}"
+    start = m.group(2) or ""
+    if blended:
+        start = ""  # (a blended path's segment starts where the blend trimmed it)
+    elif start and not isinstance(items[i], NurbsIn):
+        start = ".points[0]" if isinstance(items[i], PolylineIn) else ".start"
+    return f"{names[i]}{start}{m.group(3)}"
 
 
 def to_segments(items: Sequence[NurbsIn | LineIn | ArcIn | PolylineIn]) -> list[NurbsSegment]:

@@ -9,6 +9,7 @@ exceptions with keyword-only fields do not survive pickling).
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from collections.abc import Sequence
@@ -73,25 +74,37 @@ def not_found(what: str, value: Any = None) -> ServiceError:
                         rule="must name an existing resource")
 
 
+#: Characters of a string echoed as an error's value (a program of megabytes is not sent back whole).
+VALUE_CHARS = 1000
+
+
+def text_of(s: str, most: int = VALUE_CHARS) -> str:
+    """``s`` as UTF-8 can carry it: a lone surrogate (JSON's "\\ud800", which no UTF-8 encodes) as its escape,
+    and at most ``most`` characters."""
+    s = s.encode("utf-8", "backslashreplace").decode("utf-8")
+    return s if len(s) <= most else s[: most - 3] + "..."
+
+
 def jsonable(v: Any) -> Any:
-    """Plain JSON value (NaN/Inf become strings, unknown objects their repr)."""
+    """Plain JSON value (NaN/Inf become strings, unknown objects their repr, strings ``text_of``)."""
     if isinstance(v, float) and not math.isfinite(v):
         return str(v)
     if isinstance(v, (list, tuple)):
         return [jsonable(x) for x in v[:20]] + (["..."] if len(v) > 20 else [])
     if isinstance(v, dict):
-        return {str(k): jsonable(x) for k, x in list(v.items())[:20]}
-    if isinstance(v, (str, int, float, bool)) or v is None:
+        return {text_of(str(k), 200): jsonable(x) for k, x in list(v.items())[:20]}
+    if isinstance(v, str):
+        return text_of(v)
+    if isinstance(v, (int, float, bool)) or v is None:
         return v
-    text = repr(v)
-    return text if len(text) <= 200 else text[:197] + "..."
+    return text_of(repr(v), 200)
 
 
 def field_path(loc: Sequence[Any]) -> tuple[str, str]:
     """("body", "toolpath", "segments", 0, "knots") -> ("toolpath.segments[0].knots", "#/toolpath/segments/0/knots")."""
-    parts = [p for p in loc if p not in UNION_TAGS]
+    parts = [text_of(p, 200) if isinstance(p, str) else p for p in loc if p not in UNION_TAGS]
     if parts and parts[0] in ("body", "query", "path", "header"):
-        parts = parts[1:] if parts[0] == "body" else parts
+        parts = parts[1:] if parts[0] in ("body", "header") else parts  # (a header by its own name)
     text = ""
     for p in parts:
         text += f"[{p}]" if isinstance(p, int) else (f".{p}" if text else str(p))
@@ -128,7 +141,8 @@ def validation_problem(errors: Sequence[Any]) -> dict[str, Any]:
                         "rule": rule})
             continue
         text, pointer = field_path(e.get("loc", ()))
-        out.append({"field": text, "pointer": pointer, "value": jsonable(e.get("input")), "rule": e.get("msg", "")})
+        out.append({"field": text, "pointer": pointer, "value": jsonable(e.get("input")),
+                    "rule": text_of(str(e.get("msg", "")))})
     first: dict[str, Any] = out[0] if out else {"field": None, "rule": "invalid"}
     detail = f"{first['field']}: {first['rule']}" if first["field"] else str(first["rule"])
     return _problem(422, "invalid-request", "Invalid request", detail, out)
@@ -170,12 +184,20 @@ def problem_from_exception(exc: BaseException) -> dict[str, Any]:
                     [_entry(None, None, "unexpected failure; please report it")])
 
 
+class _ProblemJSON(JSONResponse):
+    def render(self, content: Any) -> bytes:
+        try:
+            return super().render(content)
+        except UnicodeEncodeError:  # a lone surrogate that ``text_of`` did not see: ASCII escapes carry it
+            return json.dumps(content, ensure_ascii=True, allow_nan=False, separators=(",", ":")).encode("ascii")
+
+
 def problem_response(problem: dict[str, Any], instance: str | None = None,
                      headers: dict[str, str] | None = None) -> JSONResponse:
     body = dict(problem)
     if instance:
         body.setdefault("instance", instance)
-    return JSONResponse(body, status_code=int(body["status"]), media_type=MEDIA_PROBLEM, headers=headers)
+    return _ProblemJSON(body, status_code=int(body["status"]), media_type=MEDIA_PROBLEM, headers=headers)
 
 
 def install_handlers(app: FastAPI) -> None:

@@ -24,6 +24,8 @@ from pydantic import (
 )
 
 from geometry.arcblend import BLEND_TOLERANCE_RULE, MIN_BLEND_TOLERANCE_MM
+from geometry.nurbs import MAX_DEGREE
+from geometry.primitives import MAX_TURNS
 
 #: A finite JSON number (integers accepted, booleans and strings not).
 Number = Annotated[float, Strict(), AllowInfNan(False)]
@@ -43,7 +45,7 @@ MEDIA_PROBLEM = "application/problem+json"
 class NurbsIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
     type: Literal["nurbs"] = "nurbs"
-    degree: StrictInt = Field(ge=1, le=12)
+    degree: StrictInt = Field(ge=1, le=MAX_DEGREE)
     knots: list[Annotated[Number, Field(ge=-1e9, le=1e9)]] = Field(min_length=2, max_length=200_000)
     control_points: list[Annotated[list[Coord], Field(min_length=2, max_length=3)]] = Field(
         min_length=2, max_length=200_000
@@ -82,7 +84,7 @@ class ArcIn(BaseModel):
     plane: Literal["G17", "G18", "G19"] = "G17"
     direction: Literal["cw", "ccw"] = Field(default="ccw", description="cw = G02, ccw = G03, seen from the "
                                             "positive end of the plane normal")
-    turns: StrictInt = Field(default=0, ge=0, le=1000, description="extra full turns")
+    turns: StrictInt = Field(default=0, ge=0, le=MAX_TURNS, description="extra full turns")
 
 
 class PolylineIn(BaseModel):
@@ -120,7 +122,7 @@ class ToolpathIn(BaseModel):
         description="G-code text (G00-G03, G17-G19, G20/G21, G90/G91, Fanuc G06.2, Siemens BSPLINE, LinuxCNC "
         "G5.2); F words become the feed limit of their blocks, G00 moves run at the machine's own limits",
     )
-    corner_tolerance_deg: Annotated[Number, Field(ge=0, le=180)] = 0.5
+    corner_tolerance_deg: Annotated[Number, Field(ge=0, lt=180)] = 0.5
     corner_blend_mm: Annotated[Number, Field(ge=0, le=100)] = Field(
         default=0.0, description="blend the tangent breaks of chains of lines and arcs (G-code runs at one F, "
         "or consecutive JSON line / arc / polyline segments and NURBS that are exact lines or arcs) with G2 "

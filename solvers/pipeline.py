@@ -1977,14 +1977,17 @@ MOTION_FLOOR_SHARE = 0.99
 
 def _motion_time_floor(toolpath: Toolpath, lim: LimitSet, vmax: FloatArray | None) -> float:
     r"""A lower bound of the motion time (s), known before any solve: MOTION_FLOOR_SHARE of the path's time
-    with every sub-segment at its feed cap,
+    with every sub-segment at its feed cap, or with its slowest axis at its speed bound if that takes longer,
 
-        T >= share * sum_k L_k / min(F_k, Fmax, ||vmax||_2),
+        T >= share * sum_k max(L_k / min(F_k, Fmax, ||vmax||_2), max_i |dx_ki| / vmax_i),
 
     with L_k (mm) the k-th sub-segment's length, F_k its programmed feed limit (mm/s, inf where none), Fmax
-    the machine's tangential feed limit and vmax (3,) the speed bound of each axis (a feed f along a unit
+    the machine's tangential feed limit, vmax (3,) the speed bound of each axis (a feed f along a unit
     tangent moves the axes at f x_s, so f^2 = sum v_i^2 <= ||vmax||^2; left out unless every axis has a
-    finite one).  Rests, accelerations and curvature only add to the time; 0 when nothing caps the feed."""
+    finite one) and dx_k (3,) the sub-segment's end minus its start (axis i travels at least |dx_ki| there, at
+    most at vmax_i: an axis at 1e-8 mm/s took the feed-cap bound alone to 0.08 s for 1e9 s of motion, and the
+    time table of that motion did not finish, session 58).  Rests, accelerations and curvature only add to the
+    time; 0 when nothing caps the feed."""
     off = toolpath.offsets
     length = np.diff(off)
     cap = _feed_cap(lim, toolpath, 0.5 * (off[:-1] + off[1:]))
@@ -1992,7 +1995,11 @@ def _motion_time_floor(toolpath: Toolpath, lim: LimitSet, vmax: FloatArray | Non
     if vmax is not None and bool(np.all(np.isfinite(vmax))):
         bound = float(np.linalg.norm(vmax))
     caps = np.minimum(np.inf if cap is None else cap, bound)
-    return MOTION_FLOOR_SHARE * float(np.sum(length / caps))
+    t = length / caps
+    if vmax is not None:
+        dx = np.abs(np.diff(toolpath.positions(off), axis=0))
+        t = np.maximum(t, np.max(dx / vmax[None, :], axis=1))
+    return MOTION_FLOOR_SHARE * float(np.sum(t))
 
 
 def motion_time_floor(toolpath: Toolpath, machine: Machine, options: Options | None = None) -> float:

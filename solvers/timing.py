@@ -26,7 +26,7 @@ from functools import partial
 import numpy as np
 from numpy.typing import NDArray
 
-from geometry.quadrature import MonotoneTable
+from geometry.quadrature import MonotoneTable, TableTooLarge
 from solvers import bspline, kinematics, native
 from solvers.errors import ScheduleError
 
@@ -309,9 +309,15 @@ def _segment_table(profile: PieceProfile, x0: float, x1: float, inverse: bool) -
     # d on the other): the table's guesses take h from each interval's own side there (``MonotoneTable``)
     n = profile.n_int
     jumps = np.array([1.0, n - 1.0]) - k0
-    return MonotoneTable.build(partial(profile.h_local, k0), edges, min_intervals=2, abs_tol=1e-16,
-                               guess_tol=TIME_GUESS_TOL_S if inverse else np.inf, jumps=jumps,
-                               jump_eps=JUMP_EPS_SHARE * max(1.0, float(n)))
+    try:
+        return MonotoneTable.build(partial(profile.h_local, k0), edges, min_intervals=2, abs_tol=1e-16,
+                                   guess_tol=TIME_GUESS_TOL_S if inverse else np.inf, jumps=jumps,
+                                   jump_eps=JUMP_EPS_SHARE * max(1.0, float(n)))
+    except TableTooLarge as exc:  # (round-off: a motion so long that TIME_GUESS_TOL_S is under its time's ulp)
+        raise ScheduleError(
+            f"the time table of the piece does not converge within {exc.budget} intervals (a motion too long, or a "
+            "feed too uneven, for float64 time to resolve)", field="toolpath",
+            value={"s_start": profile.s_start, "knot_intervals": [x0, x1]}) from exc
 
 
 def stuck(profile: PieceProfile) -> bool:

@@ -225,7 +225,7 @@ def test_unblendable_corners_are_reported_with_a_reason() -> None:
 
 
 def test_degenerate_corner_is_refused() -> None:
-    """No room on the arc (a 1e-8 mm arc) leaves spirals shorter than MIN_CLOTHOID_LENGTH_MM: refused."""
+    """No room on the arc (a 1e-8 mm arc) leaves spirals shorter than MIN_BLEND_SPIRAL_MM: refused."""
     res = solve_corner(1.0, 0.0, 1.0, 1.0, 1e-10, 0.05)
     assert isinstance(res, str) and "shorter" in res
 
@@ -462,3 +462,32 @@ def test_line_arc_corners_between_different_feeds_take_the_lower_feed() -> None:
     sch = schedule(tp, m, Options(method="lp"))
     assert sch.diagnostics["corners"] == []
     _check(tp, m, sch)
+
+
+@pytest.mark.parametrize("jog", [1e-7, 1e-6])
+def test_corners_too_close_for_a_blend_stay_corners_and_schedule(jog: float) -> None:
+    """A jog of 1e-7 mm between two 90 degree corners, blended at 0.05 mm: its spirals were ~jog long (curvature
+    ~1e7 /mm) and the feed stalled in them, a 422 under both methods (1e-6 mm under lp+nlp), where the corners
+    unblended schedule (session 58's API probe).  Spirals under MIN_BLEND_SPIRAL_MM are not made: the two corners
+    stay rest points, and the schedule ends on the path's end within its limits (finite differences)."""
+    from geometry.clothoid import MIN_BLEND_SPIRAL_MM
+    from tests.fdcheck import fd_drive, utilisation
+    from tests.solvers.test_limits import LIMIT_FACTOR
+
+    segs = [primitives.line([0, 0, 0], [10, 0, 0]), primitives.line([10, 0, 0], [10, jog, 0]),
+            primitives.line([10, jog, 0], [20, jog, 0])]
+    bp = blend_path(segs, 0.05)
+    assert not any(isinstance(s, ClothoidSegment) for s in bp.segments)
+    tp = Toolpath(bp.segments, unblended=bp.unblended)
+    assert len(tp.corners) == 2 and jog < MIN_BLEND_SPIRAL_MM
+    for method in ("lp", "lp+nlp"):
+        sch = schedule(tp, router(), Options(method=method, nlp_workers=1))
+        np.testing.assert_allclose(sch.samples.position[-1], [20.0, jog, 0.0], rtol=0, atol=1e-12)
+        assert len(sch.diagnostics["corners"]) == 2
+        m = router()
+        if method == "lp":
+            assert max(utilisation(sch.samples.position, 1e-3, *m.limit_arrays()).values()) <= LIMIT_FACTOR
+        else:
+            dr = m.drive_arrays()
+            u, e = fd_drive(sch.samples.position, 1e-3, dr)
+            assert np.max(np.abs(u) / dr["umax"]) <= LIMIT_FACTOR and np.max(np.abs(e) / dr["emax"]) <= LIMIT_FACTOR

@@ -377,6 +377,7 @@ MALFORMED = [
     (F + "G2 X20 R5", 2, 8, "cannot reach the end point"),
     (F + "G2 R5", 2, 4, "full circle"),
     (F + "G2 X10 P0 I5", 2, 8, "P (number of turns)"),
+    (F + "G2 X10 P1000000 I5", 2, 8, "turns must be <= 1000"),
     ("G90.1 F100\nG2 X10 Y0 I5", 2, 11, "needs both I and J"),
     ("G05 X10 Y10 I1 J1 P1 Q1", 1, 1, "high-speed mode switch"),
     # Fanuc G06.2
@@ -407,6 +408,7 @@ MALFORMED = [
     # LinuxCNC G5.2
     (F + "G5.2 X0 Y1 L3", 2, 6, "needs X, Y and a weight P"),
     (F + "G5.2 L2", 2, 6, "order L must be an integer >= 3"),
+    (F + "G5.2 L14", 2, 6, "order L must be <= 13"),
     (F + "G18 G5.2 P1", 2, 5, "planar in XY"),
     (F + "G91 G5.2 P1", 2, 5, "absolute (G90)"),
     (F + "G5.2\nX1 Y1 P1\nX2 Y0 P1\nG1 X5", 5, 1, "closed with G5.3"),

@@ -186,3 +186,51 @@ def test_a_jump_at_an_edge_keeps_both_sides_and_needs_no_bisection_towards_it() 
     for table in (plain, sided):
         np.testing.assert_allclose(table.value(x), _F_jump(x), rtol=INTEGRAL_REL_TOL, atol=0.0)
         np.testing.assert_allclose(table.inverse(_F_jump(x)), x, rtol=0.0, atol=INVERSE_ABS_TOL)
+
+
+def test_a_table_that_round_off_keeps_from_converging_stops_at_its_budget(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An integrand whose halves never agree (noise at the last place: round-off) split every interval at every
+    level, doubling them up to MAX_BISECTIONS times; the table now stops at its interval budget with
+    ``TableTooLarge`` (session 58: weights 1e-16 : 1 : 1e-16 built 27 M breakpoints).  A smooth integrand on the
+    same budget converges."""
+    import geometry.quadrature as q
+
+    monkeypatch.setattr(q, "MAX_TABLE_INTERVALS", 4096)
+    rng = np.random.default_rng(0)
+    with pytest.raises(q.TableTooLarge) as err:
+        MonotoneTable.build(lambda x: 1.0 + 1e-9 * rng.standard_normal(x.shape), np.array([0.0, 1.0]))
+    assert err.value.budget == 4096 and err.value.intervals > 4096
+    table = MonotoneTable.build(lambda x: 1.0 + x * x, np.array([0.0, 1.0]))
+    assert table.total == pytest.approx(4.0 / 3.0, rel=1e-14)
+
+
+def test_an_arc_length_that_does_not_converge_names_the_segment() -> None:
+    """Weights 1e-30 : 1 : 1e-30: round-off holds the arc length's quadrature off at every level (a sync request ran
+    to its 30 s budget, session 58's API probe).  The segment is refused naming it and its weights' spread."""
+    from geometry.errors import GeometryError
+    from geometry.nurbs import NurbsSegment
+    from geometry.toolpath import Toolpath
+
+    seg = NurbsSegment.create(2, [0, 0, 0, 1, 1, 1], [[0, 0, 0], [5, 5, 0], [10, 0, 0]], [1e-30, 1.0, 1e-30],
+                              name="toolpath.segments[0]")
+    with pytest.raises(GeometryError) as err:
+        Toolpath([seg])
+    assert err.value.field == "toolpath.segments[0]" and "does not converge" in err.value.rule
+    assert err.value.value == {"weights_max_over_min": pytest.approx(1e30)}
+
+
+def test_a_time_table_over_its_budget_is_a_schedule_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A piece's time table that cannot converge in its budget (1e9 s of motion: TIME_GUESS_TOL_S under the
+    time's last place) is a ScheduleError naming the piece, not a run to the request's budget."""
+    import geometry.quadrature as q
+    from solvers.errors import ScheduleError
+
+    n = 40
+    c = 100.0 + 50.0 * np.sin(np.arange(n + 2) / 3.0)
+    c[0], c[-1] = -c[1], -c[-2]
+    prof = PieceProfile(s_start=7.0, length=float(n), d=1.0, c=c)
+    monkeypatch.setattr(q, "MAX_TABLE_INTERVALS", 1)
+    monkeypatch.setattr(q, "TABLE_GROWTH", 1)
+    with pytest.raises(ScheduleError, match="time table of the piece does not converge") as err:
+        PieceTiming.build(prof)
+    assert err.value.field == "toolpath" and err.value.value["s_start"] == 7.0

@@ -184,6 +184,16 @@ def test_too_few_control_points(degree: int, n_points: int) -> None:
     assert f"degree {degree} needs at least {degree + 1} control points" in err.rule
 
 
+def test_degree_above_the_cap() -> None:
+    """Degree 13 is refused naming the degree (``nurbs.MAX_DEGREE``; the API's schema says the same); 12 builds."""
+    n = 14
+    pts = [[float(i), float(i % 2), 0.0] for i in range(n)]
+    err = rejected(degree=13, knots=[0.0] * 14 + [1.0] * 14, control_points=pts, weights=None)
+    assert err.field == f"{NAME}.degree" and err.value == 13 and "<= 12" in err.rule
+    seg = NurbsSegment.create(12, [0.0] * 13 + [1.0] * 13, pts[:13], None, name=NAME)
+    assert seg.degree == 12
+
+
 def test_all_control_points_equal() -> None:
     err = rejected(control_points=[[3.0, 4.0, 5.0]] * 4)
     assert err.field == f"{NAME}.control_points"

@@ -10,6 +10,7 @@ import struct
 from typing import Any
 
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 
 from service.schemas import EXAMPLE
@@ -170,6 +171,19 @@ def test_malformed_json_is_problem(client: TestClient) -> None:
     assert_problem(client.post("/v1/schedule", content=b"{nope", headers=hdr), 422, "body")
 
 
+@pytest.mark.parametrize("body", [
+    b'{"toolpath":{"gcode":"G01 X10 F600\\n"},"machine":"\\ud800"}',
+    b'{"toolpath":{"gcode":"G01 X10 F600 (\\udfff)\\n"}}',
+    b'{"toolpath":{"gcode":"G01 X10 F600\\n"},"\\ud800":1}',
+])
+def test_a_lone_surrogate_in_a_string_is_422_not_500(client: TestClient, body: bytes) -> None:
+    """JSON may escape a lone UTF-16 surrogate ("\\ud800"), which no UTF-8 encodes: pydantic refuses the string,
+    and the problem that echoes it was a 500 (UnicodeEncodeError while rendering it, session 58's API probe)."""
+    b = assert_problem(client.post("/v1/schedule", content=body, headers={"content-type": "application/json"}), 422)
+    assert "\\ud8" in json.dumps(b) or "\\udf" in json.dumps(b)  # (the escape, as text)
+    assert client.get("/healthz").status_code == 200  # (the connection and the app are fine after it)
+
+
 def test_body_size_cap(client: TestClient) -> None:
     big = {**EXAMPLE, "pad": "x" * 250_000}
     b = assert_problem(client.post("/v1/schedule", json=big), 413, "body")
@@ -235,3 +249,43 @@ def test_the_interval_budget_counts_the_knot_floor(client: TestClient) -> None:
     assert summary["knot_floor_pieces"] == 1 and summary["control_points"] == 3002
     body["options"]["knot_spacing"] = 0.001
     assert_problem(client.post("/v1/schedule", json=body), 413, "options.knot_spacing")
+
+
+@pytest.mark.parametrize("ctype", ["text/plain", "application/x-www-form-urlencoded", None])
+def test_a_json_route_sent_another_media_type_is_415(client: TestClient, ctype: str | None) -> None:
+    """``curl -d`` without a content-type sends a form: the JSON routes answer 415 naming the content type (a 422
+    naming the field "" with the body's bytes as its value until session 58)."""
+    body = json.dumps(EXAMPLE)
+    hdr = {"content-type": ctype} if ctype else {}
+    for route in ("/v1/schedule", "/v1/jobs"):
+        b = assert_problem(client.post(route, content=body, headers=hdr), 415, "content-type")
+        assert b["errors"][0]["value"] == ctype
+    assert client.post("/v1/schedule", content=body, headers={"content-type": "application/json; charset=utf-8"}
+                       ).status_code == 200
+
+
+def test_an_empty_idempotency_key_is_422(client: TestClient) -> None:
+    """"" would be one key for every client that sends it empty: refused, naming the header by its name."""
+    r = client.post("/v1/jobs", json=EXAMPLE, headers={"Idempotency-Key": ""})
+    b = assert_problem(r, 422, "Idempotency-Key")
+    assert b["errors"][0]["value"] == ""
+
+
+@pytest.mark.parametrize(("second", "field"), [
+    ({"type": "polyline", "points": [[10, 1, 0], [20, 1, 0]]}, "toolpath.segments[1].points[0]"),
+    ({"type": "line", "start": [10, 1, 0], "end": [20, 1, 0]}, "toolpath.segments[1].start"),
+    ({"degree": 1, "knots": [0, 0, 1, 1], "control_points": [[10, 1, 0], [20, 1, 0]]},
+     "toolpath.segments[1].control_points[0]"),
+])
+def test_a_gap_names_the_segments_start_as_the_request_has_it(client: TestClient, second: dict[str, Any],
+                                                              field: str) -> None:
+    """The toolpath's errors named ``segments[1].control_points[0]``: no ``toolpath.`` and, for a polyline or a
+    line, a field the request does not have (session 58's API probe).  Now the request's own path."""
+    body = {"toolpath": {"segments": [{"type": "line", "start": [0, 0, 0], "end": [10, 0, 0]}, second]},
+            "options": {"method": "lp"}}
+    b = assert_problem(client.post("/v1/schedule", json=body), 422, field)
+    assert b["errors"][0]["value"] == pytest.approx(1.0)
+    blended = {**body, "toolpath": {**body["toolpath"], "corner_blend_mm": 0.1}}
+    assert_problem(client.post("/v1/schedule", json=blended), 422, "toolpath.segments[1]")
+    tol = {"toolpath": {"corner_tolerance_deg": 180, "segments": body["toolpath"]["segments"][:1]}}
+    assert_problem(client.post("/v1/schedule", json=tol), 422, "toolpath.corner_tolerance_deg")

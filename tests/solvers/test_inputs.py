@@ -182,10 +182,13 @@ def test_motion_time_floor_bounds_the_axes_speeds() -> None:
     from solvers.pipeline import MOTION_FLOOR_SHARE, motion_time_floor, schedule
 
     m = router()
-    tp = Toolpath([primitives.line([0, 0, 0], [200, 200, 100])])
+    dx = np.array([200.0, 200.0, 100.0])
+    tp = Toolpath([primitives.line([0, 0, 0], dx)])
     vmax = np.array([a.limits.vmax for a in m.axes])
+    # (the slowest axis over its travel, if that takes longer than the feed at ||vmax||: z here, session 58)
     assert motion_time_floor(tp, m, Options(method="lp")) == pytest.approx(
-        MOTION_FLOOR_SHARE * 300.0 / float(np.linalg.norm(vmax)), rel=1e-12)
+        MOTION_FLOOR_SHARE * max(300.0 / float(np.linalg.norm(vmax)), float(np.max(dx / vmax))), rel=1e-12)
+    assert np.max(dx / vmax) > 300.0 / float(np.linalg.norm(vmax))
     dr = m.drive_arrays()
     v_u = drive_speed_bound(dr)
     assert v_u == pytest.approx((dr["umax"] + np.abs(dr["c"]) - dr["d"]) / dr["b"], rel=1e-15)
@@ -194,7 +197,37 @@ def test_motion_time_floor_bounds_the_axes_speeds() -> None:
     stuck = {**dr, "d": dr["umax"] + np.abs(dr["c"]) + 1.0, "b": np.array([0.0, 1.0, 1.0])}
     assert np.all(drive_speed_bound(stuck) == np.inf)
     assert motion_time_floor(tp, m, Options(method="lp+nlp")) == pytest.approx(
-        MOTION_FLOOR_SHARE * 300.0 / float(np.linalg.norm(v_u)), rel=1e-12)
+        MOTION_FLOOR_SHARE * max(300.0 / float(np.linalg.norm(v_u)), float(np.max(dx / v_u))), rel=1e-12)
     sch = schedule(tp, m, Options(method="lp+nlp"))
     assert np.all(np.abs(sch.samples.velocity).max(axis=0) <= v_u)
     assert sch.summary["motion_time"] >= motion_time_floor(tp, m, Options(method="lp+nlp"))
+    sch = schedule(tp, m, Options(method="lp"))
+    assert sch.summary["motion_time"] >= motion_time_floor(tp, m, Options(method="lp"))
+
+
+def test_motion_time_floor_refuses_a_slow_axis_up_front() -> None:
+    """One axis at 1e-8 mm/s on a 10 mm x travel: 1e9 s of motion.  The floor read the feed at ||vmax|| alone
+    (0.08 s), the LP ran, and the time table of 1e9 s never finished (session 58's API probe: a sync request hung
+    to its 30 s budget, a job ran on).  The slowest axis over its travel bounds the time too: refused at once.
+    On a curve the bound is the axes' end-to-end travel (a lower bound of what they travel): a semicircle in x, y
+    with y at 1 mm/s takes at least its 2 R of y travel (4 s at R = 2 mm), and its schedule is not under it."""
+    from geometry import primitives
+    from geometry.toolpath import Toolpath
+    from solvers.errors import OutputTooLargeError
+    from solvers.machine import Axis, AxisLimits, Machine
+    from solvers.pipeline import MOTION_FLOOR_SHARE, motion_time_floor, schedule
+
+    def machine(vx: float, vy: float) -> Machine:
+        ax = (("x", vx), ("y", vy), ("z", 100.0))
+        return Machine("slow", tuple(Axis(n, AxisLimits(v, 400.0, 50_000.0)) for n, v in ax))  # type: ignore[arg-type]
+
+    tp = Toolpath([primitives.line([0, 0, 0], [10, 5, 1])])
+    slow = machine(1e-8, 100.0)
+    assert motion_time_floor(tp, slow, Options(method="lp")) == pytest.approx(MOTION_FLOOR_SHARE * 1e9, rel=1e-12)
+    with pytest.raises(OutputTooLargeError):
+        schedule(tp, slow, Options(method="lp", max_samples=10**7))
+    arc = Toolpath([primitives.arc([0, 0, 0], [4, 0, 0], centre=[2, 0, 0], direction="ccw")])
+    m = machine(100.0, 1.0)
+    floor = motion_time_floor(arc, m, Options(method="lp"))
+    assert floor == pytest.approx(MOTION_FLOOR_SHARE * 4.0, rel=1e-9)
+    assert schedule(arc, m, Options(method="lp")).summary["motion_time"] >= floor
