@@ -388,8 +388,9 @@ class LimitSet:
     #: with END_STEP_KERNEL): a piece's first repair round for its samples (``pipeline._repair_limits``)
     rest_reach_ends: bool = False
     #: method lp with jerk: the rest shapes in a piece's rest intervals (``WindowSpec.rest_shapes``,
-    #: ``pipeline._solve_windows``).  Off in a piece's last repair round for its samples where samples over a limit
-    #: lie in a rest interval (``pipeline._repair_limits``): there the rises' steep bends can hold off the cut rounds
+    #: ``pipeline._solve_windows``).  Off in the round a piece gets past its repair rounds for its samples where
+    #: samples still over the promise lie in a rest interval (``pipeline._repair_limits``): there the rises' steep
+    #: bends can hold off the cut rounds
     #: (bench seed 14855: a rest interval of 6 mm, a_x 1.0105 x amax at r = 0.007 of it through both repair rounds,
     #: 27 verification points still over after each window's 6 cut rounds).
     rest_shapes: bool = True

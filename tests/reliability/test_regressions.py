@@ -1179,12 +1179,29 @@ def test_rest_interval_the_cut_rounds_cannot_hold_is_repaired_without_rest_shape
     """Bench seed 14855 (lp, session 58): a piece from a corner on 6 mm knots, x amax 1,100 mm/s^2 against y's
     229,000.  Its first window's rest interval left 27 verification points over amax after each of its 6 cut rounds
     (the rises' bend at r ~ 0.006 of the interval, between the quarter-octave rows), and the samples read a_x
-    1.0105 x amax at r = 0.007 through both repair rounds: a 422.  The last repair round solves such a piece without
-    the rest shapes (``pipeline.REPAIR_REST_SHAPES_OFF``).  Checked by the independent checker; without it the
-    schedule still fails."""
+    1.0105 x amax at r = 0.007 through both repair rounds: a 422.  A piece still over the promise there gets a round
+    more without the rest shapes (``pipeline.REPAIR_REST_SHAPES_OFF``).  Checked by the independent checker; without
+    it the schedule still fails."""
     case = gen.case(14855, "bench")
     out = harness.run(case, "lp")
     assert out.ok, out.describe()
+    sch = schedule(case.toolpath(), case.lp_machine, Options(method="lp", sample_period=TS))
+    assert sch.summary["rest_shape_repairs"] >= 1 and sch.summary["sample_repairs"] == pipeline.SAMPLE_REPAIR_ROUNDS + 1
     monkeypatch.setattr(pipeline, "REPAIR_REST_SHAPES_OFF", False)
     with pytest.raises(ScheduleError, match="after 2 repair rounds"):
         schedule(case.toolpath(), case.lp_machine, Options(method="lp", sample_period=TS))
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_a_corner_stopped_within_one_sample_gets_a_round_more_under_lp_nlp(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Cam seed 2076 (lp+nlp, session 58): an 84 degree corner between F words of ~1,300 and ~600 mm/s, stopped and
+    left within one sample; the third differences of the samples across it read e_y 1.0219 x emax (Kj j alone
+    0.99) through both repair rounds, the NLP's own sampled check 1.0016: a 422.  A piece still over the promise
+    after them gets one round more with its steps at ``pipeline.REPAIR_EXTRA_STEP_SHARE`` (0.962).  Checked by the
+    independent checker; with the extra round at the last round's share the schedule still fails."""
+    case = gen.cam_case(2076)
+    out = harness.run(case, "lp+nlp")
+    assert out.ok, out.describe()
+    monkeypatch.setattr(pipeline, "REPAIR_EXTRA_STEP_SHARE", pipeline.REPAIR_STEP_SHARE)
+    with pytest.raises(ScheduleError, match="sampled servo error"):
+        schedule(case.toolpath(), case.machine, Options(method="lp+nlp", sample_period=TS, nlp_workers=1))
