@@ -296,8 +296,9 @@ def test_first_block_leaves_before_the_last_piece_is_solved() -> None:
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_violation_in_a_late_piece_comes_after_the_earlier_blocks(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A feed cap the last piece cannot hold (injected): its samples are flagged, the piece is re-solved twice,
-    still over: ``LimitViolationError``.  The earlier pieces' blocks were yielded before, the failing piece's
+    """A feed cap the last piece cannot hold (injected): its samples are flagged, the piece is re-solved in its
+    repair rounds (two, and a third without the rest shapes, the samples over reaching its rest interval), still
+    over: ``LimitViolationError``.  The earlier pieces' blocks were yielded before, the failing piece's
     samples never are, and there is no end item."""
     tp = zigzag()
     last = tp.pieces[-1]
@@ -311,7 +312,7 @@ def test_violation_in_a_late_piece_comes_after_the_earlier_blocks(monkeypatch: p
 
     monkeypatch.setattr(P, "_feed_cap", spoiled)
     got: list[Any] = []
-    with pytest.raises(LimitViolationError, match=r"sampled feed .* after 2 repair rounds") as err:
+    with pytest.raises(LimitViolationError, match=r"sampled feed .* after 3 repair rounds") as err:
         for item in P.schedule_stream(tp, router(), P.Options(method="lp")):
             got.append(item)
     assert got and all(isinstance(b, P.SampleBlock) for b in got)
