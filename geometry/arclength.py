@@ -55,7 +55,7 @@ class ArcLengthTable:
             w = getattr(seg, "weights", None)
             ratio = float(np.max(w) / np.min(w)) if w is not None else None
             raise GeometryError(
-                str(getattr(seg, "name", "segment")),
+                seg.name,
                 {"quadrature_intervals": exc.intervals} if ratio is None else {"weights_max_over_min": ratio},
                 f"its arc length does not converge to 1e-13 within {exc.budget} quadrature intervals: the speed "
                 "|C'(u)| varies too unevenly along u for float64 (weights spanning more than ~1e15, or knot spans "

@@ -130,9 +130,11 @@ def _request_field(field: str, items: Sequence[NurbsIn | LineIn | ArcIn | Polyli
     if i >= len(names):
         return f"toolpath.{field}"
     start = m.group(2) or ""
-    if blended:
-        start = ""  # (a blended path's segment starts where the blend trimmed it)
-    elif start and not isinstance(items[i], NurbsIn):
+    if blended:  # (the input segment a blend's part came from: its spirals are named after it, ``.corner.in``;
+        # a trimmed segment starts where the blend left it)
+        base = re.match(r"toolpath\.segments\[\d+\]", names[i])
+        return base.group(0) if base else f"toolpath.{field}"
+    if start and not isinstance(items[i], NurbsIn):
         start = ".points[0]" if isinstance(items[i], PolylineIn) else ".start"
     return f"{names[i]}{start}{m.group(3)}"
 
