@@ -208,6 +208,10 @@ def test_sync_budget_points_to_jobs(client: TestClient) -> None:
     # few control points but a long path: the sample-count lower bound trips (fixture: 50 000 samples)
     b = assert_problem(client.post("/v1/schedule", json=long_line(20_000.0, 50.0)), 413, "options.sample_period")
     assert b["jobs"] == "/v1/jobs"
+    # a program's lines are counted as the parser splits them: CR-only endings got 600 moves past as one line
+    # (session 58's API probe)
+    moves = "".join(f"G01 X{i % 2} Y{i * 0.01:.2f} F600\r" for i in range(n))
+    assert_problem(client.post("/v1/schedule", json={"toolpath": {"gcode": moves}}), 413, "toolpath.segments")
 
 
 def test_exact_sample_count_over_the_budget_is_413(client: TestClient) -> None:
