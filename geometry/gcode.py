@@ -136,7 +136,7 @@ LINUXCNC_ORDER_DEFAULT: Final = 3
 
 _AXES: Final = "XYZ"
 _OFFSETS: Final = "IJK"
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)")
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)", re.ASCII)  # (ASCII digits: not Arabic-Indic or full-width ones)
 _NAME = re.compile(r"[A-Z_]+")
 #: Siemens multi-letter parameter addresses (written with '=').
 _NAMED: Final = frozenset({"SD", "PW", "PL"})

@@ -204,8 +204,9 @@ def arc(
     e2 = E[[a, b]]
     chord_vec = e2 - s2
     chord = float(np.hypot(chord_vec[0], chord_vec[1]))
-    if (centre is None) == (radius is None):
-        raise GeometryError(f"{name}.centre", None, "give exactly one of centre (I J K) or radius (R)")
+    if (centre is None) == (radius is None):  # (both: the radius is the one too many; neither: the centre missing)
+        raise GeometryError(f"{name}.radius" if radius is not None else f"{name}.centre", radius,
+                            "give exactly one of centre (I J K) or radius (R)")
     if centre is not None:
         C = _point(centre, f"{name}.centre")
         c2 = C[[a, b]]

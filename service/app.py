@@ -214,6 +214,7 @@ def _check_plots(body: ScheduleRequest, media: str) -> None:
 
 
 def _routes(app: FastAPI) -> None:
+    @app.head("/healthz", include_in_schema=False)  # (load balancers' probes)
     @app.get("/healthz", response_model=Health)
     async def healthz(request: Request) -> dict[str, Any]:
         """Liveness, and how full the service is (synchronous schedules in flight, jobs queued or running)."""
@@ -289,9 +290,10 @@ def _routes(app: FastAPI) -> None:
         method: Annotated[Literal["lp", "lp+nlp"], BeforeValidator(_query_method), Query(
             description="lp+nlp (default) or lp; a `+` left unescaped in the URL reads as a space: `lp nlp` is "
                         "lp+nlp")] = "lp+nlp",
-        sample_period: Annotated[float, Query(ge=1e-5, le=0.1, description="s")] = 0.001,
-        corner_tolerance_deg: Annotated[float, Query(ge=0, lt=180)] = 0.5,
-        corner_blend_mm: Annotated[float, Query(ge=0, le=100, description="mm; 0 stops, else >= 0.001")] = 0.0,
+        sample_period: Annotated[float, Query(ge=1e-5, le=0.1, allow_inf_nan=False, description="s")] = 0.001,
+        corner_tolerance_deg: Annotated[float, Query(ge=0, lt=180, allow_inf_nan=False)] = 0.5,
+        corner_blend_mm: Annotated[float, Query(ge=0, le=100, allow_inf_nan=False,
+                                                description="mm; 0 stops, else >= 0.001")] = 0.0,
     ) -> Response:
         """Schedule a G-code program uploaded as `text/x-gcode` (machine preset and options as query parameters).
         Answers as `POST /v1/schedule` (JSON, CSV, or NDJSON streamed piece by piece with a final summary line)."""

@@ -378,6 +378,8 @@ MALFORMED = [
     (F + "G2 R5", 2, 4, "full circle"),
     (F + "G2 X10 P0 I5", 2, 8, "P (number of turns)"),
     (F + "G2 X10 P1000000 I5", 2, 8, "turns must be <= 1000"),
+    ("G1 X\u0661\u0660 F100", 1, 4, "X must be followed by a number"),
+    ("G1 X\uff11\uff10 F100", 1, 4, "X must be followed by a number"),
     ("G90.1 F100\nG2 X10 Y0 I5", 2, 11, "needs both I and J"),
     ("G05 X10 Y10 I1 J1 P1 Q1", 1, 1, "high-speed mode switch"),
     # Fanuc G06.2

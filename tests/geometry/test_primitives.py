@@ -280,7 +280,7 @@ def test_radii_within_tolerance_give_a_circle_through_both_ends(delta: float) ->
         ({"end": (0, 10, 0.01)}, "arc.end[2]", "helical"),
         ({"end": (0, 10, 0), "plane": "G18", "centre": None, "radius": 10}, "arc.end[1]", "helical"),
         ({"centre": None}, "arc.centre", "exactly one of"),
-        ({"radius": 10}, "arc.centre", "exactly one of"),
+        ({"radius": 10}, "arc.radius", "exactly one of"),  # (both given: the radius is the one too many)
         ({"centre": (10, 0, 0)}, "arc.centre", "zero radius"),
         ({"centre": (0, 0, math.nan)}, "arc.centre[2]", "finite"),
         ({"end": (0, 10, math.inf)}, "arc.end[2]", "finite"),
@@ -288,6 +288,7 @@ def test_radii_within_tolerance_give_a_circle_through_both_ends(delta: float) ->
         ({"direction": "left"}, "arc.direction", "cw"),
         ({"turns": -1}, "arc.turns", "integer >= 0"),
         ({"turns": 1.5}, "arc.turns", "integer >= 0"),
+        ({"turns": 1001}, "arc.turns", "<= 1000"),
         ({"centre": None, "radius": 0.0}, "arc.radius", "non-zero"),
         ({"centre": None, "radius": math.nan}, "arc.radius", "finite"),
         ({"centre": None, "radius": "10"}, "arc.radius", "number"),

@@ -39,6 +39,17 @@ def assert_problem(r: Any, status: int, field: str | None = None) -> dict[str, A
 def test_healthz(client: TestClient) -> None:
     h = client.get("/healthz").json()
     assert h["status"] == "ok" and h["schedules_in_flight"] == 0 and h["schedules_limit"] == 4  # 2 x workers
+    assert client.head("/healthz").status_code == 200  # (load balancers probe with HEAD: was 405)
+
+
+@pytest.mark.parametrize("query", ["corner_blend_mm=nan", "sample_period=inf", "corner_tolerance_deg=nan"])
+def test_non_finite_query_numbers_are_refused_as_such(client: TestClient, query: str) -> None:
+    """``?corner_blend_mm=nan`` read "Input should be less than or equal to 100" (session 58's API probe)."""
+    name, value = query.split("=")
+    r = client.post(f"/v1/schedule/gcode?method=lp&{query}", content="G21 G90\nG01 X10 F600\n",
+                    headers={"content-type": "text/x-gcode"})
+    b = assert_problem(r, 422, f"query.{name}")
+    assert b["errors"][0]["value"] == value and "finite" in b["errors"][0]["rule"]
 
 
 def test_example_schedules_and_is_exact_arc(client: TestClient) -> None:
