@@ -114,13 +114,14 @@ import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 
 from geometry import arcblend, primitives
 from geometry.errors import GeometryError
 from geometry.nurbs import MAX_DEGREE, FloatArray, NurbsSegment
+from geometry.segment import Segment
 from geometry.toolpath import CORNER_TOL_DEG, Toolpath
 
 MM_PER_INCH: Final = 25.4
@@ -223,14 +224,29 @@ class Program:
         rest points too; the last two are listed in ``Toolpath.unblended``.
         """
         if blend_mm == 0.0:
-            return Toolpath(list(self.segments), corner_tol_deg=corner_tol_deg, feed_limits=list(self.feed))
+            return self._toolpath(list(self.segments), list(self.line), corner_tol_deg=corner_tol_deg,
+                                  feed_limits=list(self.feed))
         # runs are split only where a rapid meets a cutting move (the F of a cutting move may change)
         bp = arcblend.blend_path(self.segments, blend_mm, keys=list(self.rapid),
                                  names=[f"gcode:line {ln}" for ln in self.line])
         feed = self.feed
         limits = [feed[a] if a == b else _lower(feed[a], feed[b]) for a, b in zip(bp.origin, bp.after, strict=True)]
-        return Toolpath(bp.segments, corner_tol_deg=corner_tol_deg, feed_limits=limits,
-                        unblended=bp.unblended)
+        return self._toolpath(list(bp.segments), [self.line[k] for k in bp.origin], corner_tol_deg=corner_tol_deg,
+                              feed_limits=limits, unblended=bp.unblended)
+
+    @staticmethod
+    def _toolpath(segments: list[Segment], lines: list[int], **kw: Any) -> Toolpath:
+        """``Toolpath(segments, **kw)``, its errors about segment i named by i's source line (``lines``): a program
+        has no ``segments[i]`` to point at (session 58's probe: "segments[1]: zero-length segment")."""
+        try:
+            return Toolpath(segments, **kw)
+        except GcodeError:
+            raise
+        except GeometryError as exc:
+            m = re.match(r"segments\[(\d+)\]", exc.field)
+            if m is None or int(m.group(1)) >= len(lines):
+                raise
+            raise GcodeError(lines[int(m.group(1))], 1, str(exc.value), exc.rule) from exc
 
 
 def _lower(a: float | None, b: float | None) -> float | None:
@@ -246,8 +262,11 @@ def _lower(a: float | None, b: float | None) -> float | None:
 
 
 def tokenize(text: str) -> list[Block]:
-    """Split G-code text into blocks of words; raises GcodeError on lexical errors."""
+    """Split G-code text into blocks of words; raises GcodeError on lexical errors.  A leading byte-order mark
+    (Windows CAM files often start with one) is not part of the program."""
     blocks: list[Block] = []
+    if text.startswith("\ufeff"):
+        text = text[1:]
     for ln, raw in enumerate(text.splitlines(), start=1):
         block = _tokenize_line(raw, ln)
         if block is not None:

@@ -35,6 +35,8 @@ FloatArray = NDArray[np.float64]
 #: sync budget out in the geometry, and degrees of 80-150 read jerks 98-2 x 10^6 x the limit in the samples (session
 #: 58's API probe): evaluation of such a basis is not what a CNC path needs.
 MAX_DEGREE = 12
+#: ``NurbsSegment.domain_scaled`` leaves a domain whose width is within 2^-20 .. 2^20 as it is.
+DOMAIN_SCALE_POW2 = 20
 
 #: A segment whose control points all lie within this distance (mm) of each
 #: other is degenerate: it has no length to travel.
@@ -412,6 +414,18 @@ class NurbsSegment:
             Pw = Q
         return NurbsSegment(degree=p, knots=U, control_points=Pw[:, :3] / Pw[:, 3:4], weights=Pw[:, 3].copy(),
                             name=self.name)
+
+    def domain_scaled(self) -> NurbsSegment:
+        """The same curve with every knot times 2^m, its domain's width brought into [2^-DOMAIN_SCALE_POW2,
+        2^DOMAIN_SCALE_POW2] where it is outside (else itself).  A B-spline is unchanged by scaling its knots, and
+        a power of two scales them exactly; but its u-derivatives scale by 2^-m: on knots spanning 1e-120 the
+        second derivatives overflowed, and the router's quarter arc came back with NaN accelerations (session 58's
+        API probe); on 1e-154 or 1e200 its length was 0."""
+        width = float(self.knots[-self.degree - 1] - self.knots[self.degree])
+        m = -math.frexp(width)[1] if width > 0.0 and math.isfinite(width) else 0
+        if abs(m) <= DOMAIN_SCALE_POW2:
+            return self
+        return replace(self, knots=np.ldexp(self.knots, m))
 
     def rebased(self) -> NurbsSegment:
         """The same curve on knots U - U_p, so its domain starts at u = 0.

@@ -224,8 +224,11 @@ def arc(
                 f"(max({ARC_RADIUS_ABS_TOL_MM} mm, {ARC_RADIUS_REL_TOL:g} x radius))",
             )
         full = chord <= FULL_CIRCLE_TOL_MM
-        if not full:
-            # move the centre onto the perpendicular bisector of the chord: equal radii exactly
+        if not full and chord > tol:
+            # move the centre onto the perpendicular bisector of the chord: equal radii exactly.  Not on a chord
+            # within the radius tolerance: the end is then as near the start as the radii may differ, and an end
+            # 1 um off along the radius put the centre on the chord's midpoint, the arc a 1 um half circle where
+            # LinuxCNC (equal angles) cuts a full one (session 58's probe); the angles from the given centre decide
             t = chord_vec / chord
             mid = 0.5 * (s2 + e2)
             off = c2 - mid

@@ -55,6 +55,9 @@ GAP_TOL_MM = 1e-3
 CORNER_TOL_DEG = 0.5
 #: Shortest segment (mm) accepted; below it the segment has no length to travel.
 MIN_SEGMENT_LENGTH_MM = 1e-9
+#: Largest coordinate (mm) of a control point: a G-code X1e200 (or G91 steps summing past 1e307) reached the knot
+#: plan as an infinite length, a 500 (session 58's probe).  The API's schema holds JSON points to 1e6 mm.
+MAX_COORD_MM = 1e9
 #: Gaps between consecutive segments above this (and within the gap tolerance) are closed by moving
 #: the NURBS end control points that meet there (``close_gaps``); smaller ones are rounding.
 GAP_CLOSE_MIN_MM = 1e-9
@@ -410,6 +413,13 @@ class Toolpath:
             raise GeometryError("segments", [], "a toolpath needs at least one segment")
         if not (np.isfinite(corner_tol_deg) and 0.0 <= corner_tol_deg < 180.0):
             raise GeometryError("corner_tolerance_deg", corner_tol_deg, "must be in [0, 180)")
+        # (knot domains far from unit width scaled by a power of two: the same curves, finite derivatives)
+        segments = [seg.domain_scaled() if isinstance(seg, NurbsSegment) else seg for seg in segments]
+        for i, seg in enumerate(segments):
+            if isinstance(seg, NurbsSegment):
+                big = float(np.max(np.abs(seg.control_points)))
+                if not big <= MAX_COORD_MM:
+                    raise GeometryError(f"segments[{i}]", big, f"coordinates must be within +-{MAX_COORD_MM:g} mm", i)
         self.segments, self.closed_gaps = close_gaps(segments, gap_tol)
         self.unblended = list(unblended)
         self._feed = self._check_feed_limits(feed_limits, len(self.segments))

@@ -2467,8 +2467,10 @@ def _schedule_stream(
             kind, axis, util, s_worst, t_worst = worst
             if util > 1.0 + verify.FAIL_TOL:
                 raise LimitViolationError(
-                    f"the sampled {kind.replace('_', ' ')} reaches {util:.4f} x its limit after "
-                    f"{rounds} repair rounds (limits are promised within {1.0 + verify.FAIL_TOL:g} x)",
+                    (f"the sampled {kind.replace('_', ' ')} reaches {util:.4f} x its limit" if math.isfinite(util)
+                     else f"the sampled {kind.replace('_', ' ')} is not finite (the path's derivatives could not be "
+                     "evaluated there)")
+                    + f" after {rounds} repair rounds (limits are promised within {1.0 + verify.FAIL_TOL:g} x)",
                     field="toolpath", value={"s": s_worst, "t": t_worst, "utilisation": util},
                     axis=axis or None,
                 )

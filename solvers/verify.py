@@ -176,12 +176,18 @@ def check_rows(
             over[sl] |= row_any(ua > 1.0 + REPAIR_TOL) | row_any(uf > 1.0 + FD_REPAIR_TOL)
             both = np.maximum(ua, uf)
             m = row_max(both)
+            # (a value that is not finite is over every limit: never released; a NaN compares false otherwise)
+            bad = np.isnan(m)
+            if bad.any():
+                m[bad] = np.inf
+                over[sl] |= bad
             up = m > util[sl]
             util[sl] = np.where(up, m, util[sl])
             kind[sl] = np.where(up, kd, kind[sl])
             axis[sl][up] = np.argmax(both[up], axis=1)
     if lim.feed_cap is not None:
         uf_ = _feed_util(feed, lim.feed_cap)
+        uf_ = np.where(np.isnan(uf_), np.inf, uf_)
         over |= uf_ > 1.0 + REPAIR_TOL
         up = uf_ > util
         util = np.where(up, uf_, util)

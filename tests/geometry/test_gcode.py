@@ -434,6 +434,40 @@ def test_malformed_program_names_line_and_column(text: str, line: int, col: int,
     assert str(err).startswith(f"{err.field}: {err.rule}")
 
 
+@pytest.mark.parametrize(("text", "line", "fragment"), [
+    ("G1 X1" + "0" * 200 + " F100", 1, "coordinates must be within"),  # (was a 500: an infinite length)
+    ("G1 X10 F600\nG91" + "\nX100000000" * 11, 12,
+     "coordinates must be within"),  # (incremental steps past the bound: the line that crosses it)
+])
+def test_toolpath_errors_of_a_program_name_its_line(text: str, line: int, fragment: str) -> None:
+    """What the toolpath refuses (not the parser) is named by the program's line, not by a ``segments[i]`` the
+    upload does not have (session 58's probe)."""
+    with pytest.raises(GcodeError) as info:
+        parse(text).toolpath()
+    assert info.value.field == f"gcode:line {line}:col 1" and fragment in info.value.rule
+
+
+@pytest.mark.parametrize(("end", "full"), [("X10.000001 Y0", True), ("X9.999999 Y0", True), ("X10 Y0.000001", True),
+                                           ("X10 Y-0.000001", False), ("X10 Y0", True)])
+def test_an_arc_ending_within_its_radius_tolerance_of_its_start(end: str, full: bool) -> None:
+    """G2 from (10, 0) around (0, 0) to an end 1 um off the start: along the radius the centre went to the chord's
+    midpoint and the arc was a 1 um half circle (LinuxCNC, from equal angles, cuts a full circle; session 58's
+    probe).  The angles from the given centre decide: a full circle where they are equal or the end is just past
+    the start, a 1 um arc where it is just short of it (clockwise), ending on the programmed point."""
+    tp = parse(f"G21 G90\nG1 X10 F600\nG2 {end} I-10\n").toolpath()
+    want = 10.0 + (2 * math.pi * 10.0 if full else 1e-6)
+    assert tp.length == pytest.approx(want, abs=2e-6)
+    x, y = (float(w[1:]) for w in end.split())
+    np.testing.assert_allclose(tp.positions(np.array([tp.length]))[0], [x, y, 0.0], rtol=0, atol=1e-12)
+
+
+def test_a_leading_byte_order_mark_is_not_part_of_the_program() -> None:
+    """Windows CAM files often start with a UTF-8 BOM: it was "unexpected character" at line 1 col 1."""
+    plain, marked = parse("G21 G90\nG1 X10 F600\n"), parse("\ufeffG21 G90\nG1 X10 F600\n")
+    assert len(marked.segments) == len(plain.segments) == 1
+    np.testing.assert_array_equal(marked.segments[0].control_points, plain.segments[0].control_points)
+
+
 def test_invalid_parse_arguments() -> None:
     with pytest.raises(GeometryError) as info:
         parse("G0 X1", units="furlong")

@@ -507,3 +507,21 @@ def test_evaluate_is_finite_at_zero_speed_point() -> None:
         ev = tp.evaluate(np.array([10.0]), piece=tp.pieces[-1])
     assert np.all(np.isfinite(ev.d1))
     np.testing.assert_allclose(ev.d1[0], (0, 1, 0), atol=1e-6)
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e-154, 1e-120, 1e-60, 1e100, 1e200])
+def test_a_knot_domain_of_any_width_is_the_same_curve(scale: float) -> None:
+    """Knots spanning 1e-120 (or 1e100, 1e200, 1e-154...) describe the same quarter circle as on [0, 1]: their
+    u-derivatives overflowed, and the schedule came back 200 with NaN accelerations or a "zero-length segment"
+    (session 58's probe).  The toolpath scales such a domain by a power of two (exact): the same length, the same
+    points and unit tangents along s, finite curvature 1 / R."""
+    pts, w = [[10.0, 0.0, 0.0], [10.0, 10.0, 0.0], [0.0, 10.0, 0.0]], [1.0, 0.7071067811865476, 1.0]
+    ref = Toolpath([NurbsSegment.create(2, [0, 0, 0, 1, 1, 1], pts, w, name=NAME)])
+    tp = Toolpath([NurbsSegment.create(2, [0, 0, 0, scale, scale, scale], pts, w, name=NAME)])
+    assert tp.length == pytest.approx(ref.length, rel=1e-12) and ref.length == pytest.approx(5 * math.pi, rel=1e-12)
+    s = np.linspace(0.0, ref.length, 201)
+    g, g_ref = tp.evaluate(s), ref.evaluate(s)
+    np.testing.assert_allclose(g.position, g_ref.position, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(g.d1, g_ref.d1, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(g.d2, axis=1), 0.1, rtol=1e-8)
+    assert np.all(np.isfinite(g.d3))

@@ -231,3 +231,26 @@ def test_motion_time_floor_refuses_a_slow_axis_up_front() -> None:
     floor = motion_time_floor(arc, m, Options(method="lp"))
     assert floor == pytest.approx(MOTION_FLOOR_SHARE * 4.0, rel=1e-9)
     assert schedule(arc, m, Options(method="lp")).summary["motion_time"] >= floor
+
+
+@pytest.mark.parametrize("scale", [1e-120, 1e100])
+def test_a_quarter_arc_on_extreme_knots_schedules_as_on_unit_knots(scale: float) -> None:
+    """Session 58's probe: knots spanning 1e-120 gave a 200 with NaN accelerations and samples 189 x over amax
+    (1e100: a HiGHS failure).  Now the same schedule as on [0, 1] knots, every column finite, within the limits by
+    finite differences."""
+    from geometry.nurbs import NurbsSegment
+    from geometry.toolpath import Toolpath
+    from solvers.pipeline import schedule
+    from tests.fdcheck import utilisation
+
+    pts, w = [[10.0, 0.0, 0.0], [10.0, 10.0, 0.0], [0.0, 10.0, 0.0]], [1.0, 0.7071067811865476, 1.0]
+    m = router()
+    times = []
+    for k in (1.0, scale):
+        seg = NurbsSegment.create(2, [0, 0, 0, k, k, k], pts, w, name="segments[0]")
+        sch = schedule(Toolpath([seg]), m, Options(method="lp"))
+        smp = sch.samples
+        assert all(np.all(np.isfinite(x)) for x in (smp.position, smp.velocity, smp.acceleration, smp.jerk))
+        assert max(utilisation(smp.position, 1e-3, *m.limit_arrays()).values()) <= 1.01
+        times.append(sch.summary["motion_time"])
+    assert times[1] == pytest.approx(times[0], rel=1e-3)

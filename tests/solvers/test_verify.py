@@ -77,6 +77,22 @@ def test_recheck_flags_a_spoiled_sample_and_schedule_holds() -> None:
     assert abs(bad.worst[3] - k) <= 2
 
 
+def test_a_sample_that_is_not_finite_fails_the_check() -> None:
+    """A NaN in the emitted values compares false against every limit: it passed the re-check, and a quarter arc
+    on knots spanning 1e-120 came back 200 with NaN accelerations (session 58's probe).  NaN now reads as over
+    every limit (infinite utilisation), in the analytic values and in the feed."""
+    m = router()
+    sch = schedule(ex.flower(1), m, Options(method="lp"))
+    smp = sch.samples
+    vmax, amax, jmax = m.limit_arrays()
+    lim = verify.Limits(vmax, amax, jmax, None, None)
+    k = smp.t.size // 3
+    acc = smp.acceleration.copy()
+    acc[k, 1] = np.nan
+    bad = verify.check(1e-3, smp.position, smp.feed, smp.velocity, acc, smp.jerk, lim)
+    assert bad.failed and bad.repair[k] and bad.worst[0] == "acceleration" and bad.worst[2] == np.inf
+
+
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_long_chained_path_emits_no_analytic_overshoot() -> None:
     """The 5-loop flower (several LP windows): the emitted analytic a and j stay within
