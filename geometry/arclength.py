@@ -15,6 +15,7 @@ solvers' checkpoint geometry.  (The 18.35 m flower chain's tables grow from
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import partial
 
@@ -53,10 +54,14 @@ class ArcLengthTable:
                                                 df=partial(speed_slope, seg)))
         except TableTooLarge as exc:
             w = getattr(seg, "weights", None)
-            ratio = float(np.max(w) / np.min(w)) if w is not None else None
+            value: dict[str, float] = {"quadrature_intervals": exc.intervals}
+            if w is not None:  # (the spread as max and min where their ratio overflows: 1e300 : 1e-300)
+                wmax, wmin = float(np.max(w)), float(np.min(w))
+                value = ({"weights_max_over_min": wmax / wmin} if math.isfinite(wmax / wmin)
+                         else {"weights_max": wmax, "weights_min": wmin})
             raise GeometryError(
                 seg.name,
-                {"quadrature_intervals": exc.intervals} if ratio is None else {"weights_max_over_min": ratio},
+                value,
                 f"its arc length does not converge to 1e-13 within {exc.budget} quadrature intervals: the speed "
                 "|C'(u)| varies too unevenly along u for float64 (weights spanning more than ~1e15, or knot spans "
                 "far apart in size)") from exc

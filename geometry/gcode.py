@@ -261,13 +261,24 @@ def _lower(a: float | None, b: float | None) -> float | None:
 # --------------------------------------------------------------------------- tokenizer
 
 
+#: A program's line ends: LF, CR LF or a lone CR (old Mac CAM files).  Not ``str.splitlines``'s others (VT, FF,
+#: NEL, U+2028...): inside a line those are whitespace or an unexpected character.
+LINE_END = re.compile(r"\r\n|\r|\n")
+
+
+def lines(text: str) -> list[str]:
+    """The program's lines (a trailing line end starts no line)."""
+    out = LINE_END.split(text)
+    return out[:-1] if out and out[-1] == "" else out
+
+
 def tokenize(text: str) -> list[Block]:
     """Split G-code text into blocks of words; raises GcodeError on lexical errors.  A leading byte-order mark
     (Windows CAM files often start with one) is not part of the program."""
     blocks: list[Block] = []
     if text.startswith("\ufeff"):
         text = text[1:]
-    for ln, raw in enumerate(text.splitlines(), start=1):
+    for ln, raw in enumerate(lines(text), start=1):
         block = _tokenize_line(raw, ln)
         if block is not None:
             blocks.append(block)

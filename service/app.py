@@ -23,7 +23,7 @@ from swagger_ui_bundle import swagger_ui_path
 
 from service.config import Settings
 from service.convert import Budget, control_point_count, load_result
-from service.errors import ServiceError, install_handlers, not_found, too_large
+from service.errors import ServiceError, WorkFailed, install_handlers, not_found, renamed, too_large
 from service.executor import Executor, make_executor
 from service.http import FORMAT_NAMES, NDJSON_PROTOCOL, BodyLimit, ndjson_stream, negotiate, render
 from service.jobs import JobManager
@@ -113,6 +113,14 @@ class Service:
         await self.executor.close()
         self.plots.close()
         self.store.close()
+
+
+#: The G-code upload's request fields by the names its client sent them under: the query parameters, and the
+#: program itself (``body``) for what its moves and F words decide (the knots, the control points).
+GCODE_UPLOAD_FIELDS = {"options.sample_period": "query.sample_period", "options.method": "query.method",
+                       "options.knot_spacing": "body", "toolpath.segments": "body", "toolpath.gcode": "body",
+                       "toolpath.corner_blend_mm": "query.corner_blend_mm",
+                       "toolpath.corner_tolerance_deg": "query.corner_tolerance_deg"}
 
 
 def _query_method(v: Any) -> Any:
@@ -317,7 +325,10 @@ def _routes(app: FastAPI) -> None:
             })
         except ValidationError as exc:
             raise RequestValidationError(exc.errors()) from exc
-        return await post_schedule(body, request)
+        try:
+            return await post_schedule(body, request)
+        except (ServiceError, WorkFailed) as exc:
+            raise renamed(exc, GCODE_UPLOAD_FIELDS) from exc
 
     @app.post("/v1/jobs", status_code=202, response_model=JobOut, dependencies=[Depends(_json_content)],
               responses={202: {"headers": LOCATION, "description": "queued"},

@@ -165,7 +165,7 @@ def control_point_count(req: ScheduleRequest) -> int:
     """Control points of a segment request (a line 2, an arc 9 per turn, a polyline its points);
     for G-code, its line count (an upper bound on its motions)."""
     if req.toolpath.gcode is not None:  # (its lines as the parser splits them: CR-only endings are lines too)
-        return len(req.toolpath.gcode.splitlines()) + 1
+        return len(gcode.lines(req.toolpath.gcode)) + 1
     n = 0
     for s in req.toolpath.segments or []:
         if isinstance(s, NurbsIn):

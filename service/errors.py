@@ -116,6 +116,8 @@ def pointer_of(field: str | None) -> str | None:
     """'toolpath.segments[0].knots' -> '#/toolpath/segments/0/knots'."""
     if not field:
         return None
+    if field.startswith("gcode:"):  # a program's line ("gcode:line 3:col 5"): the program's own field
+        return "#/toolpath/gcode"
     return "#/" + field.replace("[", ".").replace("]", "").replace(".", "/")
 
 
@@ -146,6 +148,19 @@ def validation_problem(errors: Sequence[Any]) -> dict[str, Any]:
     first: dict[str, Any] = out[0] if out else {"field": None, "rule": "invalid"}
     detail = f"{first['field']}: {first['rule']}" if first["field"] else str(first["rule"])
     return _problem(422, "invalid-request", "Invalid request", detail, out)
+
+
+def renamed(exc: BaseException, names: dict[str, str]) -> BaseException:
+    """``exc`` as a WorkFailed whose problem names its fields by ``names`` (request field -> the name the client
+    sent it under; e.g. the G-code upload's query parameters), or ``exc`` itself when it names none of them."""
+    problem = problem_from_exception(exc)
+    errs = problem.get("errors") or []
+    if not any(e.get("field") in names or e.get("pointer") in map(pointer_of, names) for e in errs):
+        return exc
+    pointers = {pointer_of(k): "#" if v == "body" else pointer_of(v) for k, v in names.items()}
+    out = [{**e, "field": names.get(e.get("field"), e.get("field")),
+            "pointer": pointers.get(e.get("pointer"), e.get("pointer"))} for e in errs]
+    return WorkFailed({**problem, "errors": out})
 
 
 def problem_from_exception(exc: BaseException) -> dict[str, Any]:

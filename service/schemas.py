@@ -1,8 +1,9 @@
 """Request/response schemas of the HTTP API (pydantic).  No solver imports here.
 
-Numbers are strict (booleans and strings are not numbers) and finite (JSON has
-no NaN/Inf; ``allow_inf_nan=False`` also rejects the ``NaN`` token Python's
-JSON parser would accept).  Bounds keep every accepted request physically
+Numbers and booleans are strict (booleans and strings are not numbers; "false"
+and 0 are not booleans) and numbers finite (JSON has no NaN/Inf;
+``allow_inf_nan=False`` also rejects the ``NaN`` token Python's JSON parser
+would accept).  Bounds keep every accepted request physically
 meaningful and numerically safe for the solver.
 """
 
@@ -17,6 +18,7 @@ from pydantic import (
     Discriminator,
     Field,
     Strict,
+    StrictBool,
     StrictInt,
     Tag,
     field_validator,
@@ -228,7 +230,7 @@ class OptionsIn(BaseModel):
         "kept if within 0.2 % of its motion's lower bound)"
     )
     checkpoints_per_interval: StrictInt = Field(default=5, ge=1, le=64)
-    jerk: bool = True
+    jerk: StrictBool = True
     solver: Literal["highs", "clarabel"] = "highs"
     feed_max: Speed | None = Field(default=None, description="mm/s (overrides the machine's)")
     plots: list[PlotName] | None = Field(

@@ -2305,7 +2305,12 @@ class WindowLP:
         if status == highspy.HighsModelStatus.kInfeasible:
             raise InfeasibleError("LP window is infeasible", window=self.spec.index, status=str(status))
         if status != highspy.HighsModelStatus.kOptimal:
-            raise SolverFailure("HiGHS did not reach optimality", window=self.spec.index, status=str(status))
+            sp = self.spec  # (the window's knots; the machine's limits are what the LP's scale comes from)
+            raise SolverFailure(
+                f"HiGHS did not reach optimality on LP window {sp.index} (knot intervals {sp.k0}..{sp.k1} of "
+                f"{sp.d:.6g} mm, cold and with the other presolve and scaling): limits many orders of magnitude "
+                "apart (e.g. jmax 1e-3 with amax 1e8) or a knot spacing far from the path's scale leave its "
+                "rows ill-conditioned", field="machine", value=str(status), window=sp.index, status=str(status))
         return np.asarray(h.getSolution().col_value, dtype=np.float64)
 
     @staticmethod

@@ -217,6 +217,10 @@ def test_an_arc_length_that_does_not_converge_names_the_segment() -> None:
         Toolpath([seg])
     assert err.value.field == "toolpath.segments[0]" and "does not converge" in err.value.rule
     assert err.value.value == {"weights_max_over_min": pytest.approx(1e30)}
+    wide = NurbsSegment.create(2, [0, 0, 0, 1, 1, 1], [[0, 0, 0], [5, 5, 0], [10, 0, 0]], [1e-300, 1e300, 1e-300])
+    with pytest.raises(GeometryError) as err:  # (a spread whose ratio overflows: the two ends, not "inf")
+        Toolpath([wide])
+    assert err.value.value == {"weights_max": 1e300, "weights_min": 1e-300}
 
 
 def test_a_time_table_over_its_budget_is_a_schedule_error(monkeypatch: pytest.MonkeyPatch) -> None:

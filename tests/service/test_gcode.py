@@ -93,8 +93,11 @@ def test_a_program_whose_f_words_alone_pass_the_budget_is_413_up_front(client: T
     through to the solver).  The same program at F6000 is under the budget."""
     slow = "G21 G90 G01 F1\nX1000\n"
     r = client.post("/v1/schedule/gcode?method=lp", content=slow, headers={"content-type": "text/x-gcode"})
-    b = assert_problem(r, 413, "options.sample_period")
+    b = assert_problem(r, 413, "query.sample_period")  # (the upload's own name for the sample period)
     assert "at its feed limits" in b["detail"] and b["jobs"] == "/v1/jobs"
+    same = assert_problem(client.post("/v1/schedule", json={"toolpath": {"gcode": slow}, "options": {
+        "method": "lp"}}), 413, "options.sample_period")  # (as JSON, the body's field)
+    assert same["detail"] == b["detail"]
     r = client.post("/v1/schedule/gcode?method=lp", content=slow.replace("F1", "F6000"),
                     headers={"content-type": "text/x-gcode"})
     assert r.status_code == 200, r.text
@@ -236,3 +239,27 @@ def test_f_word_knots_over_the_budget_are_coarsened_to_fit_not_refused(tmp_path:
         assert max(r.json()["samples"]["feed"]) <= 1.01 * 10.0
         body["options"]["knot_spacing"] = 0.004  # 500 a leg
         assert_problem(c.post("/v1/schedule", json=body), 413, "options.knot_spacing")
+
+
+def test_upload_errors_name_what_the_upload_sent(client: TestClient) -> None:
+    """The G-code upload has no ``options`` or ``toolpath`` body fields: its problems name the program (``body``)
+    for what its moves decide (the control-point budget, a line's error) and ``query.*`` for its parameters."""
+    hdr = {"content-type": "text/x-gcode"}
+    bad = "G21 G90\nG01 X10 F600\nG01 X20 Q5\n"
+    e = assert_problem(client.post("/v1/schedule/gcode", content=bad, headers=hdr), 422)["errors"][0]
+    assert e["field"].startswith("gcode:line 3") and e["pointer"] == "#"
+    e = assert_problem(client.post("/v1/schedule", json={"toolpath": {"gcode": bad}}), 422)["errors"][0]
+    assert e["field"].startswith("gcode:line 3") and e["pointer"] == "#/toolpath/gcode"
+    many = "G21 G90 G01 F6000\n" + "".join(f"X{i % 2} Y{i}\n" for i in range(600))
+    b = assert_problem(client.post("/v1/schedule/gcode?method=lp", content=many, headers=hdr), 413, "body")
+    assert b["errors"][0]["pointer"] == "#" and "control points" in b["detail"]
+
+
+@pytest.mark.parametrize("sep", ["\u2028", "\x85", "\x1e"])
+def test_only_lf_and_cr_end_a_program_line(client: TestClient, sep: str) -> None:
+    """``str.splitlines`` also splits at NEL, U+2028, record separators...: a program line holding one was read as
+    two moves; it is an unexpected character on its line, as in a controller."""
+    prog = f"G21 G90 G01 F600 X10{sep}Y5\n"
+    e = assert_problem(client.post("/v1/schedule/gcode?method=lp", content=prog.encode(),
+                                   headers={"content-type": "text/x-gcode"}), 422)["errors"][0]
+    assert e["field"].startswith("gcode:line 1:") and e["value"] == sep

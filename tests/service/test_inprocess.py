@@ -173,6 +173,14 @@ def test_boolean_nan_inf_string_numbers_rejected(client: TestClient) -> None:
                        "toolpath.segments[0].control_points[1][0]")
 
 
+@pytest.mark.parametrize("jerk", ["false", 0, "no", 1])
+def test_a_boolean_option_is_a_json_boolean(client: TestClient, jerk: object) -> None:
+    """``options.jerk`` "false" read as False (pydantic's lax booleans), while numbers were strict: a string or a
+    number sent for a boolean is a 422 naming it."""
+    body = {**EXAMPLE, "options": {"method": "lp", "jerk": jerk}}
+    assert_problem(client.post("/v1/schedule", json=body), 422, "options.jerk")
+
+
 def test_malformed_json_is_problem(client: TestClient) -> None:
     """The decoder's error names the body and the character where it failed (not "[12]", a field it is not)."""
     hdr = {"content-type": "application/json"}

@@ -254,3 +254,28 @@ def test_a_quarter_arc_on_extreme_knots_schedules_as_on_unit_knots(scale: float)
         assert max(utilisation(smp.position, 1e-3, *m.limit_arrays()).values()) <= 1.01
         times.append(sch.summary["motion_time"])
     assert times[1] == pytest.approx(times[0], rel=1e-3)
+
+
+def test_a_window_highs_cannot_solve_names_the_machine_and_the_window(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A HiGHS run that ends short of optimality (here its time limit set to nothing, as an ill-conditioned
+    LP's iteration stalls end) raises SolverFailure naming the machine, the window and HiGHS's status."""
+    import highspy
+
+    from geometry import primitives
+    from geometry.toolpath import Toolpath
+    from solvers.errors import SolverFailure
+    from solvers.lp import WindowLP
+    from solvers.pipeline import schedule
+
+    def no_time(h: highspy.Highs) -> None:
+        h.setOptionValue("time_limit", 0.0)
+        h.run()
+
+    monkeypatch.setattr(WindowLP, "_timed_run", staticmethod(no_time))
+    tp = Toolpath([primitives.line(np.zeros(3), np.array([50.0, 20.0, 0.0]))])
+    with pytest.raises(SolverFailure) as err:
+        schedule(tp, router(), Options(method="lp"))
+    assert err.value.field == "machine"
+    assert err.value.window == 0
+    assert err.value.status is not None and "TimeLimit" in err.value.status
+    assert "LP window 0" in err.value.rule
