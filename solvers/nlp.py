@@ -247,6 +247,16 @@ REST_RISE = True
 #: intervals next to them (3.0053 s against one rise's 2.9996); with rows as dense as the 4x finer NLP's
 #: the rises pay (``REST_RISE``, ``bspline.REST_RISE_POWERS``).
 REST_SUBDIV = 4
+#: A rest end whose LP feed at the rest interval's inner knot is at least this share of the NLP's feed bound
+#: there (``_feed_bound``: the feed cap, the axes' vmax) is solved without its rises (``NlpRefiner.rise``; None:
+#: never): the LP's ramp reaches the bound within the interval, and the degree-7 rest polynomial cannot rise
+#: to it and stay flat: it wobbled under the cap (a line at 1 mm/s left rest at 0.91, 0.85, 0.84, 0.97, 0.96,
+#: 0.79 of it in its first 13 ms; session 59: dips of 18.0, 7.6, 5.5, 4.2 % of the cap at 1, 2, 3, 5 mm/s, none
+#: with the rises off, for +3.0 to +4.7 ms a rest end).  0.99 left 5 and 6 mm/s's (LP at 0.948 of the cap
+#: there).  Cam 0-59 lp+nlp: 22 of 60 programs changed, -8.9 ms net over their 4,325 s; rest ramps dipping
+#: over 1 % 44 -> 30 of 120 (those left: the path's own (the LP's dip too) or the bound well above the LP's
+#: feed there).  The router without a feed cap has no bound at a rest end (inf): the benchmarks are unchanged.
+REST_RISE_CAP_SHARE: float | None = 0.9
 #: A window from or to rest is solved with its slot rows from round 0 (``_Shape`` ``slotted``; unused slots
 #: are unbounded): one shape to build instead of two.
 REST_SLOTTED = True
@@ -1465,6 +1475,8 @@ class NlpStats:
     slower_kept: int = 0
     #: windows that solved a rest interval (``REST_ENDS``) and failed, solved again from (to) the LP's state
     rest_retries: int = 0
+    #: rest ends solved without their rises because the LP's feed reaches its bound there (REST_RISE_CAP_SHARE)
+    rest_rises_capped: int = 0
     #: iterations of ``solvers.ipm.DenseIpm`` (also in ``iterations``), and its solves handed to Ipopt
     ipm_iterations: int = 0
     ipm_handed: int = 0
@@ -1561,7 +1573,8 @@ class NlpRefiner:
         #: machine stands there), for the sampled check of its first window (set per piece by ``refine``)
         self.lead_in: Motion | None = None
         #: whether the current chain's first / last rest interval may have its rise (REST_RISE): off for the
-        #: retry of a window from (to) rest that failed with it (set per chain by ``_spans``)
+        #: retry of a window from (to) rest that failed with it, and where the LP's feed reaches its bound at
+        #: the interval's inner knot (REST_RISE_CAP_SHARE) (set per chain by ``_spans``)
         self.rise: list[bool] = [True, True]
         #: how many leading LP control points are final while a chain is solved (``ChainPipeline``; None: all)
         self.c_final: int | None = None
@@ -1796,6 +1809,14 @@ class NlpRefiner:
         out: list[Span] = []
         a0 = A
         self.rise = [True, True]
+        n_int = c.size - 2
+        if REST_RISE_CAP_SHARE is not None:  # (the rise of a rest end whose LP feed reaches its bound: off)
+            ends = ([(False, 1)] if A == 0 else []) + ([(True, n_int - 1)] if B == n_int else [])
+            for tail, k in ends:
+                ub = float(self._feed_bound(geometry(np.array([k * d])))[0])
+                if math.sqrt(max(0.0, 0.5 * (c[k] + c[k + 1]))) >= REST_RISE_CAP_SHARE * ub:
+                    self.rise[int(tail)] = False
+                    self.stats.rest_rises_capped += 1
         while B - a0 >= 2:
             try:
                 b0, vals, rise = self._chain(geometry, c, d, a0, B, breaks)
@@ -3441,6 +3462,7 @@ def _merge_stats(into: NlpStats, st: NlpStats) -> None:
     into.lp_kept_intervals += st.lp_kept_intervals
     into.slower_kept += st.slower_kept
     into.rest_retries += st.rest_retries
+    into.rest_rises_capped += st.rest_rises_capped
     into.ipm_iterations += st.ipm_iterations
     into.ipm_handed += st.ipm_handed
     into.ipm_infeasible += st.ipm_infeasible

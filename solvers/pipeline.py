@@ -2579,6 +2579,8 @@ def _schedule_stream(
             "nlp_slower_kept_spans": nlp_stats.slower_kept,
             # windows that solved a rest interval and failed, solved again from (to) the LP's state next to it
             "nlp_rest_retries": nlp_stats.rest_retries,
+            # rest ends solved without their rises: the LP's feed reaches its bound in the rest interval
+            "nlp_rest_rises_capped": nlp_stats.rest_rises_capped,
             # worst fine-grid utilisation (u, e, feed, ...) of any accepted NLP window
             "nlp_worst_verified_utilisation": nlp_stats.worst_verified,
             "nlp_window_times": nlp_stats.window_times,

@@ -121,7 +121,13 @@ def _assert_seams_continuous(sch: Schedule) -> None:
         scale_f = float(np.max(left[0]))
         scale_a = float(np.max(np.abs(left[1])))
         np.testing.assert_allclose(left[0], right[0], rtol=0, atol=SEAM_REL_TOL * scale_f + 1e-12)
-        np.testing.assert_allclose(left[1], right[1], rtol=0, atol=SEAM_REL_TOL * scale_a + 1e-9)
+        # (each side read eps off the knot: the acceleration's own change over eps, |sdddot| / sdot eps, is no
+        # jump; a rest interval's bump, whose slope vanishes at the knot, reads 1.8e-6 mm/s^2 there at a 10 mm/s
+        # cap, where every acceleration is ~1e-4)
+        drift = eps * (np.abs(left[2]) + np.abs(right[2])) / np.maximum(left[0], 1e-300)
+        jump = np.abs(left[1] - right[1])
+        tol = SEAM_REL_TOL * scale_a + 1e-9 + drift
+        assert np.all(jump <= tol), (int(np.argmax(jump - tol)), float(np.max(jump - tol)))
 
 
 def test_windowed_within_one_percent_of_full_horizon() -> None:
