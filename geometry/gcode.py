@@ -122,7 +122,7 @@ from geometry import arcblend, primitives
 from geometry.errors import GeometryError
 from geometry.nurbs import MAX_DEGREE, FloatArray, NurbsSegment
 from geometry.segment import Segment
-from geometry.toolpath import CORNER_TOL_DEG, Toolpath
+from geometry.toolpath import CORNER_TOL_DEG, MIN_FEED_MM_S, Toolpath
 
 MM_PER_INCH: Final = 25.4
 SECONDS_PER_MINUTE: Final = 60.0
@@ -579,13 +579,16 @@ class _Interpreter:
         used.add("F")
         if not value > 0.0:
             raise GcodeError(ln, w.col, w.text, "feed rate F must be > 0")
+        scale = MM_PER_INCH if self.inch else 1.0
+        if value * scale / SECONDS_PER_MINUTE < MIN_FEED_MM_S:
+            raise GcodeError(ln, w.col, w.text,
+                             f"feed rate F must be at least {MIN_FEED_MM_S * SECONDS_PER_MINUTE:g} mm/min")
         if self.fanuc is not None and self.fanuc.points:
             raise GcodeError(ln, w.col, w.text, "F can only be given in the first block of a G06.2 curve")
         if self.lcnc is not None:
             raise GcodeError(ln, w.col, w.text, "F cannot change inside a G5.2 NURBS (one feed per curve)")
         if self.siemens is not None and self.siemens.first_line:
             raise GcodeError(ln, w.col, w.text, "F cannot change inside a B spline (one feed per curve)")
-        scale = MM_PER_INCH if self.inch else 1.0
         self.feed = value * scale / SECONDS_PER_MINUTE
 
     # ----------------------------------------------------------------- motion

@@ -58,6 +58,10 @@ MIN_SEGMENT_LENGTH_MM = 1e-9
 #: Largest coordinate (mm) of a control point: a G-code X1e200 (or G91 steps summing past 1e307) reached the knot
 #: plan as an infinite length, a 500 (session 58's probe).  The API's schema holds JSON points to 1e6 mm.
 MAX_COORD_MM = 1e9
+#: The lowest programmed feed limit (mm/s; an F word of 6e-11 mm/min): far under it the stopping distance that
+#: sizes the knots underflows (session 59's probe: F0.000...1 with 310 zeros read a zero one, a 500).  As
+#: ``solvers.machine.LIMIT_MIN``.
+MIN_FEED_MM_S = 1e-12
 #: Gaps between consecutive segments above this (and within the gap tolerance) are closed by moving
 #: the NURBS end control points that meet there (``close_gaps``); smaller ones are rounding.
 GAP_CLOSE_MIN_MM = 1e-9
@@ -512,15 +516,16 @@ class Toolpath:
         vals = [feed_limits[i] for i in given]
         if all(isinstance(f, (int, float)) and not isinstance(f, bool) for f in vals):
             arr = np.asarray(vals, dtype=np.float64)
-            if np.all(np.isfinite(arr) & (arr > 0.0)):
+            if np.all(np.isfinite(arr) & (arr >= MIN_FEED_MM_S)):
                 out[given] = arr
                 return out
         # ... else one by one, naming the first bad one
         for i, f in enumerate(feed_limits):
             if f is None:
                 continue
-            if isinstance(f, bool) or not isinstance(f, (int, float)) or not (np.isfinite(f) and f > 0):
-                raise GeometryError(f"segments[{i}].feed", f, "a feed limit must be a finite number > 0 mm/s", i)
+            if isinstance(f, bool) or not isinstance(f, (int, float)) or not (np.isfinite(f) and f >= MIN_FEED_MM_S):
+                raise GeometryError(f"segments[{i}].feed", f,
+                                    f"a feed limit must be a finite number >= {MIN_FEED_MM_S:g} mm/s", i)
             out[i] = float(f)
         return out
 

@@ -117,10 +117,20 @@ class Service:
 
 #: The G-code upload's request fields by the names its client sent them under: the query parameters, and the
 #: program itself (``body``) for what its moves and F words decide (the knots, the control points).
-GCODE_UPLOAD_FIELDS = {"options.sample_period": "query.sample_period", "options.method": "query.method",
+GCODE_UPLOAD_FIELDS = {"options.sample_period": "query.sample_period", "options.max_samples": "query.sample_period",
+                       "options.method": "query.method", "machine": "query.machine",
                        "options.knot_spacing": "body", "toolpath.segments": "body", "toolpath.gcode": "body",
                        "toolpath.corner_blend_mm": "query.corner_blend_mm",
                        "toolpath.corner_tolerance_deg": "query.corner_tolerance_deg"}
+
+
+def _upload_loc(loc: Any) -> tuple[Any, ...]:
+    """A G-code upload's ScheduleRequest error location as the client sent it: ("query", parameter) or ("body",)."""
+    text = ".".join(str(p) for p in loc)
+    for fld, name in GCODE_UPLOAD_FIELDS.items():
+        if text == fld or text.startswith(fld + "."):
+            return tuple(name.split(".")) if name != "body" else ("body",)
+    return tuple(loc)
 
 
 def _query_method(v: Any) -> Any:
@@ -162,7 +172,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             gc.unfreeze()
             await svc.close()
 
+    # (no redirect of a trailing slash: its 307 built an absolute Location from the request's Host header)
     app = FastAPI(title="feedsched", version=VERSION, lifespan=lifespan, docs_url=None, redoc_url=None,
+                  redirect_slashes=False,
                   description="Time-optimal CNC feed scheduling along NURBS toolpaths. Errors are RFC 9457 "
                   "problem+json naming the field path, value and rule.")
     # Swagger UI from the swagger-ui-bundle-v2 package, not a CDN (the service may run offline)
@@ -199,13 +211,13 @@ def _succeeded(svc: Service, job_id: str) -> Job:
     """The job if it has succeeded; 404 if unknown, 409 otherwise."""
     job = svc.store.get(job_id)
     if job is None:
-        raise not_found("job", job_id)
+        raise not_found("job", job_id, "path.job_id")
     if job.status != "succeeded":
         raise ServiceError(409, "job-not-succeeded", "No result", f"the job is {job.status}",
-                           field="job_id", value=job_id, rule="a result exists once the job has succeeded",
+                           field="path.job_id", value=job_id, rule="a result exists once the job has succeeded",
                            job_status=job.status, job_error=job.error)
     if not svc.store.result_path(job_id).exists():
-        raise not_found("job result file", job_id)
+        raise not_found("job result file", job_id, "path.job_id")
     return job
 
 
@@ -239,7 +251,7 @@ def _routes(app: FastAPI) -> None:
     @app.get("/v1/machines/{name}", response_model=MachineOut, responses=_problems(404, 422))
     async def machine(name: Annotated[str, Path(max_length=100)]) -> dict[str, Any]:
         if name not in PRESETS:
-            raise not_found(f"machine preset {name!r}", name)
+            raise not_found(f"machine preset {name!r}", name, "path.name")
         m = preset(name)
         axes = []
         for a in m.axes:
@@ -265,6 +277,11 @@ def _routes(app: FastAPI) -> None:
         that piece is solved and re-checked, while later pieces are still being solved; the last line is
         `{"event": "summary", ...}` on success or `{"event": "error", ...problem+json}` on a failure after
         rows were sent.  A stream without the summary line is incomplete."""
+        return await _schedule_now(body, request)
+
+    async def _schedule_now(body: ScheduleRequest, request: Request, names: dict[str, str] | None = None) -> Response:
+        """``POST /v1/schedule``'s work; ``names``: its problems' fields by the names the client sent them under
+        (``service.errors.renamed``; the G-code upload's), in-band NDJSON error lines included."""
         svc = _svc(request)
         media = negotiate(request.headers.get("accept"))
         n = control_point_count(body)
@@ -275,7 +292,7 @@ def _routes(app: FastAPI) -> None:
                             rule=f"at most {svc.settings.sync_max_control_points} control points")
         _check_plots(body, media)
         if media == MEDIA_NDJSON:
-            return await _stream_schedule(svc, body.model_dump(mode="json"), request.url.path)
+            return await _stream_schedule(svc, body.model_dump(mode="json"), request.url.path, names)
         with svc.sync_gate.enter():  # 503 at once when FEEDSCHED_MAX_INFLIGHT schedules are in flight
             res = await svc.executor.run(body.model_dump(mode="json"), svc.sync_budget, svc.settings.sync_timeout)
             figs = None
@@ -323,10 +340,10 @@ def _routes(app: FastAPI) -> None:
                 "machine": machine,
                 "options": {"method": method, "sample_period": sample_period},
             })
-        except ValidationError as exc:
-            raise RequestValidationError(exc.errors()) from exc
+        except ValidationError as exc:  # (the query parameters' own names; the program is the body)
+            raise RequestValidationError([{**e, "loc": _upload_loc(e.get("loc", ()))} for e in exc.errors()]) from exc
         try:
-            return await post_schedule(body, request)
+            return await _schedule_now(body, request, GCODE_UPLOAD_FIELDS)
         except (ServiceError, WorkFailed) as exc:
             raise renamed(exc, GCODE_UPLOAD_FIELDS) from exc
 
@@ -355,7 +372,7 @@ def _routes(app: FastAPI) -> None:
         svc = _svc(request)
         job = svc.store.get(job_id)
         if job is None:
-            raise not_found("job", job_id)
+            raise not_found("job", job_id, "path.job_id")
         return _job_out(svc, job)
 
     @app.delete("/v1/jobs/{job_id}", response_model=JobOut, responses=_problems(404, 409, 422))
@@ -364,12 +381,12 @@ def _routes(app: FastAPI) -> None:
         svc = _svc(request)
         job = svc.store.get(job_id)
         if job is None:
-            raise not_found("job", job_id)
+            raise not_found("job", job_id, "path.job_id")
         if job.status in ("queued", "running"):
             await svc.jobs.cancel(job_id)
         elif job.status != "cancelled":
             raise ServiceError(409, "job-finished", "Job already finished", f"the job has {job.status}",
-                               field="job_id", value=job_id, rule="only queued or running jobs can be cancelled")
+                               field="path.job_id", value=job_id, rule="only queued or running jobs can be cancelled")
         job = svc.store.get(job_id)
         assert job is not None
         return _job_out(svc, job)
@@ -381,17 +398,17 @@ def _routes(app: FastAPI) -> None:
         svc = _svc(request)
         job = svc.store.get(job_id)
         if job is None:
-            raise not_found("job", job_id)
+            raise not_found("job", job_id, "path.job_id")
         media = FORMAT_NAMES[format] if format else negotiate(request.headers.get("accept"))
         if job.status != "succeeded":
             raise ServiceError(409, "job-not-succeeded", "No result", f"the job is {job.status}",
-                               field="job_id", value=job_id, rule="a result exists once the job has succeeded",
+                               field="path.job_id", value=job_id, rule="a result exists once the job has succeeded",
                                job_status=job.status, job_error=job.error)
         path = svc.store.result_path(job_id)
         try:
             res = await _load(path)
         except FileNotFoundError:
-            raise not_found("job result file", job_id) from None
+            raise not_found("job result file", job_id, "path.job_id") from None
         return await render(res, media)
 
     @app.get("/v1/jobs/{job_id}/plots/{name}.{fmt}", response_class=Response,
@@ -404,7 +421,7 @@ def _routes(app: FastAPI) -> None:
         svc = _svc(request)
         job = _succeeded(svc, job_id)
         if name == "comparison" and job.request.get("options", {}).get("method", "lp+nlp") != "lp+nlp":
-            raise not_found("comparison plot (the job ran method lp only)", name)
+            raise not_found("comparison plot (the job ran method lp only)", name, "path.name")
         data = await svc.plots.job_plot(job_id, svc.store.result_path(job_id), job.request, name, fmt)
         return Response(data, media_type=PLOT_MEDIA[fmt], headers={"Cache-Control": "public, max-age=86400"})
 
@@ -414,7 +431,7 @@ def _routes(app: FastAPI) -> None:
         svc = _svc(request)
         job = svc.store.get(job_id)
         if job is None:
-            raise not_found("job", job_id)
+            raise not_found("job", job_id, "path.job_id")
         if job.status != "succeeded":
             return HTMLResponse(report_pending(job))
         job = _succeeded(svc, job_id)
@@ -430,7 +447,7 @@ def _routes(app: FastAPI) -> None:
     @app.get("/v1/examples/{name}", response_model=ScheduleRequest, responses=_problems(404, 422))
     async def get_example(name: Annotated[str, Path(max_length=100)]) -> dict[str, Any]:
         if name not in EXAMPLES:
-            raise not_found("example", name)
+            raise not_found("example", name, "path.name")
         body: dict[str, Any] = await run_in_threadpool(example, name)
         return body
 
@@ -446,7 +463,8 @@ def _routes(app: FastAPI) -> None:
         return HTMLResponse(index_page(sorted(PRESETS)))
 
 
-async def _stream_schedule(svc: Service, req: dict[str, Any], instance: str) -> Response:
+async def _stream_schedule(svc: Service, req: dict[str, Any], instance: str,
+                           names: dict[str, str] | None = None) -> Response:
     """``POST /v1/schedule`` as NDJSON rows while the solver works (NDJSON_PROTOCOL).
 
     Admission as for the other formats: 503 at once when FEEDSCHED_MAX_INFLIGHT schedules are in flight; the
@@ -463,7 +481,7 @@ async def _stream_schedule(svc: Service, req: dict[str, Any], instance: str) -> 
         finally:
             slot.close()
         raise
-    return ndjson_stream(first, events, slot.close, instance)
+    return ndjson_stream(first, events, slot.close, instance, names)
 
 
 async def _load(path: Any) -> Any:

@@ -69,8 +69,9 @@ def too_large(detail: str, *, field: str | None = None, value: Any = None, rule:
                         rule=rule, jobs="/v1/jobs")
 
 
-def not_found(what: str, value: Any = None) -> ServiceError:
-    return ServiceError(404, "not-found", "Not found", f"{what} not found", field="path", value=value,
+def not_found(what: str, value: Any = None, field: str = "path") -> ServiceError:
+    """404; ``field``: the path parameter that names the missing resource (``path.job_id``), as a 422 names it."""
+    return ServiceError(404, "not-found", "Not found", f"{what} not found", field=field, value=value,
                         rule="must name an existing resource")
 
 
@@ -160,7 +161,12 @@ def renamed(exc: BaseException, names: dict[str, str]) -> BaseException:
     pointers = {pointer_of(k): "#" if v == "body" else pointer_of(v) for k, v in names.items()}
     out = [{**e, "field": names.get(e.get("field"), e.get("field")),
             "pointer": pointers.get(e.get("pointer"), e.get("pointer"))} for e in errs]
-    return WorkFailed({**problem, "errors": out})
+    detail = str(problem.get("detail", ""))
+    for old, new in names.items():  # (a detail that starts with the field's name: ScheduleError's str)
+        if detail.startswith(old + ":"):
+            detail = new + detail[len(old):]
+            break
+    return WorkFailed({**problem, "errors": out, "detail": detail})
 
 
 def problem_from_exception(exc: BaseException) -> dict[str, Any]:

@@ -21,7 +21,7 @@ from service.convert import (
     ndjson_error,
     ndjson_summary,
 )
-from service.errors import ServiceError, WorkerLost, problem_from_exception, problem_response
+from service.errors import ServiceError, WorkerLost, problem_from_exception, problem_response, renamed
 from service.schemas import MEDIA_CSV, MEDIA_JSON, MEDIA_NDJSON
 
 FORMATS = (MEDIA_JSON, MEDIA_CSV, MEDIA_NDJSON)
@@ -30,32 +30,46 @@ FORMAT_NAMES = {"json": MEDIA_JSON, "csv": MEDIA_CSV, "ndjson": MEDIA_NDJSON}
 
 
 def negotiate(accept: str | None) -> str:
-    """Best of JSON, CSV, NDJSON for an Accept header (JSON when absent or */*); 406 when none fits."""
+    """Best of JSON, CSV, NDJSON for an Accept header (JSON when absent or */*); 406 when none fits.
+
+    As RFC 9110 12.5.1: each format takes the q of the most specific range that matches it (``text/csv;q=0,
+    text/*`` refuses CSV), parameter names are case-insensitive, and a q that is not a number in [0, 1] makes its
+    range refuse (it was read as given: ``q=nan`` or ``q=inf`` won).  Ties go to the range named first, then to
+    JSON, CSV, NDJSON in that order."""
     if not accept:
         return MEDIA_JSON
-    best: tuple[float, int, str] | None = None
+    ranges: list[tuple[str, float, int]] = []
     for i, part in enumerate(accept.split(",")):
         fields = [f.strip() for f in part.split(";")]
-        media = fields[0].lower()
         q = 1.0
         for f in fields[1:]:
-            if f.startswith("q="):
-                try:
-                    q = float(f[2:])
-                except ValueError:
-                    q = 0.0
-        if q <= 0:
+            key, _, val = f.partition("=")
+            if key.strip().lower() == "q":
+                q = _qvalue(val.strip())
+        ranges.append((fields[0].lower(), q, i))
+    best: tuple[float, int, str] | None = None
+    for m in FORMATS:
+        names = (m, m.split("/")[0] + "/*", "*/*")  # most specific first
+        matched = [(names.index(r), q, i) for r, q, i in ranges if r in names]
+        if not matched:
             continue
-        matches = [m for m in FORMATS if media in (m, "*/*", m.split("/")[0] + "/*")]
-        for m in matches:
-            cand = (q, -i, m)
-            if best is None or cand[:2] > best[:2]:
-                best = cand
+        _, q, i = min(matched, key=lambda t: (t[0], t[2]))
+        if q > 0 and (best is None or (q, -i) > best[:2]):
+            best = (q, -i, m)
     if best is None:
         raise ServiceError(406, "not-acceptable", "Not Acceptable", f"Accept {accept!r} matches none of "
                            f"{', '.join(FORMATS)}", field="Accept", value=accept,
                            rule=f"Accept must admit one of {', '.join(FORMATS)} (or */*)")
     return best[2]
+
+
+def _qvalue(text: str) -> float:
+    """An Accept range's weight: a number in [0, 1], else 0 (the range refuses)."""
+    try:
+        q = float(text)
+    except ValueError:
+        return 0.0
+    return q if 0.0 <= q <= 1.0 else 0.0
 
 
 async def render(res: Result, media: str, headers: dict[str, str] | None = None,
@@ -86,11 +100,12 @@ NDJSON_PROTOCOL = (
 
 
 def ndjson_stream(first: tuple[str, Any], events: AsyncGenerator[tuple[str, Any], None], release: Callable[[], None],
-                  instance: str | None = None) -> StreamingResponse:
+                  instance: str | None = None, names: dict[str, str] | None = None) -> StreamingResponse:
     """A 200 NDJSON response from an executor stream whose ``first`` event has already arrived (so failures
     before any row can still be answered with their own status).  Rows are forwarded as they come; the
     stream ends with the summary line, or with an error line (NDJSON_PROTOCOL).  ``release`` (the admission
-    slot) runs once the work has stopped, however the response ends."""
+    slot) runs once the work has stopped, however the response ends.  ``names``: an error line's fields by the
+    names the client sent them under (``errors.renamed``)."""
 
     async def body() -> AsyncIterator[bytes]:
         try:
@@ -106,7 +121,7 @@ def ndjson_stream(first: tuple[str, Any], events: AsyncGenerator[tuple[str, Any]
             yield ndjson_error({**problem_from_exception(WorkerLost("the solver stream ended without its "
                                                                     "summary")), "instance": instance})
         except Exception as exc:  # after rows: the failure goes in-band, as the last line
-            yield ndjson_error({**problem_from_exception(exc), "instance": instance})
+            yield ndjson_error({**problem_from_exception(renamed(exc, names) if names else exc), "instance": instance})
         finally:
             try:
                 await events.aclose()

@@ -34,9 +34,12 @@ Number = Annotated[float, Strict(), AllowInfNan(False)]
 Coord = Annotated[Number, Field(ge=-1e6, le=1e6)]
 
 
-Speed = Annotated[Number, Field(gt=0, le=1e5)]  # mm/s
-Accel = Annotated[Number, Field(gt=0, le=1e8)]  # mm/s^2
-Jerk = Annotated[Number, Field(gt=0, le=1e12)]  # mm/s^3
+#: The smallest limit or feed cap (``solvers.machine.LIMIT_MIN``, 1e-12 in each unit): far under it the stopping
+#: distance that sizes the knots overflowed or underflowed (amax 5e-324, feed_max 1e-310: 500s, session 59's probe).
+LIMIT_MIN = 1e-12
+Speed = Annotated[Number, Field(ge=LIMIT_MIN, le=1e5)]  # mm/s
+Accel = Annotated[Number, Field(ge=LIMIT_MIN, le=1e8)]  # mm/s^2
+Jerk = Annotated[Number, Field(ge=LIMIT_MIN, le=1e12)]  # mm/s^3
 
 MEDIA_JSON = "application/json"
 MEDIA_CSV = "text/csv"
@@ -171,8 +174,9 @@ class DriveIn(BaseModel):
     umax: Annotated[Number, Field(gt=0, le=1e4)] = Field(description="V")
     emax: Annotated[Number, Field(gt=0, le=1e3)] = Field(description="mm")
     vmax: Speed | None = Field(
-        default=None, description="mm/s, the drive's own speed limit (held by lp+nlp); none: speed is limited "
-        "through u and e only (the axis limits' vmax is the LP's limit)",
+        default=None, description="mm/s, the drive's own speed limit (held by lp+nlp, and by lp where the axis "
+        "limits are derived from the drive); none: speed is limited through u and e only (the axis limits' vmax is "
+        "the LP's limit)",
     )
 
 

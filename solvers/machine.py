@@ -94,8 +94,7 @@ class Machine:
             raise InvalidMachineError("need exactly 3 axes (x, y, z)", field="machine.axes")
         for ax in self.axes:
             for key in ("vmax", "amax", "jmax"):
-                v = getattr(ax.limits, key)
-                _positive(v, f"machine.axes.{ax.name}.{key}")
+                _limit(getattr(ax.limits, key), f"machine.axes.{ax.name}.{key}")
             if ax.drive is not None:
                 for key in ("M", "umax", "emax", "Kv", "Kj"):
                     _positive(getattr(ax.drive, key), f"machine.axes.{ax.name}.drive.{key}")
@@ -106,13 +105,13 @@ class Machine:
                             "must be finite and >= 0", field=f"machine.axes.{ax.name}.drive.{key}", value=v
                         )
                 if ax.drive.vmax is not None:
-                    _positive(ax.drive.vmax, f"machine.axes.{ax.name}.drive.vmax")
+                    _limit(ax.drive.vmax, f"machine.axes.{ax.name}.drive.vmax")
                 if not math.isfinite(ax.drive.c):
                     raise InvalidMachineError(
                         "must be finite", field=f"machine.axes.{ax.name}.drive.c", value=ax.drive.c
                     )
         if self.feed_max is not None:
-            _positive(self.feed_max, "machine.feed_max")
+            _limit(self.feed_max, "machine.feed_max")
 
     def limit_arrays(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Per-axis (vmax, amax, jmax), each (3,) in mm/s, mm/s^2, mm/s^3."""
@@ -189,9 +188,25 @@ def drive_speed_bound(drives: dict[str, NDArray[np.float64]]) -> NDArray[np.floa
     return np.where(ok, volts / np.where(ok, b, 1.0), np.inf)
 
 
+#: The range of a speed, acceleration or jerk limit and a feed cap (mm/s, mm/s^2, mm/s^3): any machine's fit in it
+#: with room (and the random cases' machines scaled down to micrometre paths: bench seed 5029's amax 9.7e-6), and
+#: within it the stopping distance v^2 / a, the ramp times a / j and the knots they size stay finite and positive
+#: in float64 (session 59's probe: amax 5e-324 read an infinite stopping distance, a 500; feed_max 1e-310 a zero
+#: one; 1e-200 was already a typed error).
+LIMIT_MIN, LIMIT_MAX = 1e-12, 1e15
+LIMIT_RULE = f"must be a finite number in [{LIMIT_MIN:g}, {LIMIT_MAX:g}]"
+
+
 def _positive(v: float, fld: str) -> None:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
         raise InvalidMachineError("must be a finite number > 0", field=fld, value=v)
+
+
+def _limit(v: float, fld: str) -> None:
+    """A kinematic limit or feed cap within [LIMIT_MIN, LIMIT_MAX]."""
+    _positive(v, fld)
+    if not LIMIT_MIN <= v <= LIMIT_MAX:
+        raise InvalidMachineError(LIMIT_RULE, field=fld, value=v)
 
 
 def derive_limits(drive: DriveModel, vmax: float, name: str = "axis") -> AxisLimits:
@@ -201,6 +216,8 @@ def derive_limits(drive: DriveModel, vmax: float, name: str = "axis") -> AxisLim
     velocity alone uses the error budget), vmax is lowered so that viscous
     friction uses ``VOLTAGE_SHARE_FOR_SPEED`` of the remaining voltage.
     """
+    if drive.vmax is not None:  # (the drive's own speed limit, which lp+nlp holds: the LP's too)
+        vmax = min(vmax, drive.vmax)
     volts_left = drive.umax - abs(drive.c) - drive.d
     if volts_left <= 0:
         raise InvalidMachineError(
@@ -216,6 +233,13 @@ def derive_limits(drive: DriveModel, vmax: float, name: str = "axis") -> AxisLim
     if drive.Ka * amax >= budget:
         amax = ACCEL_ERROR_SHARE * budget / drive.Ka
     jmax = (budget - drive.Ka * amax) / drive.Kj
+    derived = {"vmax": v, "amax": amax, "jmax": jmax}
+    if not all(math.isfinite(x) and LIMIT_MIN <= x <= LIMIT_MAX for x in derived.values()):
+        raise InvalidMachineError(
+            f"the limits derived from this drive model (vmax, amax, jmax) must each be a finite number in "
+            f"[{LIMIT_MIN:g}, {LIMIT_MAX:g}]: its parameters are out of scale (e.g. Kv, Kj or emax near 0); give "
+            "the axis its limits, or a vmax_request",
+            field=f"machine.axes.{name}.drive", value=derived)
     return AxisLimits(vmax=v, amax=amax, jmax=jmax)
 
 

@@ -352,6 +352,10 @@ def auto_nlp_workers() -> int:
     return max(1, min(cores, NLP_AUTO_WORKERS_MAX))
 
 
+#: The shortest output period (s; the service's schema: 1e-5): a 1e-300 s period overflowed the knot floor's count.
+MIN_SAMPLE_PERIOD_S = 1e-6
+
+
 @dataclass(frozen=True)
 class Options:
     """Scheduling options (all lengths mm, times s).
@@ -420,8 +424,9 @@ class Options:
         if self.solver not in SOLVERS:
             raise InvalidOptionsError(f"solver must be one of {SOLVERS}", field="options.solver", value=self.solver)
         _pos(self.sample_period, "options.sample_period")
-        if self.sample_period > 0.1:
-            raise InvalidOptionsError("must be <= 0.1 s", field="options.sample_period", value=self.sample_period)
+        if not MIN_SAMPLE_PERIOD_S <= self.sample_period <= 0.1:
+            raise InvalidOptionsError(f"must be in [{MIN_SAMPLE_PERIOD_S:g}, 0.1] s", field="options.sample_period",
+                                      value=self.sample_period)
         if self.knot_spacing is not None:
             _pos(self.knot_spacing, "options.knot_spacing")
         if self.knot_feed_floor is not None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -145,7 +146,7 @@ def test_blend_under_the_path_fidelity_is_refused(client: TestClient, blend: flo
     on both routes: such blends ran 129,079 s of lp+nlp motion (4,547 s lp) or stalled the LP."""
     r = client.post(f"/v1/schedule/gcode?method=lp&corner_blend_mm={blend!r}", content=ZIGZAG,
                     headers={"content-type": "text/x-gcode"})
-    body = assert_problem(r, 422, "toolpath.corner_blend_mm")
+    body = assert_problem(r, 422, "query.corner_blend_mm")  # (the upload's own parameter)
     assert any("0.001" in e["rule"] for e in body["errors"]), body
     r = client.post("/v1/schedule", json={"toolpath": {"gcode": ZIGZAG, "corner_blend_mm": blend},
                                           "options": {"method": "lp"}})
@@ -263,3 +264,32 @@ def test_only_lf_and_cr_end_a_program_line(client: TestClient, sep: str) -> None
     e = assert_problem(client.post("/v1/schedule/gcode?method=lp", content=prog.encode(),
                                    headers={"content-type": "text/x-gcode"}), 422)["errors"][0]
     assert e["field"].startswith("gcode:line 1:") and e["value"] == sep
+
+
+def test_upload_query_errors_and_stream_errors_name_the_query(client: TestClient) -> None:
+    """The upload's query parameters checked with the request (an unknown preset, a blend under 1 um) named the
+    body fields ``machine`` and ``toolpath.corner_blend_mm``; an error line after streamed rows named
+    ``options.max_samples`` (session 59's probe).  Each names the query parameter now."""
+    hdr = {"content-type": "text/x-gcode"}
+    prog = "G21 G90\nG1 X1 F6000\nG1 Y1\n"
+    assert_problem(client.post("/v1/schedule/gcode?machine=x", content=prog, headers=hdr), 422, "query.machine")
+    assert_problem(client.post("/v1/schedule/gcode?method=lp&corner_blend_mm=0.0001", content=prog, headers=hdr),
+                   422, "query.corner_blend_mm")
+    long = "G21 G90\nG1 X1 F6000\nG2 X1 Y0 I0.01 J0 P60\n"  # (a first piece, then one over the sample budget)
+    r = client.post("/v1/schedule/gcode?method=lp&sample_period=0.00001", content=long,
+                    headers={**hdr, "accept": "application/x-ndjson"})
+    lines = r.text.strip().split("\n")
+    assert r.status_code == 200, r.text[:300]  # (the first piece's rows, then the error in-band)
+    last = json.loads(lines[-1])
+    assert len(lines) > 1 and last["event"] == "error" and last["status"] == 413
+    assert last["errors"][0]["field"] == "query.sample_period" and last["detail"].startswith("query.")
+
+
+@pytest.mark.parametrize("f", ["F0." + "0" * 310 + "1", "F0.00000000001"])
+def test_a_feed_word_under_the_smallest_feed_is_its_line_s_error(client: TestClient, f: str) -> None:
+    """F0.000...1 (310 zeros) made the knots' stopping distance 0: a 500 (session 59's probe).  F words under
+    1e-12 mm/s (6e-11 mm/min) are the line's error."""
+    r = client.post("/v1/schedule/gcode?method=lp", content=f"G21 G90\nG1 X1 {f}\n",
+                    headers={"content-type": "text/x-gcode"})
+    e = assert_problem(r, 422)["errors"][0]
+    assert e["field"].startswith("gcode:line 2:") and "at least" in e["rule"]

@@ -245,9 +245,12 @@ def test_exact_sample_count_over_the_budget_is_413(client: TestClient) -> None:
 def test_404_405_problem(client: TestClient) -> None:
     assert_problem(client.get("/v2/nothing"), 404, "path")
     assert_problem(client.put("/v1/schedule", json=EXAMPLE), 405, "path")
-    assert_problem(client.get("/v1/machines/nope"), 404)
+    assert_problem(client.get("/v1/machines/nope"), 404, "path.name")
     assert_problem(client.get("/v1/jobs/../../etc/passwd"), 404)
-    assert_problem(client.get("/v1/jobs/not-a-valid-id"), 404)
+    # (a job id names its path parameter as a 422 and a 409 do: was "path" here, "job_id" in a 409)
+    assert_problem(client.get("/v1/jobs/not-a-valid-id"), 404, "path.job_id")
+    assert_problem(client.delete("/v1/jobs/not-a-valid-id"), 404, "path.job_id")
+    assert_problem(client.get("/v1/examples/nope"), 404, "path.name")
 
 
 def test_router_machine(client: TestClient) -> None:
@@ -312,3 +315,63 @@ def test_a_gap_names_the_segments_start_as_the_request_has_it(client: TestClient
     assert_problem(client.post("/v1/schedule", json=blended), 422, "toolpath.segments[1]")
     tol = {"toolpath": {"corner_tolerance_deg": 180, "segments": body["toolpath"]["segments"][:1]}}
     assert_problem(client.post("/v1/schedule", json=tol), 422, "toolpath.corner_tolerance_deg")
+
+
+@pytest.mark.parametrize(("accept", "media"), [
+    ("application/json;q=0, */*", "text/csv"),  # (JSON refused by name: */* admits the others)
+    ("text/csv;Q=0, application/json", "application/json"),  # (parameter names are case-insensitive)
+    ("text/csv;q=nan, application/json", "application/json"),  # (a q not in [0, 1] refuses its range)
+    ("text/csv;q=inf, application/json", "application/json"),
+    ("application/json;q=1.5, text/csv", "text/csv"),
+    ("text/csv;q=0.5, application/json;q=0.5", "text/csv"),  # (a tie: the range named first)
+    ("text/*", "text/csv"),
+    ("text/csv;q=0, text/*", None),  # (the most specific range decides: CSV refused, nothing else is text/*)
+])
+def test_accept_follows_rfc_9110_precedence(client: TestClient, accept: str, media: str | None) -> None:
+    """Session 59's probe: ``text/csv;q=0, text/*`` served CSV, an invalid q won, ``Q=0`` was not read."""
+    r = client.post("/v1/schedule", json=EXAMPLE, headers={"Accept": accept})
+    if media is None:
+        assert_problem(r, 406, "Accept")
+    else:
+        assert r.status_code == 200 and r.headers["content-type"].startswith(media), (r.status_code, r.text[:200])
+
+
+def test_a_trailing_slash_is_not_redirected(client: TestClient) -> None:
+    """Starlette's 307 to the path without the slash built its absolute Location from the Host header (a client
+    could make the service redirect to any host): now a 404 problem."""
+    r = client.get("/healthz/", headers={"host": "evil.example"}, follow_redirects=False)
+    assert_problem(r, 404)
+    assert "location" not in r.headers
+
+
+@pytest.mark.parametrize(("axis", "field"), [
+    ({"limits": {"vmax": 100, "amax": 5e-324, "jmax": 1e5}}, "machine.axes.x.limits.amax"),
+    ({"limits": {"vmax": 100, "amax": 1e3, "jmax": 1e-310}}, "machine.axes.x.limits.jmax"),
+    ({"drive": {**{k: getattr(ROUTER_DRIVES["x"], k) for k in ("M", "c", "d", "Ka", "Kj", "umax", "emax")},
+                "Kv": 5e-324, "b": 0.0}}, "machine.axes.x.drive"),
+    ({"drive": {**{k: getattr(ROUTER_DRIVES["x"], k) for k in ("M", "b", "c", "d", "Kv", "Ka", "umax", "emax")},
+                "Kj": 5e-324}}, "machine.axes.x.drive"),
+])
+def test_limits_out_of_scale_are_422_naming_what_was_sent(client: TestClient, axis: dict[str, Any],
+                                                           field: str) -> None:
+    """Session 59's probe: amax 5e-324 (an infinite stopping distance) and feed_max 1e-310 (a zero one) were 500s
+    in the knot plan; a drive whose derived jmax is inf named ``machine.axes.x.jmax``, a field no request has."""
+    n = {"limits": {"vmax": 100.0, "amax": 1000.0, "jmax": 1e5}}
+    body = {"toolpath": {"segments": [{"type": "line", "start": [0, 0, 0], "end": [5, 0, 0]}]},
+            "machine": {"axes": {"x": axis, "y": n, "z": n}}, "options": {"method": "lp"}}
+    assert_problem(client.post("/v1/schedule", json=body), 422, field)
+    tiny = {**EXAMPLE, "options": {"method": "lp", "feed_max": 1e-310}}
+    assert_problem(client.post("/v1/schedule", json=tiny), 422, "options.feed_max")
+
+
+def test_lp_holds_a_drive_s_own_vmax_when_its_limits_are_derived(client: TestClient) -> None:
+    """A drive-only axis with ``drive.vmax`` 5 mm/s: lp+nlp held it, method lp's derived limits ignored it (51.5
+    mm/s on a 5 mm line, session 59's probe).  The finite differences of the positions hold it now."""
+    drive = {k: getattr(ROUTER_DRIVES["x"], k) for k in ("M", "b", "c", "d", "Kv", "Ka", "Kj", "umax", "emax")}
+    axes = {"x": {"drive": {**drive, "vmax": 5.0}}, "y": {"drive": drive}, "z": {"drive": drive}}
+    body = {"toolpath": {"segments": [{"type": "line", "start": [0, 0, 0], "end": [5, 0, 0]}]},
+            "machine": {"axes": axes}, "options": {"method": "lp"}}
+    r = client.post("/v1/schedule", json=body)
+    assert r.status_code == 200, r.text
+    x = np.asarray(r.json()["samples"]["x"])
+    assert float(np.max(np.abs(np.diff(x)))) / 1e-3 <= 5.0 * 1.01

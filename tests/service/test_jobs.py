@@ -79,7 +79,7 @@ def test_cancel_kills_the_solver_process(client: TestClient) -> None:
 def test_delete_finished_job_is_conflict(client: TestClient) -> None:
     loc = client.post("/v1/jobs", json=EXAMPLE).headers["location"]
     poll_done(client, loc)
-    assert_problem(client.delete(loc), 409)
+    assert_problem(client.delete(loc), 409, "path.job_id")
 
 
 def test_idempotency_key_returns_existing_job(client: TestClient) -> None:

@@ -206,11 +206,12 @@ def test_motion_time_floor_bounds_the_axes_speeds() -> None:
 
 
 def test_motion_time_floor_refuses_a_slow_axis_up_front() -> None:
-    """One axis at 1e-8 mm/s on a 10 mm x travel: 1e9 s of motion.  The floor read the feed at ||vmax|| alone
-    (0.08 s), the LP ran, and the time table of 1e9 s never finished (session 58's API probe: a sync request hung
-    to its 30 s budget, a job ran on).  The slowest axis over its travel bounds the time too: refused at once.
-    On a curve the bound is the axes' end-to-end travel (a lower bound of what they travel): a semicircle in x, y
-    with y at 1 mm/s takes at least its 2 R of y travel (4 s at R = 2 mm), and its schedule is not under it."""
+    """One axis at 1e-8 mm/s on a 10 mm x travel: 1e9 s of
+    motion.  The floor read the feed at ||vmax|| alone (0.08 s), the LP ran, and the time table of 1e9 s never
+    finished (session 58's API probe: a sync request hung to its 30 s budget, a job ran on).  The slowest axis
+    over its travel bounds the time too: refused at once.  On a curve the bound is the axes' end-to-end travel
+    (a lower bound of what they travel): a semicircle in x, y with y at 1 mm/s takes at least its 2 R of y
+    travel (4 s at R = 2 mm), and its schedule is not under it."""
     from geometry import primitives
     from geometry.toolpath import Toolpath
     from solvers.errors import OutputTooLargeError
@@ -279,3 +280,38 @@ def test_a_window_highs_cannot_solve_names_the_machine_and_the_window(monkeypatc
     assert err.value.window == 0
     assert err.value.status is not None and "TimeLimit" in err.value.status
     assert "LP window 0" in err.value.rule
+
+
+@pytest.mark.parametrize(("key", "bad"), [("amax", 5e-324), ("jmax", 1e-310), ("vmax", 1e-13), ("amax", 1e16)])
+def test_a_limit_out_of_float64_s_scale_is_refused(key: str, bad: float) -> None:
+    """Limits within [LIMIT_MIN, LIMIT_MAX]: amax 5e-324 made the stopping distance inf and the knot plan raise
+    OverflowError (a 500 in the service, session 59's probe)."""
+    from solvers.machine import LIMIT_MAX, LIMIT_MIN
+
+    m = router()
+    lim = replace(m.axes[0].limits, **{key: bad})
+    with pytest.raises(InvalidMachineError) as err:
+        Machine(m.name, (replace(m.axes[0], limits=lim), m.axes[1], m.axes[2]))
+    assert err.value.field == f"machine.axes.x.{key}" and f"{LIMIT_MIN:g}" in err.value.rule
+    assert f"{LIMIT_MAX:g}" in err.value.rule
+    with pytest.raises(InvalidMachineError) as err:
+        m.with_feed_max(1e-310)
+    assert err.value.field == "machine.feed_max"
+
+
+def test_derived_limits_out_of_scale_name_the_drive_and_drive_vmax_caps_them() -> None:
+    """A drive whose Kj is 5e-324 derives jmax = inf: refused naming the drive (it named ``machine.axes.x.jmax``,
+    which no request has); a drive's own vmax caps the derived vmax (lp held 51.5 mm/s past vmax 5)."""
+    d = router().axes[0].drive
+    assert d is not None
+    with pytest.raises(InvalidMachineError) as err:
+        derive_limits(replace(d, Kj=5e-324), math.inf, "x")
+    assert err.value.field == "machine.axes.x.drive" and err.value.value["jmax"] == math.inf
+    assert derive_limits(replace(d, vmax=5.0), math.inf, "x").vmax == 5.0
+    assert derive_limits(d, math.inf, "x").vmax > 5.0
+
+
+def test_a_sample_period_under_a_microsecond_is_refused() -> None:
+    with pytest.raises(InvalidOptionsError) as err:
+        Options(sample_period=1e-300)
+    assert err.value.field == "options.sample_period"
