@@ -68,6 +68,11 @@ HIGHS_TIME_LIMIT_S = 1.0
 HIGHS_TIME_PER_ROW_S = 2e-4
 #: Coefficients below this (after scaling) are dropped (HiGHS presolve trap, spec §10).
 TINY_COEF = 1e-9
+#: The q reachable from rest over a window, which caps its scale Q, reads the acceleration limits of the axes the
+#: window moves only (False: all three, as before session 59).  A/B in one run (session 59): cam 0-59 and bench
+#: 0-99, both methods, 0 failures either side; 57/60, 57/60, 89/100, 90/100 motions identical, the rest within
+#: 0.13 ms.  An x line on a machine whose x amax is 1e-3 and y, z 1000 failed (2.11 x amax): 141.43 s now.
+Q_REACH_MOVING_AXES = True
 #: Jerk rows whose sqrt(q*) is below this fraction of sqrt(Q) are dropped (spec §10).
 TINY_SQRT_QSTAR = 1e-6
 #: A point whose recomputed v/a/j exceeds its limit by more than this fraction gets a row.
@@ -1501,7 +1506,12 @@ class WindowLP:
         # use (v^2 / a >> L) the velocity bound alone left acceleration rows with coefficients
         # ~1e9 and HiGHS returned no status
         L = spec.n_int * spec.d
-        Q_reach = 2.0 * float(np.linalg.norm(self.lim.amax)) * L
+        # (|sddot| = |x_s . a| <= the norm of the moving axes' amax: an axis the window does not move has a = 0;
+        # with all three a machine whose x is 1e6 x slower than y and z scaled an x line's q to ~5e-7 of Q, under
+        # HiGHS's tolerances: its acceleration rows gave way (2.11 x amax) through every cut round, session 59)
+        moving = np.max(np.abs(g.d1), axis=0) > 0.0 if Q_REACH_MOVING_AXES else np.ones(3, dtype=bool)
+        moving = moving if moving.any() else np.ones(3, dtype=bool)
+        Q_reach = 2.0 * float(np.linalg.norm(self.lim.amax[moving])) * L
         if self.lim.jerk:  # from rest under jerk j: s = j t^3 / 6, v = j t^2 / 2
             j = float(np.linalg.norm(self.lim.jmax))
             Q_reach = min(Q_reach, 4.0 * (0.5 * j) ** (2.0 / 3.0) * (6.0 * L) ** (4.0 / 3.0))

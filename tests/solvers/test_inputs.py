@@ -315,3 +315,26 @@ def test_a_sample_period_under_a_microsecond_is_refused() -> None:
     with pytest.raises(InvalidOptionsError) as err:
         Options(sample_period=1e-300)
     assert err.value.field == "options.sample_period"
+
+
+@pytest.mark.parametrize("jmax", [1e-3, 1e3])
+def test_an_axis_far_slower_than_the_others_schedules_its_own_line(jmax: float) -> None:
+    """x amax 1e-3 mm/s^2 (y, z 1000) on a 5 mm x line: the window's q scale read the norm of all three amax
+    (2 ||amax|| L = 14,142 against a reachable 0.01), its q sat ~5e-7 of the scale, under HiGHS's tolerances,
+    and the acceleration rows gave way through every cut round: a 422 after 15-47 s (sampled a 2.11 x, j 532 x;
+    session 59's probe).  The scale reads the moving axes only (``lp.Q_REACH_MOVING_AXES``): it schedules, the
+    motion at least the bang-bang optimum 2 sqrt(L / a), the finite differences within the limits."""
+    from geometry import primitives
+    from geometry.toolpath import Toolpath
+    from solvers.machine import Axis, AxisLimits, Machine
+    from solvers.pipeline import schedule
+
+    other = AxisLimits(100.0, 1000.0, 1e5)
+    m = Machine("slow-x", (Axis("x", AxisLimits(100.0, 1e-3, jmax)), Axis("y", other), Axis("z", other)))
+    sch = schedule(Toolpath([primitives.line(np.zeros(3), np.array([5.0, 0.0, 0.0]))]), m, Options(method="lp"))
+    assert sch.summary["motion_time"] >= 2.0 * math.sqrt(5.0 / 1e-3)
+    x = np.asarray(sch.samples.position)[:, 0]
+    ts = sch.summary["sample_period"]
+    v, a, j = np.diff(x) / ts, np.diff(x, 2) / ts**2, np.diff(x, 3) / ts**3
+    assert np.max(np.abs(v)) <= 100.0 * 1.01 and np.max(np.abs(a)) <= 1e-3 * 1.01
+    assert np.max(np.abs(j)) <= jmax * 1.01
