@@ -328,6 +328,12 @@ REPAIR_EXTRA_STEP_SHARE = 0.3
 REPAIR_REST_SHAPES_OFF = True
 #: Points verified per sample gap next to a sample found over a limit.
 REPAIR_SUBDIV = 8
+#: Most points a piece's sample repairs verify (``verify_s``, all rounds): where more samples are flagged, an even
+#: thinning of their points.  A machine whose x jmax was 3.8e-6 mm/s^3 (derived from a drive with Kj 1e3) flagged
+#: nearly every sample of its 5 mm line: 1.1 M points, one LP window of 88 columns and 3.3 M rows, and HiGHS took
+#: 23 GB before the kernel killed it (session 59).  Repairs flagging under 2,500 samples (REPAIR_SUBDIV points
+#: each) are unchanged.
+MAX_REPAIR_POINTS = 20_000
 #: Samples computed per chunk (bounds memory in the reconstruction).
 SAMPLE_CHUNK = 100_000
 #: The noise of plain sample positions (``Toolpath.evaluate`` without ``precise``), in units in the last place of
@@ -2452,6 +2458,8 @@ def _schedule_stream(
                 # reused), then re-sampled
                 rounds += 1
                 verify_s = np.union1d(verify_s, s_loc)
+                if verify_s.size > MAX_REPAIR_POINTS:  # (an even thinning: the rows a point adds are per point)
+                    verify_s = verify_s[np.linspace(0, verify_s.size - 1, MAX_REPAIR_POINTS).round().astype(np.int64)]
                 lim_r = _repair_limits(lim, rounds, at_rest and not nlp)
                 if not lim_r.rest_shapes:
                     cache = {}  # (its windows were solved with the rest shapes)

@@ -1205,3 +1205,28 @@ def test_a_corner_stopped_within_one_sample_gets_a_round_more_under_lp_nlp(monke
     monkeypatch.setattr(pipeline, "REPAIR_EXTRA_STEP_SHARE", pipeline.REPAIR_STEP_SHARE)
     with pytest.raises(ScheduleError, match="sampled servo error"):
         schedule(case.toolpath(), case.machine, Options(method="lp+nlp", sample_period=TS, nlp_workers=1))
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_sample_repairs_verify_at_most_max_repair_points(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A repair verifies at most ``MAX_REPAIR_POINTS`` points of a piece, evenly thinned: a machine whose x jmax
+    was 3.8e-6 flagged nearly every sample of its line (1.1 M points, 3.3 M LP rows) and HiGHS took 23 GB
+    (session 59).  Bench seed 51 (lp) needs one repair round: its points, then the same at a cap of 4."""
+    import solvers.pipeline as P
+
+    seen: list[int] = []
+    real = P.solve_piece
+
+    def spy(*args: object, **kw: object) -> object:
+        vs = args[7] if len(args) > 7 else kw.get("verify_s")
+        if vs is not None:
+            seen.append(int(np.asarray(vs).size))
+        return real(*args, **kw)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(P, "solve_piece", spy)
+    harness.run(gen.case(51, "bench"), "lp")
+    assert seen and max(seen) > 4
+    seen.clear()
+    monkeypatch.setattr(P, "MAX_REPAIR_POINTS", 4)
+    harness.run(gen.case(51, "bench"), "lp")
+    assert seen and max(seen) <= 4
