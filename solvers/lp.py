@@ -1509,7 +1509,7 @@ class WindowLP:
         # (|sddot| = |x_s . a| <= the norm of the moving axes' amax: an axis the window does not move has a = 0;
         # with all three a machine whose x is 1e6 x slower than y and z scaled an x line's q to ~5e-7 of Q, under
         # HiGHS's tolerances: its acceleration rows gave way (2.11 x amax) through every cut round, session 59)
-        moving = np.max(np.abs(g.d1), axis=0) > 0.0 if Q_REACH_MOVING_AXES else np.ones(3, dtype=bool)
+        moving = np.array([axis_moves(g, ax) or not Q_REACH_MOVING_AXES for ax in range(3)])
         moving = moving if moving.any() else np.ones(3, dtype=bool)
         Q_reach = 2.0 * float(np.linalg.norm(self.lim.amax[moving])) * L
         if self.lim.jerk:  # from rest under jerk j: s = j t^3 / 6, v = j t^2 / 2
