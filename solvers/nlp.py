@@ -1813,6 +1813,8 @@ class NlpRefiner:
         if REST_RISE_CAP_SHARE is not None:  # (the rise of a rest end whose LP feed reaches its bound: off)
             ends = ([(False, 1)] if A == 0 else []) + ([(True, n_int - 1)] if B == n_int else [])
             for tail, k in ends:
+                if not self._rise_free(tail):  # (a corner's rest end has no rise to take off)
+                    continue
                 ub = float(self._feed_bound(geometry(np.array([k * d])))[0])
                 if math.sqrt(max(0.0, 0.5 * (c[k] + c[k + 1]))) >= REST_RISE_CAP_SHARE * ub:
                     self.rise[int(tail)] = False
