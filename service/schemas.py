@@ -28,6 +28,7 @@ from pydantic import (
 from geometry.arcblend import BLEND_TOLERANCE_RULE, MIN_BLEND_TOLERANCE_MM
 from geometry.nurbs import MAX_DEGREE
 from geometry.primitives import MAX_TURNS
+from geometry.toolpath import MIN_FEED_MM_S
 
 #: A finite JSON number (integers accepted, booleans and strings not).
 Number = Annotated[float, Strict(), AllowInfNan(False)]
@@ -36,7 +37,7 @@ Coord = Annotated[Number, Field(ge=-1e6, le=1e6)]
 
 #: The smallest limit or feed cap (``solvers.machine.LIMIT_MIN``, 1e-12 in each unit): far under it the stopping
 #: distance that sizes the knots overflowed or underflowed (amax 5e-324, feed_max 1e-310: 500s, session 59's probe).
-LIMIT_MIN = 1e-12
+LIMIT_MIN = MIN_FEED_MM_S
 Speed = Annotated[Number, Field(ge=LIMIT_MIN, le=1e5)]  # mm/s
 Accel = Annotated[Number, Field(ge=LIMIT_MIN, le=1e8)]  # mm/s^2
 Jerk = Annotated[Number, Field(ge=LIMIT_MIN, le=1e12)]  # mm/s^3

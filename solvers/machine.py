@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from geometry.toolpath import MIN_FEED_MM_S
 from solvers.errors import InvalidMachineError
 
 AXES = ("x", "y", "z")
@@ -193,7 +194,7 @@ def drive_speed_bound(drives: dict[str, NDArray[np.float64]]) -> NDArray[np.floa
 #: within it the stopping distance v^2 / a, the ramp times a / j and the knots they size stay finite and positive
 #: in float64 (session 59's probe: amax 5e-324 read an infinite stopping distance, a 500; feed_max 1e-310 a zero
 #: one; 1e-200 was already a typed error).
-LIMIT_MIN, LIMIT_MAX = 1e-12, 1e15
+LIMIT_MIN, LIMIT_MAX = MIN_FEED_MM_S, 1e15  # (the programmed feeds' floor too: one number)
 LIMIT_RULE = f"must be a finite number in [{LIMIT_MIN:g}, {LIMIT_MAX:g}]"
 
 
