@@ -13,9 +13,11 @@ from dataclasses import asdict
 from typing import Annotated, Any, Literal
 
 from fastapi import Depends, FastAPI, Header, Path, Query, Request
+from fastapi.dependencies.models import Dependant
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse, Response
+from fastapi.routing import APIRoute
 from fastapi.staticfiles import StaticFiles
 from pydantic import BeforeValidator, ValidationError
 from starlette.concurrency import run_in_threadpool
@@ -147,6 +149,34 @@ def _json_content(request: Request) -> None:
                            field="content-type", value=ctype or None, rule="content-type must be application/json")
 
 
+#: The query parameters each /v1 route reads (by id of its APIRoute), filled on first use.
+_QUERY_NAMES: dict[int, frozenset[str]] = {}
+
+
+def _query_names(dep: Dependant) -> set[str]:
+    """The query parameters a route's dependency tree reads, by the names a client sends."""
+    return {str(p.alias) for p in dep.query_params}.union(*(_query_names(d) for d in dep.dependencies))
+
+
+def _known_query(request: Request) -> None:
+    """422 for a query parameter a /v1 route does not read, each named ``query.<name>``: ignored, the G-code upload
+    ran ``?feed_max=5`` uncapped and ``POST /v1/schedule?method=lp`` as lp+nlp, the client none the wiser."""
+    route = request.scope.get("route")
+    if not request.query_params or not isinstance(route, APIRoute) or not route.path.startswith("/v1/"):
+        return
+    known = _QUERY_NAMES.get(id(route))
+    if known is None:
+        known = _QUERY_NAMES[id(route)] = frozenset(_query_names(route.dependant))
+    rule = (f"{route.path} reads the query parameters {', '.join(sorted(known))} only" if known
+            else f"{route.path} reads no query parameters")
+    if route.body_field is not None:
+        rule += " (machine and options go in the JSON body)"
+    errors = [{"type": "extra_forbidden", "loc": ("query", k), "msg": rule, "input": v}
+              for k, v in request.query_params.multi_items() if k not in known]
+    if errors:
+        raise RequestValidationError(errors)
+
+
 def _svc(request: Request) -> Service:
     svc: Service = request.app.state.service
     return svc
@@ -174,7 +204,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     # (no redirect of a trailing slash: its 307 built an absolute Location from the request's Host header)
     app = FastAPI(title="feedsched", version=VERSION, lifespan=lifespan, docs_url=None, redoc_url=None,
-                  redirect_slashes=False,
+                  redirect_slashes=False, dependencies=[Depends(_known_query)],
                   description="Time-optimal CNC feed scheduling along NURBS toolpaths. Errors are RFC 9457 "
                   "problem+json naming the field path, value and rule.")
     # Swagger UI from the swagger-ui-bundle-v2 package, not a CDN (the service may run offline)

@@ -20,6 +20,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match, Route
 
 from geometry import GeometryError
 from service.schemas import MEDIA_PROBLEM, UNION_TAGS
@@ -221,6 +222,14 @@ def problem_response(problem: dict[str, Any], instance: str | None = None,
     return _ProblemJSON(body, status_code=int(body["status"]), media_type=MEDIA_PROBLEM, headers=headers)
 
 
+def allowed_methods(request: Request) -> list[str]:
+    """Every method some route of the app takes at the request's path: Starlette's 405 named the first route's only
+    (``Allow: GET`` on /v1/jobs/{job_id}, which DELETE cancels; FastAPI makes a route per method)."""
+    methods = {m for r in request.app.router.routes if isinstance(r, Route)
+               and r.matches(request.scope)[0] != Match.NONE for m in (r.methods or ())}
+    return sorted(methods)
+
+
 def install_handlers(app: FastAPI) -> None:
     """Every 4xx/5xx leaves as application/problem+json."""
 
@@ -243,8 +252,13 @@ def install_handlers(app: FastAPI) -> None:
         value = None if exc.status_code in (400, 413) else request.url.path
         # an exception that names its own entry (``service.http.BodyTooLarge``)
         field, value, rule = (getattr(exc, "field", field), getattr(exc, "value", value), getattr(exc, "rule", rule))
+        headers = dict(exc.headers or {})
+        if exc.status_code == 405:
+            allowed = allowed_methods(request)
+            headers["Allow"] = ", ".join(allowed)
+            rule = f"{request.method} is not allowed on this route; it allows {', '.join(allowed)}"
         p = _problem(exc.status_code, slug, title, str(exc.detail), [_entry(field, value, rule)])
-        return problem_response(p, request.url.path, headers=dict(exc.headers or {}))
+        return problem_response(p, request.url.path, headers=headers)
 
     for cls in (RequestValidationError, GeometryError, ScheduleError, ServiceError, WorkFailed, WorkTimeout,
                 WorkerLost):

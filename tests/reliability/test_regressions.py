@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from geometry import examples as ex
 from geometry import primitives
 from geometry.nurbs import NurbsSegment
 from geometry.toolpath import Toolpath
@@ -19,6 +20,7 @@ from solvers.errors import ScheduleError
 from solvers.machine import Axis, AxisLimits, Machine, router
 from solvers.pipeline import Options, schedule
 from solvers.timing import PieceProfile, PieceTiming
+from tests.fdcheck import utilisation
 from tests.reliability import checker, gen, harness
 
 TS = 1e-3
@@ -1211,7 +1213,10 @@ def test_a_corner_stopped_within_one_sample_gets_a_round_more_under_lp_nlp(monke
 def test_sample_repairs_verify_at_most_max_repair_points(monkeypatch: pytest.MonkeyPatch) -> None:
     """A repair verifies at most ``MAX_REPAIR_POINTS`` points of a piece, evenly thinned: a machine whose x jmax
     was 3.8e-6 flagged nearly every sample of its line (1.1 M points, 3.3 M LP rows) and HiGHS took 23 GB
-    (session 59).  Bench seed 51 (lp) needs one repair round: its points, then the same at a cap of 4."""
+    (session 59).  Here every sample over half a limit is flagged (``verify.REPAIR_TOL`` -0.5), so the repairs
+    surely run on any platform (bench seed 51, this test's case until session 60, needed its one repair round on
+    one CPU and none on another): the circle's rounds verify thousands of points, then exactly the cap, and the
+    thinned schedule still holds its limits."""
     import solvers.pipeline as P
 
     seen: list[int] = []
@@ -1224,9 +1229,17 @@ def test_sample_repairs_verify_at_most_max_repair_points(monkeypatch: pytest.Mon
         return real(*args, **kw)  # type: ignore[arg-type]
 
     monkeypatch.setattr(P, "solve_piece", spy)
-    harness.run(gen.case(51, "bench"), "lp")
-    assert seen and max(seen) > 4
+    monkeypatch.setattr(verify, "REPAIR_TOL", -0.5)
+    monkeypatch.setattr(verify, "FD_REPAIR_TOL", -0.5)
+    tp = Toolpath([ex.circle(10.0)])
+    m = router()
+    schedule(tp, m, Options(method="lp"))
+    cap = 300
+    assert seen and max(seen) > 10 * cap, seen
     seen.clear()
-    monkeypatch.setattr(P, "MAX_REPAIR_POINTS", 4)
-    harness.run(gen.case(51, "bench"), "lp")
-    assert seen and max(seen) <= 4
+    monkeypatch.setattr(P, "MAX_REPAIR_POINTS", cap)
+    out = schedule(tp, m, Options(method="lp"))
+    assert seen and max(seen) == cap, seen
+    vmax, amax, jmax = m.limit_arrays()
+    u = utilisation(out.samples.position, out.summary["sample_period"], vmax, amax, jmax)
+    assert max(u.values()) <= checker.LIMIT_FACTOR, u

@@ -244,13 +244,38 @@ def test_exact_sample_count_over_the_budget_is_413(client: TestClient) -> None:
 
 def test_404_405_problem(client: TestClient) -> None:
     assert_problem(client.get("/v2/nothing"), 404, "path")
-    assert_problem(client.put("/v1/schedule", json=EXAMPLE), 405, "path")
+    r = client.put("/v1/schedule", json=EXAMPLE)
+    assert_problem(r, 405, "path")
+    assert r.headers["allow"] == "POST"
+    # every method of the path (FastAPI makes a route per method: Starlette's 405 named the first one's only)
+    r = client.put("/v1/jobs/abc")
+    assert r.headers["allow"] == "DELETE, GET" and "allows DELETE, GET" in assert_problem(r, 405)["errors"][0]["rule"]
+    assert client.post("/healthz").headers["allow"] == "GET, HEAD"
     assert_problem(client.get("/v1/machines/nope"), 404, "path.name")
     assert_problem(client.get("/v1/jobs/../../etc/passwd"), 404)
     # (a job id names its path parameter as a 422 and a 409 do: was "path" here, "job_id" in a 409)
     assert_problem(client.get("/v1/jobs/not-a-valid-id"), 404, "path.job_id")
     assert_problem(client.delete("/v1/jobs/not-a-valid-id"), 404, "path.job_id")
     assert_problem(client.get("/v1/examples/nope"), 404, "path.name")
+
+
+def test_unknown_query_parameters_are_refused(client: TestClient) -> None:
+    """A /v1 route refuses query parameters it does not read, each by name: the G-code upload ran ``?feed_max=5``
+    uncapped and ``POST /v1/schedule?method=lp`` as lp+nlp.  Pages outside /v1 take any (a cache-buster)."""
+    hdr = {"content-type": "text/x-gcode"}
+    b = assert_problem(client.post("/v1/schedule/gcode?machine=router&feed_max=5", content="G1 X10 F600\n",
+                                   headers=hdr), 422, "query.feed_max")
+    assert [e["field"] for e in b["errors"]] == ["query.feed_max"] and b["errors"][0]["value"] == "5"
+    assert "machine, method, sample_period" in b["errors"][0]["rule"]
+    b = assert_problem(client.post("/v1/schedule?method=lp&feed_max=5", json=EXAMPLE), 422)
+    assert [e["field"] for e in b["errors"]] == ["query.method", "query.feed_max"]
+    assert "JSON body" in b["errors"][0]["rule"]
+    assert_problem(client.get("/v1/machines?verbose=1"), 422, "query.verbose")
+    assert_problem(client.get("/v1/jobs/abc/result?fmt=csv"), 422, "query.fmt")  # (``format``: a typo ran JSON)
+    assert client.get("/v1/machines").status_code == 200
+    assert client.get("/healthz?probe=1").status_code == 200
+    ok = client.post("/v1/schedule/gcode?machine=router&method=lp", content="G1 X10 F600\n", headers=hdr)
+    assert ok.status_code == 200 and ok.json()["summary"]["method"] == "lp"
 
 
 def test_router_machine(client: TestClient) -> None:

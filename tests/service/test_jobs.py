@@ -6,8 +6,10 @@ import json
 from pathlib import Path
 from typing import Any
 
+import pytest
 from fastapi.testclient import TestClient
 
+from service import jobs
 from service.app import create_app
 from service.config import Settings
 from service.schemas import EXAMPLE
@@ -74,6 +76,18 @@ def test_cancel_kills_the_solver_process(client: TestClient) -> None:
     assert j["status"] == "cancelled" and j["worker_pid"] is None
     assert_problem(client.get(loc + "/result"), 409)
     assert client.delete(loc).status_code == 200  # cancelling again is harmless
+
+
+def test_a_cancelled_job_keeps_its_latest_progress(client: TestClient, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A job's progress is written to the store at most every ``jobs.PROGRESS_WRITE_S`` (served from memory while
+    it runs); a cancel wrote the status over the stored value, and the job read 0.025 where its last poll had read
+    0.275.  With the writes held off entirely, the stored value stays 0 and only the flush on cancel keeps it."""
+    monkeypatch.setattr(jobs, "PROGRESS_WRITE_S", 1e12)
+    loc = client.post("/v1/jobs", json=long_line(40_000.0)).headers["location"]
+    running = wait_for(lambda: (j := client.get(loc).json())["progress"] > 0 and j, "progress")
+    d = client.delete(loc).json()
+    assert d["status"] == "cancelled" and d["progress"] >= running["progress"] > 0, (d, running)
+    assert client.get(loc).json()["progress"] == d["progress"]
 
 
 def test_delete_finished_job_is_conflict(client: TestClient) -> None:
