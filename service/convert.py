@@ -199,8 +199,9 @@ def check_budget(tp: Toolpath, machine: Machine, opts: Options, budget: Budget) 
     samples = floor / opts.sample_period
     if samples > budget.max_samples:
         raise too_large(
-            f"at least {samples:.0f} samples (path {tp.length:.6g} mm in at least {floor:.6g} s at its feed limits, "
-            f"every {opts.sample_period} s) exceed the {budget.max_samples} allowed in {budget.where}",
+            f"at least {samples:.0f} samples (path {tp.length:.6g} mm in at least {floor:.6g} s at its feed and "
+            f"acceleration limits, every {opts.sample_period} s) exceed the {budget.max_samples} allowed in "
+            f"{budget.where}",
             field="options.sample_period", value=opts.sample_period,
             rule=f"motion time / sample period must be <= {budget.max_samples}",
         )

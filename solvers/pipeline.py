@@ -1991,21 +1991,31 @@ def _feed_cap(lim: LimitSet, toolpath: Toolpath, s: FloatArray) -> FloatArray | 
 #: ``motion_time_floor`` is this share of the path's time at its feed caps: the schedule's feed may pass a
 #: cap by a hair between its checkpoints (the sampled feed reads up to 1.002 x an F word in the random cases).
 MOTION_FLOOR_SHARE = 0.99
+#: ``motion_time_floor``'s acceleration bound reads each axis's amax times this (the samples hold it within 1.01 x).
+ACCEL_FLOOR_SLACK = 1.1
 
 
-def _motion_time_floor(toolpath: Toolpath, lim: LimitSet, vmax: FloatArray | None) -> float:
+def _motion_time_floor(toolpath: Toolpath, lim: LimitSet, vmax: FloatArray | None,
+                       amax: FloatArray | None = None) -> float:
     r"""A lower bound of the motion time (s), known before any solve: MOTION_FLOOR_SHARE of the path's time
     with every sub-segment at its feed cap, or with its slowest axis at its speed bound if that takes longer,
+    or of the path's rest-to-rest time at its acceleration bounds if that is longer still,
 
-        T >= share * sum_k max(L_k / min(F_k, Fmax, ||vmax||_2), max_i |dx_ki| / vmax_i),
+        T >= share * max(sum_k max(L_k / min(F_k, Fmax, ||vmax||_2), max_i |dx_ki| / vmax_i),
+                         2 sqrt(L / ||A||_2), max_i 2 sqrt(|D_i| / A_i)),
 
     with L_k (mm) the k-th sub-segment's length, F_k its programmed feed limit (mm/s, inf where none), Fmax
     the machine's tangential feed limit, vmax (3,) the speed bound of each axis (a feed f along a unit
     tangent moves the axes at f x_s, so f^2 = sum v_i^2 <= ||vmax||^2; left out unless every axis has a
     finite one) and dx_k (3,) the sub-segment's end minus its start (axis i travels at least |dx_ki| there, at
     most at vmax_i: an axis at 1e-8 mm/s took the feed-cap bound alone to 0.08 s for 1e9 s of motion, and the
-    time table of that motion did not finish, session 58).  Rests, accelerations and curvature only add to the
-    time; 0 when nothing caps the feed."""
+    time table of that motion did not finish, session 58).  The acceleration term, where the schedule promises
+    axis accelerations ``amax`` (3,), mm/s^2 (method lp): A = ACCEL_FLOOR_SLACK x amax (the samples hold amax
+    within 1.01 x); the path's acceleration sddot = x_s . a (x_s . x_ss = 0 at unit speed) is at most ||A||, and
+    the path (length L, mm) starts and ends at rest, so T >= 2 sqrt(L / ||A||); axis i moves |D_i| (mm, end
+    minus start) from rest to rest at |a_i| <= A_i, so T >= 2 sqrt(|D_i| / A_i) (amax 1e-12 on a 5 mm line:
+    3.4e6 s of motion read "cannot leave rest" after a solve, session 59's probe).  Corners, jerk and curvature
+    only add to the time; 0 when nothing caps the feed or the acceleration."""
     off = toolpath.offsets
     length = np.diff(off)
     cap = _feed_cap(lim, toolpath, 0.5 * (off[:-1] + off[1:]))
@@ -2017,17 +2027,24 @@ def _motion_time_floor(toolpath: Toolpath, lim: LimitSet, vmax: FloatArray | Non
     if vmax is not None:
         dx = np.abs(np.diff(toolpath.positions(off), axis=0))
         t = np.maximum(t, np.max(dx / vmax[None, :], axis=1))
-    return MOTION_FLOOR_SHARE * float(np.sum(t))
+    floor = float(np.sum(t))
+    if amax is not None:
+        a = ACCEL_FLOOR_SLACK * np.asarray(amax, dtype=np.float64)
+        travel = np.abs(np.diff(toolpath.positions(off[[0, -1]]), axis=0)[0])
+        floor = max(floor, 2.0 * math.sqrt(float(off[-1] - off[0]) / float(np.linalg.norm(a))),
+                    float(np.max(2.0 * np.sqrt(travel / a))))
+    return MOTION_FLOOR_SHARE * floor
 
 
 def motion_time_floor(toolpath: Toolpath, machine: Machine, options: Options | None = None) -> float:
     """A lower bound (s) of the motion time ``schedule(toolpath, machine, options)`` returns, from the feed
-    caps alone (``_motion_time_floor``): lp's axis vmax; lp+nlp's speed under the control signal
-    (``machine.drive_speed_bound``) and the axis vmax it promises.  ``schedule`` refuses up front what this
-    takes over ``Options.max_samples``, and so does the service's budget."""
+    caps and the promised accelerations (``_motion_time_floor``): lp's axis vmax and amax; lp+nlp's speed under
+    the control signal (``machine.drive_speed_bound``) and the axis vmax it promises.  ``schedule`` refuses up front
+    what this takes over ``Options.max_samples``, and so does the service's budget."""
     opt = options or Options()
     lim = _limit_set(machine, opt)
-    return _motion_time_floor(toolpath, lim, _speed_bound(_promised(lim, opt, machine).vmax, opt, machine))
+    promised = _promised(lim, opt, machine)
+    return _motion_time_floor(toolpath, lim, _speed_bound(promised.vmax, opt, machine), promised.amax)
 
 
 def _limit_set(machine: Machine, opt: Options) -> LimitSet:
@@ -2341,12 +2358,13 @@ def _schedule_stream(
     if opt.max_samples is not None:
         # refused up front when even the feed caps alone take the samples over the cap (cam-bench seed 35:
         # F words of 0.02-0.4 mm/s over 2,718 mm, 22,164 s; lp+nlp used to spend minutes on the pieces first)
-        t_floor = _motion_time_floor(toolpath, lim, _speed_bound(limits.vmax, opt, machine))
+        t_floor = _motion_time_floor(toolpath, lim, _speed_bound(limits.vmax, opt, machine), limits.amax)
         k_floor = math.floor(t_floor / opt.sample_period) + 1
         if k_floor > opt.max_samples:
             raise OutputTooLargeError(
                 f"the schedule needs at least {k_floor} time samples (the path takes at least {t_floor:.6g} s "
-                f"at its feed limits, every {opt.sample_period:g} s), over the {opt.max_samples} allowed",
+                f"at its feed and acceleration limits, every {opt.sample_period:g} s), over the {opt.max_samples} "
+                "allowed",
                 field="options.max_samples", value=opt.max_samples,
             )
     precise = precise_points(toolpath, limits, opt.sample_period)  # (the samples' positions, once per schedule)

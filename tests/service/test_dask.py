@@ -60,7 +60,7 @@ def test_schedule_and_job_through_dask(dask_client: TestClient, cluster: LocalCl
 
 
 def test_worker_killed_mid_job_is_rerun(dask_client: TestClient, cluster: LocalCluster) -> None:
-    loc = dask_client.post("/v1/jobs", json=long_line(8_000.0)).headers["location"]
+    loc = dask_client.post("/v1/jobs", json=long_line(3_000.0)).headers["location"]
     running: dict[str, Any] = wait_for(
         lambda: (j := dask_client.get(loc).json())["progress"] > 0 and j["worker_pid"] and j, "progress on a worker")
     pid = running["worker_pid"]
@@ -69,7 +69,7 @@ def test_worker_killed_mid_job_is_rerun(dask_client: TestClient, cluster: LocalC
     wait_for(lambda: pid_gone(pid), "the killed worker to be gone")
     done = poll_done(dask_client, loc)
     assert done["status"] == "succeeded", done
-    assert dask_client.get(loc + "/result").json()["summary"]["path_length"] == 8_000.0
+    assert dask_client.get(loc + "/result").json()["summary"]["path_length"] == 3_000.0
     wait_for(lambda: len(worker_pids(cluster)) == 2, "the nanny to restart the worker")
 
 

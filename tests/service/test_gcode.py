@@ -95,7 +95,7 @@ def test_a_program_whose_f_words_alone_pass_the_budget_is_413_up_front(client: T
     slow = "G21 G90 G01 F1\nX1000\n"
     r = client.post("/v1/schedule/gcode?method=lp", content=slow, headers={"content-type": "text/x-gcode"})
     b = assert_problem(r, 413, "query.sample_period")  # (the upload's own name for the sample period)
-    assert "at its feed limits" in b["detail"] and b["jobs"] == "/v1/jobs"
+    assert "at its feed and acceleration limits" in b["detail"] and b["jobs"] == "/v1/jobs"
     same = assert_problem(client.post("/v1/schedule", json={"toolpath": {"gcode": slow}, "options": {
         "method": "lp"}}), 413, "options.sample_period")  # (as JSON, the body's field)
     assert same["detail"] == b["detail"]

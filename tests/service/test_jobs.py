@@ -118,7 +118,7 @@ def test_restart_reruns_interrupted_job_and_keeps_results(tmp_path: Path) -> Non
         fin = c.post("/v1/jobs", json=EXAMPLE).headers["location"]
         assert poll_done(c, fin)["status"] == "succeeded"
         before = c.get(fin + "/result", headers={"Accept": "text/csv"}).text
-        loc = c.post("/v1/jobs", json=long_line(6_000.0)).headers["location"]
+        loc = c.post("/v1/jobs", json=long_line(3_000.0)).headers["location"]
         wait_for(lambda: c.get(loc).json()["progress"] > 0, "progress")
         pid = c.get(loc).json()["worker_pid"]
     # the service stopped mid-job: its solver process is gone, the job is still 'running' on disk
@@ -127,7 +127,7 @@ def test_restart_reruns_interrupted_job_and_keeps_results(tmp_path: Path) -> Non
         assert c.get(fin + "/result", headers={"Accept": "text/csv"}).text == before
         done = poll_done(c, loc)
         assert done["status"] == "succeeded" and done["attempts"] == 2
-        assert c.get(loc + "/result").json()["summary"]["path_length"] == 6_000.0
+        assert c.get(loc + "/result").json()["summary"]["path_length"] == 3_000.0
 
 
 def test_restart_fails_job_after_max_attempts(tmp_path: Path) -> None:

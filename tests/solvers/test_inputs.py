@@ -166,7 +166,7 @@ def test_a_schedule_over_the_output_cap_at_its_feed_caps_is_refused_before_any_s
         seen: list[float] = []
         with pytest.raises(OutputTooLargeError) as err:
             schedule(tp, router(), replace(opt, max_samples=30_000), progress=seen.append)
-        assert err.value.field == "options.max_samples" and "at its feed limits" in str(err.value)
+        assert err.value.field == "options.max_samples" and "at its feed and acceleration limits" in str(err.value)
         assert seen == []  # refused before the first window
         sch = schedule(tp, router(), replace(opt, max_samples=40_000))
         assert floor <= sch.summary["motion_time"] <= 70.0 / f + 1.0
@@ -232,6 +232,38 @@ def test_motion_time_floor_refuses_a_slow_axis_up_front() -> None:
     floor = motion_time_floor(arc, m, Options(method="lp"))
     assert floor == pytest.approx(MOTION_FLOOR_SHARE * 4.0, rel=1e-9)
     assert schedule(arc, m, Options(method="lp")).summary["motion_time"] >= floor
+
+
+def test_motion_time_floor_reads_the_promised_accelerations() -> None:
+    """Where the schedule promises axis accelerations (method lp), a rest-to-rest path takes at least
+    2 sqrt(L / ||A||) and each axis 2 sqrt(|D_i| / A_i), A = ACCEL_FLOOR_SLACK x amax.  Session 59's probe: amax
+    1e-12 on a 5 mm line (3.4e6 s of motion) read "cannot leave rest" after a solve; now refused up front as over
+    the output cap, before any window.  On the router a short line's schedule (its jerk limits too) is not under
+    the floor; lp+nlp promises no accelerations (the NLP may pass the LP's amax): its floor is the feed's."""
+    from geometry import primitives
+    from geometry.toolpath import Toolpath
+    from solvers.errors import OutputTooLargeError
+    from solvers.machine import Axis, AxisLimits, Machine
+    from solvers.pipeline import ACCEL_FLOOR_SLACK, MOTION_FLOOR_SHARE, motion_time_floor, schedule
+
+    crawl = Machine("crawl", tuple(Axis(n, AxisLimits(100.0, 1e-12, 1e3)) for n in "xyz"))  # type: ignore[arg-type]
+    tp = Toolpath([primitives.line([0, 0, 0], [5, 0, 0])])
+    floor = motion_time_floor(tp, crawl, Options(method="lp"))
+    assert floor == pytest.approx(MOTION_FLOOR_SHARE * 2.0 * math.sqrt(5.0 / (ACCEL_FLOOR_SLACK * 1e-12)), rel=1e-12)
+    seen: list[float] = []
+    with pytest.raises(OutputTooLargeError, match="acceleration limits"):
+        schedule(tp, crawl, Options(method="lp", max_samples=10**7), progress=seen.append)
+    assert seen == []
+    m = router()
+    amax = np.array([a.limits.amax for a in m.axes])
+    d = np.array([3.0, -2.0, 0.5])
+    line = Toolpath([primitives.line([0, 0, 0], d)])
+    bound = max(2.0 * math.sqrt(float(np.linalg.norm(d)) / float(np.linalg.norm(ACCEL_FLOOR_SLACK * amax))),
+                float(np.max(2.0 * np.sqrt(np.abs(d) / (ACCEL_FLOOR_SLACK * amax)))))
+    floor = motion_time_floor(line, m, Options(method="lp"))
+    assert floor == pytest.approx(MOTION_FLOOR_SHARE * bound, rel=1e-12)
+    assert floor > motion_time_floor(line, m, Options(method="lp+nlp"))  # (the feed's floor alone there)
+    assert schedule(line, m, Options(method="lp")).summary["motion_time"] >= floor
 
 
 @pytest.mark.parametrize("scale", [1e-120, 1e100])
