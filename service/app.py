@@ -413,12 +413,11 @@ def _routes(app: FastAPI) -> None:
         if job is None:
             raise not_found("job", job_id, "path.job_id")
         if job.status in ("queued", "running"):
-            await svc.jobs.cancel(job_id)
-        elif job.status != "cancelled":
+            await svc.jobs.cancel(job_id)  # (the job may finish first: its status is read again below)
+            job = svc.store.get(job_id) or job
+        if job.status != "cancelled":
             raise ServiceError(409, "job-finished", "Job already finished", f"the job has {job.status}",
                                field="path.job_id", value=job_id, rule="only queued or running jobs can be cancelled")
-        job = svc.store.get(job_id)
-        assert job is not None
         return _job_out(svc, job)
 
     @app.get("/v1/jobs/{job_id}/result", response_model=ScheduleResponse,

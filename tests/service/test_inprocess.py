@@ -234,9 +234,11 @@ def test_sync_budget_points_to_jobs(client: TestClient) -> None:
 
 
 def test_exact_sample_count_over_the_budget_is_413(client: TestClient) -> None:
-    """The sample-count lower bound (length / |vmax|) passes a slow machine's path; the exact count, known once
-    the pieces are solved, is over the fixture's 50 000: a 413 naming options.max_samples (no samples built)."""
-    axes = {ax: {"limits": {"vmax": 1e4, "amax": 0.05, "jmax": 1.0}} for ax in ("x", "y", "z")}
+    """The sample-count lower bound (``motion_time_floor``: the feed and acceleration limits, 11.9 s here) passes a
+    jerk-bound machine's path; the exact count (62 s of motion), known once the pieces are solved, is over the
+    fixture's 50 000: a 413 naming options.max_samples (no samples built).  Until session 60 the floor read no
+    acceleration and this test's machine was amax 0.05, which the floor now refuses up front (53 s)."""
+    axes = {ax: {"limits": {"vmax": 1e4, "amax": 1.0, "jmax": 0.02}} for ax in ("x", "y", "z")}
     body = {**EXAMPLE, "machine": {"axes": axes}, "options": {"method": "lp"}}
     b = assert_problem(client.post("/v1/schedule", json=body), 413, "options.max_samples")
     assert b["jobs"] == "/v1/jobs" and "50000 allowed" in b["detail"]

@@ -90,6 +90,25 @@ def test_a_cancelled_job_keeps_its_latest_progress(client: TestClient, monkeypat
     assert client.get(loc).json()["progress"] == d["progress"]
 
 
+def test_a_job_that_finishes_while_it_is_cancelled_is_a_conflict(client: TestClient,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """DELETE reads the job's status, then cancels: a job that finishes in between (here: fails, injected in the
+    cancel itself) answered 200 with the finished status; now the 409 a finished job gets."""
+    loc = client.post("/v1/jobs", json=long_line(40_000.0)).headers["location"]
+    wait_for(lambda: client.get(loc).json()["progress"] > 0, "progress")
+    jm = client.app.state.service.jobs  # type: ignore[attr-defined]
+    real = jm.cancel
+
+    async def finished_first(job_id: str) -> bool:
+        jm.store.finish(job_id, "failed", error=None)
+        out: bool = await real(job_id)
+        return out
+
+    monkeypatch.setattr(jm, "cancel", finished_first)
+    b = assert_problem(client.delete(loc), 409, "path.job_id")
+    assert b["detail"] == "the job has failed" and client.get(loc).json()["status"] == "failed"
+
+
 def test_delete_finished_job_is_conflict(client: TestClient) -> None:
     loc = client.post("/v1/jobs", json=EXAMPLE).headers["location"]
     poll_done(client, loc)
