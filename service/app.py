@@ -149,10 +149,6 @@ def _json_content(request: Request) -> None:
                            field="content-type", value=ctype or None, rule="content-type must be application/json")
 
 
-#: The query parameters each /v1 route reads (by id of its APIRoute), filled on first use.
-_QUERY_NAMES: dict[int, frozenset[str]] = {}
-
-
 def _query_names(dep: Dependant) -> set[str]:
     """The query parameters a route's dependency tree reads, by the names a client sends."""
     return {str(p.alias) for p in dep.query_params}.union(*(_query_names(d) for d in dep.dependencies))
@@ -164,9 +160,7 @@ def _known_query(request: Request) -> None:
     route = request.scope.get("route")
     if not request.query_params or not isinstance(route, APIRoute) or not route.path.startswith("/v1/"):
         return
-    known = _QUERY_NAMES.get(id(route))
-    if known is None:
-        known = _QUERY_NAMES[id(route)] = frozenset(_query_names(route.dependant))
+    known = _query_names(route.dependant)  # (a few fields; only where the request has a query)
     rule = (f"{route.path} reads the query parameters {', '.join(sorted(known))} only" if known
             else f"{route.path} reads no query parameters")
     if route.body_field is not None:

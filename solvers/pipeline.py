@@ -2356,8 +2356,9 @@ def _schedule_stream(
 
     limits = _promised(lim, opt, machine)
     if opt.max_samples is not None:
-        # refused up front when even the feed caps alone take the samples over the cap (cam-bench seed 35:
-        # F words of 0.02-0.4 mm/s over 2,718 mm, 22,164 s; lp+nlp used to spend minutes on the pieces first)
+        # refused up front when even the feed caps (or the accelerations) alone take the samples over the cap
+        # (cam-bench seed 35: F words of 0.02-0.4 mm/s over 2,718 mm, 22,164 s; lp+nlp used to spend minutes on
+        # the pieces first)
         t_floor = _motion_time_floor(toolpath, lim, _speed_bound(limits.vmax, opt, machine), limits.amax)
         k_floor = math.floor(t_floor / opt.sample_period) + 1
         if k_floor > opt.max_samples:
