@@ -27,7 +27,7 @@ from service.config import Settings
 from service.convert import Budget, control_point_count, load_result
 from service.errors import ServiceError, WorkFailed, install_handlers, not_found, renamed, too_large
 from service.executor import Executor, make_executor
-from service.http import FORMAT_NAMES, NDJSON_PROTOCOL, BodyLimit, ndjson_stream, negotiate, render
+from service.http import FORMAT_NAMES, NDJSON_PROTOCOL, BodyLimit, HeadAsGet, ndjson_stream, negotiate, render
 from service.jobs import JobManager
 from service.limits import Gate
 from service.plots import FORMATS as PLOT_MEDIA
@@ -204,6 +204,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # Swagger UI from the swagger-ui-bundle-v2 package, not a CDN (the service may run offline)
     app.mount(SWAGGER_STATIC, StaticFiles(directory=swagger_ui_path), name="swagger-ui")
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(HeadAsGet)
     install_handlers(app)
     _routes(app)
     return app
@@ -258,8 +259,7 @@ def _check_plots(body: ScheduleRequest, media: str) -> None:
 
 
 def _routes(app: FastAPI) -> None:
-    @app.head("/healthz", include_in_schema=False)  # (load balancers' probes)
-    @app.get("/healthz", response_model=Health)
+    @app.get("/healthz", response_model=Health)  # (HEAD too, for load balancers' probes: ``HeadAsGet``)
     async def healthz(request: Request) -> dict[str, Any]:
         """Liveness, and how full the service is (synchronous schedules in flight, jobs queued or running)."""
         svc = _svc(request)

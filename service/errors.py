@@ -222,11 +222,17 @@ def problem_response(problem: dict[str, Any], instance: str | None = None,
     return _ProblemJSON(body, status_code=int(body["status"]), media_type=MEDIA_PROBLEM, headers=headers)
 
 
+#: The scope key ``service.http.HeadAsGet`` sets on a HEAD request it passes on as GET (a 405 names HEAD).
+HEAD_KEY = "feedsched.head"
+
+
 def allowed_methods(request: Request) -> list[str]:
     """Every method some route of the app takes at the request's path: Starlette's 405 named the first route's only
     (``Allow: GET`` on /v1/jobs/{job_id}, which DELETE cancels; FastAPI makes a route per method)."""
     methods = {m for r in request.app.router.routes if isinstance(r, Route)
                and r.matches(request.scope)[0] != Match.NONE for m in (r.methods or ())}
+    if "GET" in methods:  # (``service.http.HeadAsGet`` answers HEAD wherever GET is taken)
+        methods.add("HEAD")
     return sorted(methods)
 
 
@@ -256,7 +262,8 @@ def install_handlers(app: FastAPI) -> None:
         if exc.status_code == 405:
             allowed = allowed_methods(request)
             headers["Allow"] = ", ".join(allowed)
-            rule = f"{request.method} is not allowed on this route; it allows {', '.join(allowed)}"
+            method = "HEAD" if request.scope.get(HEAD_KEY) else request.method
+            rule = f"{method} is not allowed on this route; it allows {', '.join(allowed)}"
         p = _problem(exc.status_code, slug, title, str(exc.detail), [_entry(field, value, rule)])
         return problem_response(p, request.url.path, headers=headers)
 

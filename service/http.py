@@ -21,7 +21,7 @@ from service.convert import (
     ndjson_error,
     ndjson_summary,
 )
-from service.errors import ServiceError, WorkerLost, problem_from_exception, problem_response, renamed
+from service.errors import HEAD_KEY, ServiceError, WorkerLost, problem_from_exception, problem_response, renamed
 from service.schemas import MEDIA_CSV, MEDIA_JSON, MEDIA_NDJSON
 
 FORMATS = (MEDIA_JSON, MEDIA_CSV, MEDIA_NDJSON)
@@ -200,6 +200,29 @@ class BodyLimit:
             return msg
 
         await self.app(scope, limited, send)
+
+
+class HeadAsGet:
+    """ASGI middleware: HEAD is answered as GET without its body (RFC 9110 9.3.2: the same status and headers).
+    FastAPI routes take only the methods they name, and ``HEAD /v1/machines`` or a job's result was a 405; a path
+    with no GET route still answers 405, its ``Allow`` from ``errors.allowed_methods``."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] != "HEAD":
+            await self.app(scope, receive, send)
+            return
+
+        async def headers_only(msg: Message) -> None:
+            if msg["type"] == "http.response.body":
+                if msg.get("more_body", False):
+                    return
+                msg = {"type": "http.response.body", "body": b"", "more_body": False}
+            await send(msg)
+
+        await self.app({**scope, "method": "GET", HEAD_KEY: True}, receive, headers_only)
 
 
 def _as_service_error(limit: int, size: Any) -> Exception:

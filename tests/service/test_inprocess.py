@@ -251,8 +251,22 @@ def test_404_405_problem(client: TestClient) -> None:
     assert r.headers["allow"] == "POST"
     # every method of the path (FastAPI makes a route per method: Starlette's 405 named the first one's only)
     r = client.put("/v1/jobs/abc")
-    assert r.headers["allow"] == "DELETE, GET" and "allows DELETE, GET" in assert_problem(r, 405)["errors"][0]["rule"]
+    assert r.headers["allow"] == "DELETE, GET, HEAD"
+    rule = assert_problem(r, 405)["errors"][0]["rule"]
+    assert rule == "PUT is not allowed on this route; it allows DELETE, GET, HEAD"
     assert client.post("/healthz").headers["allow"] == "GET, HEAD"
+    r = client.head("/v1/schedule")  # (no GET there: HEAD is refused as itself, not as the GET it is passed on as)
+    assert r.status_code == 405 and r.headers["allow"] == "POST" and r.content == b""
+
+
+def test_head_is_get_without_the_body(client: TestClient) -> None:
+    """HEAD answers as GET with no body (RFC 9110 9.3.2): the same status and headers.  FastAPI routes take only
+    the methods they name, and ``HEAD /v1/machines`` was a 405 (only /healthz had a HEAD route)."""
+    for url in ("/healthz", "/v1/machines", "/v1/machines/router", "/v1/examples/flower", "/v1/machines/nope"):
+        get, head = client.get(url), client.head(url)
+        assert head.status_code == get.status_code and head.content == b"", url
+        assert head.headers["content-type"] == get.headers["content-type"], url
+        assert head.headers["content-length"] == get.headers["content-length"] == str(len(get.content)), url
     assert_problem(client.get("/v1/machines/nope"), 404, "path.name")
     assert_problem(client.get("/v1/jobs/../../etc/passwd"), 404)
     # (a job id names its path parameter as a 422 and a 409 do: was "path" here, "job_id" in a 409)

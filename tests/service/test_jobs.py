@@ -43,6 +43,9 @@ def test_submit_poll_result_all_formats(client: TestClient) -> None:
     assert res.json()["samples"] == sync["samples"]  # same floats as the synchronous answer
     assert done["summary"]["samples"] == len(sync["samples"]["t"])
     csv_text = client.get(loc + "/result", headers={"Accept": "text/csv"}).text
+    head = client.head(loc + "/result", headers={"Accept": "text/csv"})  # (a streamed body: the headers alone)
+    assert head.status_code == 200 and head.content == b"" and head.headers["content-type"].startswith("text/csv")
+    assert head.headers["x-samples"] == str(done["summary"]["samples"])
     assert csv_text.splitlines()[1:] == client.post("/v1/schedule", json=EXAMPLE,
                                                    headers={"Accept": "text/csv"}).text.splitlines()[1:]
     nd = client.get(loc + "/result", headers={"Accept": "application/x-ndjson"}).text.splitlines()
