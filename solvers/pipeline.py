@@ -2043,7 +2043,12 @@ def motion_time_floor(toolpath: Toolpath, machine: Machine, options: Options | N
     what this takes over ``Options.max_samples``, and so does the service's budget."""
     opt = options or Options()
     lim = _limit_set(machine, opt)
-    promised = _promised(lim, opt, machine)
+    return _promised_floor(toolpath, lim, _promised(lim, opt, machine), opt, machine)
+
+
+def _promised_floor(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt: Options,
+                    machine: Machine) -> float:
+    """``_motion_time_floor`` under the limits the schedule promises (``_promised``): its speed bound and amax."""
     return _motion_time_floor(toolpath, lim, _speed_bound(promised.vmax, opt, machine), promised.amax)
 
 
@@ -2359,7 +2364,7 @@ def _schedule_stream(
         # refused up front when even the feed caps (or the accelerations) alone take the samples over the cap
         # (cam-bench seed 35: F words of 0.02-0.4 mm/s over 2,718 mm, 22,164 s; lp+nlp used to spend minutes on
         # the pieces first)
-        t_floor = _motion_time_floor(toolpath, lim, _speed_bound(limits.vmax, opt, machine), limits.amax)
+        t_floor = _promised_floor(toolpath, lim, limits, opt, machine)
         k_floor = math.floor(t_floor / opt.sample_period) + 1
         if k_floor > opt.max_samples:
             raise OutputTooLargeError(
