@@ -25,9 +25,18 @@ from swagger_ui_bundle import swagger_ui_path
 
 from service.config import Settings
 from service.convert import Budget, control_point_count, load_result
-from service.errors import ServiceError, WorkFailed, install_handlers, not_found, renamed, too_large
+from service.errors import DUPLICATE_KEY, ServiceError, WorkFailed, install_handlers, not_found, renamed, too_large
 from service.executor import Executor, make_executor
-from service.http import FORMAT_NAMES, NDJSON_PROTOCOL, BodyLimit, HeadAsGet, ndjson_stream, negotiate, render
+from service.http import (
+    FORMAT_NAMES,
+    NDJSON_PROTOCOL,
+    BodyLimit,
+    HeadAsGet,
+    UniqueNamesRoute,
+    ndjson_stream,
+    negotiate,
+    render,
+)
 from service.jobs import JobManager
 from service.limits import Gate
 from service.plots import FORMATS as PLOT_MEDIA
@@ -149,6 +158,18 @@ def _json_content(request: Request) -> None:
                            field="content-type", value=ctype or None, rule="content-type must be application/json")
 
 
+def _unique_names(request: Request) -> None:
+    """422 for a JSON body that gives a name twice in one object (``service.http.UniqueNamesRequest``): JSON leaves
+    its meaning open and the parser kept the last, so ``"feed_max"`` twice ran at whichever came second."""
+    found = request.scope.get(DUPLICATE_KEY)
+    if found:
+        at, name, times = found
+        raise RequestValidationError([{
+            "type": "duplicate_name", "loc": ("body", *at, name), "input": name,
+            "msg": f'the name "{name}" appears {times} times in one object; give each name once (JSON does not say '
+                   "which one counts)"}])
+
+
 def _query_names(dep: Dependant) -> set[str]:
     """The query parameters a route's dependency tree reads, by the names a client sends."""
     return {str(p.alias) for p in dep.query_params}.union(*(_query_names(d) for d in dep.dependencies))
@@ -202,6 +223,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   description="Time-optimal CNC feed scheduling along NURBS toolpaths. Errors are RFC 9457 "
                   "problem+json naming the field path, value and rule.")
     # Swagger UI from the swagger-ui-bundle-v2 package, not a CDN (the service may run offline)
+    app.router.route_class = UniqueNamesRoute  # (before the routes: each reads its JSON body noting repeated names)
     app.mount(SWAGGER_STATIC, StaticFiles(directory=swagger_ui_path), name="swagger-ui")
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
     app.add_middleware(HeadAsGet)
@@ -246,14 +268,23 @@ def _succeeded(svc: Service, job_id: str) -> Job:
     return job
 
 
-def _check_plots(body: ScheduleRequest, media: str) -> None:
+def _media(body: ScheduleRequest, accept: str | None) -> str:
+    """The response's media type for ``accept``: with ``options.plots``, JSON wherever Accept admits it at all (the
+    plots come in the JSON body only: ``application/json;q=0.1, text/csv`` was a 406), else a 406 naming them."""
     o = body.options
     if not o.plots:
-        return
-    if media != MEDIA_JSON:
+        return negotiate(accept)
+    try:
+        return negotiate(accept, (MEDIA_JSON,))
+    except ServiceError as exc:
         raise ServiceError(406, "not-acceptable", "Not Acceptable", "plots come in the JSON body only",
-                           field="options.plots", value=o.plots, rule="options.plots needs Accept: application/json")
-    if "comparison" in o.plots and o.method != "lp+nlp":
+                           field="options.plots", value=o.plots,
+                           rule=f"options.plots needs an Accept that admits {MEDIA_JSON}") from exc
+
+
+def _check_plots(body: ScheduleRequest) -> None:
+    o = body.options
+    if o.plots and "comparison" in o.plots and o.method != "lp+nlp":
         raise ServiceError(422, "invalid-options", "Invalid options", "the comparison plot needs method lp+nlp",
                            field="options.plots", value=o.plots, rule='"comparison" needs options.method "lp+nlp"')
 
@@ -289,7 +320,7 @@ def _routes(app: FastAPI) -> None:
     @app.post(
         "/v1/schedule",
         response_model=ScheduleResponse,
-        dependencies=[Depends(_json_content)],
+        dependencies=[Depends(_json_content), Depends(_unique_names)],
         responses={200: {"content": SAMPLE_FORMATS, "headers": X_SAMPLES, "description": "the schedule (JSON "
                          "columns, CSV or NDJSON rows by Accept)"},
                    **_problems(400, 406, 413, 415, 422, busy="schedule")},
@@ -307,14 +338,14 @@ def _routes(app: FastAPI) -> None:
         """``POST /v1/schedule``'s work; ``names``: its problems' fields by the names the client sent them under
         (``service.errors.renamed``; the G-code upload's), in-band NDJSON error lines included."""
         svc = _svc(request)
-        media = negotiate(request.headers.get("accept"))
+        media = _media(body, request.headers.get("accept"))
         n = control_point_count(body)
         if n > svc.settings.sync_max_control_points:
             raise too_large(f"{n} control points exceed the synchronous limit of "
                             f"{svc.settings.sync_max_control_points}; POST the same body to /v1/jobs",
                             field="toolpath.segments", value=n,
                             rule=f"at most {svc.settings.sync_max_control_points} control points")
-        _check_plots(body, media)
+        _check_plots(body)
         if media == MEDIA_NDJSON:
             return await _stream_schedule(svc, body.model_dump(mode="json"), request.url.path, names)
         with svc.sync_gate.enter():  # 503 at once when FEEDSCHED_MAX_INFLIGHT schedules are in flight
@@ -371,7 +402,8 @@ def _routes(app: FastAPI) -> None:
         except (ServiceError, WorkFailed) as exc:
             raise renamed(exc, GCODE_UPLOAD_FIELDS) from exc
 
-    @app.post("/v1/jobs", status_code=202, response_model=JobOut, dependencies=[Depends(_json_content)],
+    @app.post("/v1/jobs", status_code=202, response_model=JobOut,
+              dependencies=[Depends(_json_content), Depends(_unique_names)],
               responses={202: {"headers": LOCATION, "description": "queued"},
                          200: {"model": JobOut, "headers": LOCATION, "description": "an existing job (same "
                                "Idempotency-Key)"},
@@ -382,6 +414,10 @@ def _routes(app: FastAPI) -> None:
     ) -> JSONResponse:
         """Queue a toolpath; poll the job at `Location`."""
         svc = _svc(request)
+        keys = request.headers.getlist("idempotency-key")
+        if len(keys) > 1:  # (the route read the first and ignored the rest)
+            raise ServiceError(422, "invalid-request", "Invalid request", f"Idempotency-Key sent {len(keys)} times",
+                               field="Idempotency-Key", value=keys, rule="one Idempotency-Key header per request")
         req = body.model_dump(mode="json")
         job, created = svc.jobs.submit(req, idempotency_key)
         if not created and job.request != req:

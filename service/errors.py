@@ -224,6 +224,8 @@ def problem_response(problem: dict[str, Any], instance: str | None = None,
 
 #: The scope key ``service.http.HeadAsGet`` sets on a HEAD request it passes on as GET (a 405 names HEAD).
 HEAD_KEY = "feedsched.head"
+#: The scope key ``service.http.UniqueNamesRequest`` sets when a JSON body names a member twice in one object.
+DUPLICATE_KEY = "feedsched.duplicate_name"
 
 
 def allowed_methods(request: Request) -> list[str]:

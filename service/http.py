@@ -1,11 +1,14 @@
-"""HTTP plumbing: content negotiation, response rendering, the request body cap."""
+"""HTTP plumbing: content negotiation, response rendering, the request body cap, JSON bodies' duplicate names."""
 
 from __future__ import annotations
 
-from collections.abc import AsyncGenerator, AsyncIterator, Callable
+import json
+from collections.abc import AsyncGenerator, AsyncIterator, Callable, Coroutine
 from typing import Any
 
 import anyio
+from fastapi import Request
+from fastapi.routing import APIRoute
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 from starlette.responses import Response, StreamingResponse
@@ -21,7 +24,15 @@ from service.convert import (
     ndjson_error,
     ndjson_summary,
 )
-from service.errors import HEAD_KEY, ServiceError, WorkerLost, problem_from_exception, problem_response, renamed
+from service.errors import (
+    DUPLICATE_KEY,
+    HEAD_KEY,
+    ServiceError,
+    WorkerLost,
+    problem_from_exception,
+    problem_response,
+    renamed,
+)
 from service.schemas import MEDIA_CSV, MEDIA_JSON, MEDIA_NDJSON
 
 FORMATS = (MEDIA_JSON, MEDIA_CSV, MEDIA_NDJSON)
@@ -29,15 +40,17 @@ FORMATS = (MEDIA_JSON, MEDIA_CSV, MEDIA_NDJSON)
 FORMAT_NAMES = {"json": MEDIA_JSON, "csv": MEDIA_CSV, "ndjson": MEDIA_NDJSON}
 
 
-def negotiate(accept: str | None) -> str:
-    """Best of JSON, CSV, NDJSON for an Accept header (JSON when absent or */*); 406 when none fits.
+def negotiate(accept: str | None, offers: tuple[str, ...] = FORMATS) -> str:
+    """Best of ``offers`` (JSON, CSV, NDJSON) for an Accept header (the first offer when absent or */*); 406 when
+    none fits.  A request that only JSON can carry (``options.plots``) offers JSON alone: ``application/json;q=0.1,
+    text/csv`` then reads JSON, the one format the client takes that can answer it.
 
     As RFC 9110 12.5.1: each format takes the q of the most specific range that matches it (``text/csv;q=0,
     text/*`` refuses CSV), parameter names are case-insensitive, and a q that is not a number in [0, 1] makes its
     range refuse (it was read as given: ``q=nan`` or ``q=inf`` won).  Ties go to the range named first, then to
     JSON, CSV, NDJSON in that order."""
     if not accept:
-        return MEDIA_JSON
+        return offers[0]
     ranges: list[tuple[str, float, int]] = []
     for i, part in enumerate(accept.split(",")):
         fields = [f.strip() for f in part.split(";")]
@@ -48,7 +61,7 @@ def negotiate(accept: str | None) -> str:
                 q = _qvalue(val.strip())
         ranges.append((fields[0].lower(), q, i))
     best: tuple[float, int, str] | None = None
-    for m in FORMATS:
+    for m in offers:
         names = (m, m.split("/")[0] + "/*", "*/*")  # most specific first
         matched = [(names.index(r), q, i) for r, q, i in ranges if r in names]
         if not matched:
@@ -58,9 +71,76 @@ def negotiate(accept: str | None) -> str:
             best = (q, -i, m)
     if best is None:
         raise ServiceError(406, "not-acceptable", "Not Acceptable", f"Accept {accept!r} matches none of "
-                           f"{', '.join(FORMATS)}", field="Accept", value=accept,
-                           rule=f"Accept must admit one of {', '.join(FORMATS)} (or */*)")
+                           f"{', '.join(offers)}", field="Accept", value=accept,
+                           rule=f"Accept must admit one of {', '.join(offers)} (or */*)")
     return best[2]
+
+
+class _Pairs(list[tuple[str, Any]]):
+    """A JSON object as its name/value pairs in order (``json.loads``' ``object_pairs_hook``)."""
+
+
+def duplicate_name(body: bytes | str) -> tuple[tuple[str | int, ...], str, int] | None:
+    """The first name given twice in one object of a JSON document: (the object's path, the name, how many
+    times), in document order; None when every object's names are distinct.  Only run on a body whose parse saw
+    one (``UniqueNamesRequest``): it keeps every pair."""
+    def walk(v: Any, at: tuple[str | int, ...]) -> tuple[tuple[str | int, ...], str, int] | None:
+        if isinstance(v, _Pairs):
+            names = [k for k, _ in v]
+            for k in names:
+                if names.count(k) > 1:
+                    return at, k, names.count(k)
+            items: list[tuple[str | int, Any]] = list(v)
+        elif isinstance(v, list):
+            items = list(enumerate(v))
+        else:
+            return None
+        for step, x in items:
+            found = walk(x, (*at, step))
+            if found is not None:
+                return found
+        return None
+    return walk(json.loads(body, object_pairs_hook=_Pairs), ())
+
+
+class _NameCheck:
+    """``object_pairs_hook`` building the dicts ``json.loads`` would, noting whether any object repeats a name."""
+
+    def __init__(self) -> None:
+        self.repeated = False
+
+    def __call__(self, pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        d = dict(pairs)
+        if len(d) != len(pairs):
+            self.repeated = True
+        return d
+
+
+class UniqueNamesRequest(Request):
+    """A request whose JSON body notes a name given twice in one object (RFC 8259 4: such an object's meaning is
+    not defined; Python's parser kept the last, so ``{"feed_max": 500, ..., "feed_max": 5000}`` ran at 5000)
+    under ``scope[DUPLICATE_KEY]`` as ``duplicate_name``'s finding, for the route's dependency to refuse.  The body
+    is parsed once, as FastAPI would."""
+
+    async def json(self) -> Any:
+        if not hasattr(self, "_json"):
+            body = await self.body()
+            check = _NameCheck()
+            self._json = json.loads(body, object_pairs_hook=check)
+            if check.repeated:
+                self.scope[DUPLICATE_KEY] = duplicate_name(body)
+        return self._json
+
+
+class UniqueNamesRoute(APIRoute):
+    """The routes' class: their handlers read the request as a ``UniqueNamesRequest``."""
+
+    def get_route_handler(self) -> Callable[[Request], Coroutine[Any, Any, Response]]:
+        handler = super().get_route_handler()
+
+        async def route_handler(request: Request) -> Response:
+            return await handler(UniqueNamesRequest(request.scope, request.receive))
+        return route_handler
 
 
 def _qvalue(text: str) -> float:

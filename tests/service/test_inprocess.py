@@ -416,3 +416,34 @@ def test_lp_holds_a_drive_s_own_vmax_when_its_limits_are_derived(client: TestCli
     assert r.status_code == 200, r.text
     x = np.asarray(r.json()["samples"]["x"])
     assert float(np.max(np.abs(np.diff(x)))) / 1e-3 <= 5.0 * 1.01
+
+
+@pytest.mark.parametrize(("raw", "field"), [
+    # options.method twice ran the last one: lp here, the first said lp+nlp
+    ('"options": {"method": "lp+nlp", "sample_period": 0.001, "method": "lp"}', "options.method"),
+    ('"options": {"method": "lp"}, "options": {"method": "lp+nlp"}', "options"),
+])
+def test_a_name_given_twice_in_a_json_object_is_422(client: TestClient, raw: str, field: str) -> None:
+    """RFC 8259 leaves an object with a repeated name undefined; Python's parser kept the last (sessions 59-60's
+    probes). Both JSON routes refuse it, naming the object's path and the name."""
+    body = json.dumps({k: v for k, v in EXAMPLE.items() if k != "options"})[:-1] + ", " + raw + "}"
+    for route in ("/v1/schedule", "/v1/jobs"):
+        b = assert_problem(client.post(route, content=body, headers={"content-type": "application/json"}), 422,
+                           field)
+        assert b["errors"][0]["value"] == field.rsplit(".", 1)[-1] and "2 times" in b["errors"][0]["rule"]
+
+
+def test_a_repeated_name_inside_a_list_is_found_where_it_is() -> None:
+    from service.http import duplicate_name
+    seg = '{"degree": 1, "knots": [0, 0, 1, 1], "weights": [1, 1], "control_points": [[0, 0, 0], [1, 0, 0]]}'
+    dup = seg.replace('"weights": [1, 1]', '"weights": [1, 1], "weights": [1, 2], "weights": [2, 2]')
+    doc = '{"toolpath": {"segments": [' + seg + ", " + dup + "]}}"
+    assert duplicate_name(doc) == (("toolpath", "segments", 1), "weights", 3)
+    assert duplicate_name('{"a": [{"b": {"c": 1}}, {"b": 2}], "c": {"a": 1}}') is None  # (names repeat across objects)
+
+
+def test_a_second_idempotency_key_header_is_422(client: TestClient) -> None:
+    """Two Idempotency-Key headers: the route read the first and ignored the second (session 59's probe)."""
+    r = client.post("/v1/jobs", json=EXAMPLE, headers=[("Idempotency-Key", "k-1"), ("Idempotency-Key", "k-2")])
+    b = assert_problem(r, 422, "Idempotency-Key")
+    assert b["errors"][0]["value"] == ["k-1", "k-2"]

@@ -193,6 +193,16 @@ def test_sync_plots_option(client: TestClient) -> None:
     assert "plots" not in client.post("/v1/schedule", json=EXAMPLE).json()
     # plots only in JSON; the comparison only when the NLP ran
     assert_problem(client.post("/v1/schedule", json=body, headers={"Accept": "text/csv"}), 406, "options.plots")
+    # ... JSON wherever Accept admits it: JSON at q=0.1 beside CSV was a 406 (session 59's probe)
+    low = client.post("/v1/schedule", json={**EXAMPLE, "options": {"method": "lp", "plots": ["feed"]}},
+                      headers={"Accept": "application/json;q=0.1, text/csv"})
+    assert low.status_code == 200 and low.headers["content-type"].startswith("application/json")
+    assert set(low.json()["plots"]) == {"feed"}
+    assert client.post("/v1/schedule", json={**EXAMPLE, "options": {"method": "lp"}},
+                       headers={"Accept": "application/json;q=0.1, text/csv"}).headers["content-type"].startswith(
+                           "text/csv")  # (without plots CSV wins)
+    assert_problem(client.post("/v1/schedule", json=body, headers={"Accept": "text/csv, application/json;q=0"}), 406,
+                   "options.plots")
     assert_problem(client.post("/v1/schedule", json={**EXAMPLE, "options": {"method": "lp", "plots": ["comparison"]}}),
                    422, "options.plots")
     assert_problem(client.post("/v1/schedule", json={**EXAMPLE, "options": {"plots": ["pie"]}}), 422,
