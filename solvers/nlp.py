@@ -256,7 +256,14 @@ REST_SUBDIV = 4
 #: there).  Cam 0-59 lp+nlp: 22 of 60 programs changed, -8.9 ms net over their 4,325 s; rest ramps dipping
 #: over 1 % 44 -> 30 of 120 (those left: the path's own (the LP's dip too) or the bound well above the LP's
 #: feed there).  The router without a feed cap has no bound at a rest end (inf): the benchmarks are unchanged.
-REST_RISE_CAP_SHARE: float | None = 0.9
+#: 0.8 since session 61: at 0.9 the same line at 7-12 mm/s (the LP at 0.83-0.90 of the cap there) dipped by 3.9,
+#: 1.1, 1.9, 0.3, 0.4 % at 7, 9, 10, 11, 12 mm/s; at 0.8 by under 1e-5, for +2.1-2.5 ms a rest end; cam 0-59
+#: lp+nlp: 7 programs changed, +5.0 ms net (+0.08 to +3.3 ms), two rest ramps' 0.5 and 0.9 % dips gone.
+REST_RISE_CAP_SHARE: float | None = 0.8
+#: A free feed control point whose bound is the same at every checkpoint of its support is held at that bound
+#: (``flat_feed_columns``); FLAT_FEED_RTOL: relative spread read as the same.
+FLAT_FEED_COLUMNS = True
+FLAT_FEED_RTOL = 1e-12
 #: A window from or to rest is solved with its slot rows from round 0 (``_Shape`` ``slotted``; unused slots
 #: are unbounded): one shape to build instead of two.
 REST_SLOTTED = True
@@ -448,6 +455,30 @@ class NlpLimits:
 
 
 # ----- one window shape ----------------------------------------------------------
+def flat_feed_columns(feed_ub: FloatArray, n: int, N: int, head: bool, tail: bool) -> FloatArray:
+    """Each feed control point's own bound (n + 2,), mm/s: the feed bound where it is the same (to FLAT_FEED_RTOL)
+    at every checkpoint of the control point's three knot intervals, inf elsewhere and next to a rest interval
+    (its feed is not the f spline's).  With p >= 0, p_j <= F keeps f <= F between the checkpoints too (the
+    B-spline's convex hull) and leaves no room for control points alternating about the bound on a cruise at a
+    feed cap (``solvers.lp.flat_reach``, the LP's).
+
+    feed_ub: (n (N + 1),) the bound at the checkpoints (``checkpoint_layout``), mm/s."""
+    per = feed_ub.reshape(n, N + 1)
+    lo = np.concatenate([[np.inf, np.inf], per.min(axis=1), [np.inf, np.inf]])
+    hi = np.concatenate([[-np.inf, -np.inf], per.max(axis=1), [-np.inf, -np.inf]])
+    lo3 = np.minimum(np.minimum(lo[:-2], lo[1:-1]), lo[2:])  # (n + 2,): intervals j - 2 .. j
+    hi3 = np.maximum(np.maximum(hi[:-2], hi[1:-1]), hi[2:])
+    spread = np.full(n + 2, np.inf)
+    fin = np.isfinite(lo3) & np.isfinite(hi3)
+    spread[fin] = hi3[fin] - lo3[fin]
+    out = np.where(spread <= FLAT_FEED_RTOL * lo3, lo3, np.inf)
+    if head:
+        out[:3] = np.inf
+    if tail:
+        out[-3:] = np.inf
+    return np.asarray(out, dtype=np.float64)
+
+
 def checkpoint_layout(n: int, N: int) -> tuple[NDArray[np.int64], FloatArray]:
     """Knot interval k (window-local) and tau in [0, 1] of each NLP checkpoint, each (n (N+1),).
 
@@ -2117,6 +2148,11 @@ class NlpRefiner:
             for off in (0, 1):
                 np.minimum.at(feed_ub, kc + off, np.where(near_lp[kc + off], np.inf, f_cap))
             lp_side = _LpSideCaps.at(br, f_cap, kc, near_lp, f_lp)
+        if FLAT_FEED_COLUMNS:  # (a control point under a flat feed bound is held at it: ``flat_feed_columns``)
+            col_ub = flat_feed_columns(feed_ub, n, N, head, tail) / Fs
+            held = (lbx[: n + 2] < ubx[: n + 2]) & np.isfinite(col_ub)
+            ubx[: n + 2][held] = np.minimum(ubx[: n + 2][held], col_ub[held])
+            x0[: n + 2] = np.minimum(x0[: n + 2], ubx[: n + 2])
         floor_u, floor_e = self._inherited_floor(prev, g, xsss_hi, xsss_lo, k_loc, tau, d, moving)
         fine, g_fine = _refine_turns(geometry, fine, geometry(fine))
         # cut slots may sit where a free control point acts, off the fixed states at the window ends (and
