@@ -2182,7 +2182,10 @@ class WindowLP:
         unbounded directions.  Bench seed 664 (lp), piece 1 on 128 knot intervals with its floors: a model
         that the floors make infeasible (5,791 rows, 130 columns) ran 0.3-4.6 s of dual simplex to status
         unknown (10 ms an iteration, the objective at 1e13), and 2 s more with presolve to prove it infeasible;
-        with the bounds, 0.03 s to infeasible."""
+        with the bounds, 0.03 s to infeasible.
+
+        With FLAT_CAP_COLUMNS a column whose bound is flat over its support is held at it (``flat_reach``): that
+        bound cuts into the rows' feasible set on purpose (the feed between the checkpoints)."""
         spec = self.spec
         n = spec.ncols
         k, W0, _, _ = bspline.basis(g.s, spec.d, spec.n_int, spec.k0, spec.k1 - 1)
