@@ -513,8 +513,8 @@ def stack_rows(blocks: list[sp.csr_matrix]) -> sp.csr_matrix:
 
 
 def flat_reach(k: IntArray, W0: FloatArray, cap: FloatArray, ncols: int) -> FloatArray:
-    """For each control point c_j (ncols,), cap where cap is the same (to FLAT_CAP_RTOL) at every point s whose
-    basis function b_j(s) > 0 and finite, inf elsewhere.  Where it is, c_j <= cap keeps q <= cap between the
+    """For each control point c_j (ncols,): cap, where cap is finite and the same (to FLAT_CAP_RTOL) at every
+    point s with b_j(s) > 0; inf elsewhere.  Where it is, c_j <= cap keeps q <= cap between the
     points too (q is a convex combination of c >= 0: the B-spline's convex hull), and on a cruise at the cap it
     leaves one optimum where integral q had many: c_j + c_j+1 = 2 cap at the knots holds the rows with the
     control points alternating about the cap (a line at an 8 mm/s cap: 1.0116, 0.9884, 1.0007, 0.9993 of it
