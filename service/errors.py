@@ -87,14 +87,21 @@ def text_of(s: str, most: int = VALUE_CHARS) -> str:
     return s if len(s) <= most else s[: most - 3] + "..."
 
 
-def jsonable(v: Any) -> Any:
-    """Plain JSON value (NaN/Inf become strings, unknown objects their repr, strings ``text_of``)."""
+#: How deep ``jsonable`` echoes lists and objects; deeper ones read "...".
+VALUE_DEPTH = 8
+
+
+def jsonable(v: Any, depth: int = VALUE_DEPTH) -> Any:
+    """Plain JSON value (NaN/Inf become strings, unknown objects their repr, strings ``text_of``), at most 20 items
+    a level and ``depth`` levels deep (a body nested 900 deep was echoed level by level: RecursionError, a 500)."""
     if isinstance(v, float) and not math.isfinite(v):
         return str(v)
+    if isinstance(v, (list, tuple, dict)) and depth <= 0:
+        return "..."
     if isinstance(v, (list, tuple)):
-        return [jsonable(x) for x in v[:20]] + (["..."] if len(v) > 20 else [])
+        return [jsonable(x, depth - 1) for x in v[:20]] + (["..."] if len(v) > 20 else [])
     if isinstance(v, dict):
-        return {text_of(str(k), 200): jsonable(x) for k, x in list(v.items())[:20]}
+        return {text_of(str(k), 200): jsonable(x, depth - 1) for k, x in list(v.items())[:20]}
     if isinstance(v, str):
         return text_of(v)
     if isinstance(v, (int, float, bool)) or v is None:
@@ -138,8 +145,8 @@ def validation_problem(errors: Sequence[Any]) -> dict[str, Any]:
     for e in errors:
         if e.get("type") == "json_invalid":  # (loc ("body", character offset): not a field of the body)
             loc = e.get("loc", ())
-            at = loc[-1] if len(loc) > 1 and isinstance(loc[-1], int) else None
             why = (e.get("ctx") or {}).get("error")
+            at = loc[-1] if len(loc) > 1 and isinstance(loc[-1], int) and why != NESTED_TOO_DEEP else None
             rule = "the body must be JSON" + (f": {why}" if why else "") + ("" if at is None else f" at character {at}")
             out.append({"field": "body", "pointer": "#", "value": None if at is None else f"character {at}",
                         "rule": rule})
@@ -224,6 +231,9 @@ def problem_response(problem: dict[str, Any], instance: str | None = None,
 
 #: The scope key ``service.http.HeadAsGet`` sets on a HEAD request it passes on as GET (a 405 names HEAD).
 HEAD_KEY = "feedsched.head"
+#: The parse error of a JSON body nested deeper than Python's parser goes (~900 levels: what the stack leaves;
+#: ``service.http.UniqueNamesRequest``), a 422 with no character offset.
+NESTED_TOO_DEEP = "arrays and objects nested too deep (Python's parser takes about 900 levels)"
 #: The scope key ``service.http.UniqueNamesRequest`` sets when a JSON body names a member twice in one object.
 DUPLICATE_KEY = "feedsched.duplicate_name"
 

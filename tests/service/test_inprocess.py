@@ -440,6 +440,8 @@ def test_a_repeated_name_inside_a_list_is_found_where_it_is() -> None:
     doc = '{"toolpath": {"segments": [' + seg + ", " + dup + "]}}"
     assert duplicate_name(doc) == (("toolpath", "segments", 1), "weights", 3)
     assert duplicate_name('{"a": [{"b": {"c": 1}}, {"b": 2}], "c": {"a": 1}}') is None  # (names repeat across objects)
+    many = "{" + ", ".join(f'"k{i}": {i}' for i in range(20_000)) + ', "k19999": 0, "k19999": 1}'
+    assert duplicate_name('{"segments": [' + many + "]}") == (("segments", 0), "k19999", 3)  # (the last name)
 
 
 def test_a_second_idempotency_key_header_is_422(client: TestClient) -> None:
@@ -447,3 +449,28 @@ def test_a_second_idempotency_key_header_is_422(client: TestClient) -> None:
     r = client.post("/v1/jobs", json=EXAMPLE, headers=[("Idempotency-Key", "k-1"), ("Idempotency-Key", "k-2")])
     b = assert_problem(r, 422, "Idempotency-Key")
     assert b["errors"][0]["value"] == ["k-1", "k-2"]
+
+
+@pytest.mark.parametrize("depth", [900, 3000])
+def test_a_deeply_nested_body_is_422(client: TestClient, depth: int) -> None:
+    """Arrays nested 900 deep: the 422's echo of the value recursed level by level (RecursionError: a 500); 3,000
+    deep: Python's parser gives up (a 400 "must be UTF-8 JSON").  Both 422s now, the echo cut at VALUE_DEPTH levels;
+    and a name given twice 900 levels down is found there (``duplicate_name`` keeps its own stack)."""
+    from service.errors import VALUE_DEPTH
+
+    body = '{"toolpath": ' + "[" * depth + '{"a": 1}' + "]" * depth + "}"
+    for route in ("/v1/schedule", "/v1/jobs"):
+        r = client.post(route, content=body, headers={"content-type": "application/json"})
+        e = assert_problem(r, 422)["errors"][0]
+        if depth == 900:
+            assert e["field"] == "toolpath"
+            v, levels = e["value"], 0
+            while isinstance(v, list):
+                v, levels = v[0], levels + 1
+            assert v == "..." and levels == VALUE_DEPTH
+        else:
+            assert e["field"] == "body" and "nested too deep" in e["rule"] and "character" not in e["rule"]
+    if depth == 900:
+        dup = body.replace('{"a": 1}', '{"a": 1, "a": 2}')
+        r = client.post("/v1/schedule", content=dup, headers={"content-type": "application/json"})
+        assert assert_problem(r, 422, "toolpath" + "[0]" * depth + ".a")["errors"][0]["value"] == "a"
