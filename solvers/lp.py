@@ -522,9 +522,13 @@ def flat_reach(k: IntArray, W0: FloatArray, cap: FloatArray, ncols: int) -> Floa
 
     k, W0, cap as ``column_reach``'s."""
     on = np.where(W0 > 0.0, 1.0, 0.0)
-    lo = column_reach(k, on, cap, ncols, 0.5)
-    hi = -column_reach(k, on, -cap, ncols, 0.5)
-    spread = np.full(ncols, np.inf)
+    return flat_bound(column_reach(k, on, cap, ncols, 0.5), -column_reach(k, on, -cap, ncols, 0.5))
+
+
+def flat_bound(lo: FloatArray, hi: FloatArray) -> FloatArray:
+    """lo where a bound's smallest and largest values over a support, lo and hi (same shapes), are finite and the
+    same to FLAT_CAP_RTOL; inf elsewhere (``flat_reach``, ``solvers.nlp.flat_feed_columns``)."""
+    spread = np.full(lo.shape, np.inf)
     fin = np.isfinite(lo) & np.isfinite(hi)
     spread[fin] = hi[fin] - lo[fin]
     return np.where(spread <= FLAT_CAP_RTOL * lo, lo, np.inf)

@@ -87,7 +87,7 @@ from scipy.ndimage import maximum_filter1d
 from geometry.toolpath import PathSamples
 from solvers import bspline, ccompile, kinematics
 from solvers.ipm import STATUS_INFEASIBLE, DenseIpm, IpmResult
-from solvers.lp import SIGN_EPS, V_KERNEL_A, V_KERNEL_JC, axis_moves, step_cap, tangent_jump
+from solvers.lp import SIGN_EPS, V_KERNEL_A, V_KERNEL_JC, axis_moves, flat_bound, step_cap, tangent_jump
 from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
@@ -260,10 +260,9 @@ REST_SUBDIV = 4
 #: 1.1, 1.9, 0.3, 0.4 % at 7, 9, 10, 11, 12 mm/s; at 0.8 by under 1e-5, for +2.1-2.5 ms a rest end; cam 0-59
 #: lp+nlp: 7 programs changed, +5.0 ms net (+0.08 to +3.3 ms), two rest ramps' 0.5 and 0.9 % dips gone.
 REST_RISE_CAP_SHARE: float | None = 0.8
-#: A free feed control point whose bound is the same at every checkpoint of its support is held at that bound
-#: (``flat_feed_columns``); FLAT_FEED_RTOL: relative spread read as the same.
+#: A free feed control point whose bound is the same (to ``lp.FLAT_CAP_RTOL``) at every checkpoint of its
+#: support is held at that bound (``flat_feed_columns``).
 FLAT_FEED_COLUMNS = True
-FLAT_FEED_RTOL = 1e-12
 #: A window from or to rest is solved with its slot rows from round 0 (``_Shape`` ``slotted``; unused slots
 #: are unbounded): one shape to build instead of two.
 REST_SLOTTED = True
@@ -456,7 +455,7 @@ class NlpLimits:
 
 # ----- one window shape ----------------------------------------------------------
 def flat_feed_columns(feed_ub: FloatArray, n: int, N: int, head: bool, tail: bool) -> FloatArray:
-    """Each feed control point's own bound (n + 2,), mm/s: the feed bound where it is the same (to FLAT_FEED_RTOL)
+    """Each feed control point's own bound (n + 2,), mm/s: the feed bound where it is the same (``lp.flat_bound``)
     at every checkpoint of the control point's three knot intervals, inf elsewhere and next to a rest interval
     (its feed is not the f spline's).  With p >= 0, p_j <= F keeps f <= F between the checkpoints too (the
     B-spline's convex hull) and leaves no room for control points alternating about the bound on a cruise at a
@@ -468,10 +467,7 @@ def flat_feed_columns(feed_ub: FloatArray, n: int, N: int, head: bool, tail: boo
     hi = np.concatenate([[-np.inf, -np.inf], per.max(axis=1), [-np.inf, -np.inf]])
     lo3 = np.minimum(np.minimum(lo[:-2], lo[1:-1]), lo[2:])  # (n + 2,): intervals j - 2 .. j
     hi3 = np.maximum(np.maximum(hi[:-2], hi[1:-1]), hi[2:])
-    spread = np.full(n + 2, np.inf)
-    fin = np.isfinite(lo3) & np.isfinite(hi3)
-    spread[fin] = hi3[fin] - lo3[fin]
-    out = np.where(spread <= FLAT_FEED_RTOL * lo3, lo3, np.inf)
+    out = flat_bound(lo3, hi3)
     if head:
         out[:3] = np.inf
     if tail:

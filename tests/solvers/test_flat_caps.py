@@ -16,6 +16,7 @@ from solvers.machine import router
 from solvers.pipeline import Options, schedule
 from tests.fdcheck import utilisation
 from tests.solvers.test_nlp import _check_drive
+from tests.solvers.test_nlp_rest import _ramp_dip
 
 TS = 1e-3
 #: The feed over its cap (share of the cap) and its largest drop below its running maximum while it leaves rest
@@ -26,12 +27,6 @@ RIPPLE = 1e-5
 RIPPLE_WITHOUT = 5e-4
 #: FD limits as the issue's: <= 1.01 x (method lp's v, a, j; lp+nlp's u and e: ``_check_drive``).
 LIMIT_FACTOR = 1.01
-
-
-def _ripple(feed: np.ndarray, cap: float) -> float:
-    """Largest drop of ``feed`` below its running maximum over its first half and (reversed) its last, / cap."""
-    h = feed.size // 2
-    return max(float(np.max(np.maximum.accumulate(f) - f)) / cap for f in (feed[:h], feed[::-1][:h]))
 
 
 def _line(cap: float) -> Toolpath:
@@ -48,7 +43,7 @@ def test_a_cruise_at_a_feed_cap_is_flat(monkeypatch: pytest.MonkeyPatch, method:
     sch = schedule(_line(cap), m, Options(method=method))
     f = sch.samples.feed
     assert float(np.max(f)) <= cap * (1.0 + CAP_OVER)
-    assert _ripple(f, cap) <= RIPPLE
+    assert _ramp_dip(f, cap) <= RIPPLE
     if method == "lp":
         u = utilisation(sch.samples.position, TS, *m.limit_arrays())
         assert max(u.values()) <= LIMIT_FACTOR, u
@@ -57,7 +52,7 @@ def test_a_cruise_at_a_feed_cap_is_flat(monkeypatch: pytest.MonkeyPatch, method:
     monkeypatch.setattr(lp, "FLAT_CAP_COLUMNS", False)
     monkeypatch.setattr(nlp, "FLAT_FEED_COLUMNS", False)
     off = schedule(_line(cap), m, Options(method=method))
-    assert _ripple(off.samples.feed, cap) >= RIPPLE_WITHOUT  # (the test sees the ripple)
+    assert _ramp_dip(off.samples.feed, cap) >= RIPPLE_WITHOUT  # (the test sees the ripple)
     assert sch.summary["motion_time"] <= off.summary["motion_time"] + 1e-4
 
 
