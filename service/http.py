@@ -129,10 +129,10 @@ class UniqueNamesRequest(Request):
             check = _NameCheck()
             try:
                 self._json = json.loads(body, object_pairs_hook=check)
+                if check.repeated:  # (parsed again a frame deeper: inside the try too)
+                    self.scope[DUPLICATE_KEY] = duplicate_name(body)
             except RecursionError as exc:  # (FastAPI read it as any other failure: 400 "must be UTF-8 JSON")
                 raise json.JSONDecodeError(NESTED_TOO_DEEP, "", 0) from exc
-            if check.repeated:
-                self.scope[DUPLICATE_KEY] = duplicate_name(body)
         return self._json
 
 
