@@ -1106,7 +1106,6 @@ def test_lp_nlp_tries_the_coarser_refinements_before_the_plan_knots(monkeypatch:
     assert on.nlp_fallbacks == 0 and on.samples <= 0.6 * off.samples
 
 
-@pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def _session_60_feed(monkeypatch: pytest.MonkeyPatch) -> None:
     """The LP and NLP as they were until session 61 (no flat column bounds, rest rises off from 0.9 of the bound):
     the case of a mechanism's test that the session-61 feed no longer reaches (it needs other windows or rounds
@@ -1118,6 +1117,7 @@ def _session_60_feed(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(nlp, "REST_RISE_CAP_SHARE", 0.9)
 
 
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_a_window_far_outside_its_rows_is_solved_by_the_elastic_start(monkeypatch: pytest.MonkeyPatch) -> None:
     """Bench seed 47 (lp+nlp): six solves of a window of n = 74 that the dense method does not finish warm or
     cold (line search failed after 3-8 iterations) go to Ipopt without the elastic start.  With the rows
