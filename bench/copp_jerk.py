@@ -40,7 +40,9 @@ import numpy as np
 
 from bench._common import (
     LIMIT_FACTOR,
+    REPEATS,
     TS,
+    WARMUP,
     emit,
     env_info,
     gap_pct,
@@ -164,10 +166,11 @@ def held(runner: CoppRunner, n: int) -> dict[str, Any]:
         return {"stations": n, "error": f"copp-py failed: {type(exc).__name__}: {exc}"}
 
 
-def _attempt(runner: CoppRunner, n: int, refine: bool) -> dict[str, Any]:
-    """Timed copp run (median of repeats) or the reason it failed."""
+def _attempt(runner: CoppRunner, n: int, refine: bool, repeats: int = REPEATS, warmup: int = WARMUP
+             ) -> dict[str, Any]:
+    """Timed copp run (median of ``repeats`` after ``warmup``) or the reason it failed."""
     try:
-        t_c, times_c, r = repeat(lambda: runner.solve(n, refine))
+        t_c, times_c, r = repeat(lambda: runner.solve(n, refine), repeats, warmup)
         return {"stations": n, **_public(r), "time": t_c, "times": times_c,
                 "fd_utilisation": runner.fd_utilisation(r)}
     except Exception as exc:
@@ -207,24 +210,20 @@ def sweep(runner: CoppRunner | None, tp: Toolpath, m: Any) -> tuple[list[dict[st
             rows.append(row(what, ours, "n/a", "copp-py not importable", f">= {TARGET_RATIO:g}x", "info"))
             recs.append(rec)
             continue
-        try:
-            t_c, _, c = repeat(lambda n=n: runner.solve(n), repeats=1, warmup=0)
-            cu = runner.fd_utilisation(c)
-        except Exception as exc:
-            rec["copp"] = {"error": f"copp-py failed: {type(exc).__name__}: {exc}"}
-            rows.append(row(what, ours, "failed", rec["copp"]["error"], f">= {TARGET_RATIO:g}x", "info"))
-            recs.append(rec)
+        c = rec["copp"] = _attempt(runner, n, False, repeats=1, warmup=0)
+        recs.append(rec)
+        if "error" in c:
+            rows.append(row(what, ours, "failed", c["error"], f">= {TARGET_RATIO:g}x", "info"))
             continue
-        ratio = t_c / t["compute_time"]
+        cu = c["fd_utilisation"]
+        ratio = c["time"] / t["compute_time"]
         meets = (ratio >= TARGET_RATIO and sch.summary["motion_time"] <= c["motion_time"]
                  and max(u.values()) <= LIMIT_FACTOR)
-        rec["copp"] = {**_public(c), "time": t_c, "fd_utilisation": cu}
         rec["ratio"], rec["meets_target"] = ratio, meets
-        recs.append(rec)
         rows.append(row(
             what, ours,
-            f"{t_c * 1e3:.0f} ms, {c['motion_time']:.4f} s, all {max(cu.values()):.4f}{_stop_note(c)}",
-            f"copp/ours **{ratio:.2f}x**, motion {gap_pct(sch.summary['motion_time'], c['motion_time']):+.2f} %",
+            f"{c['time'] * 1e3:.0f} ms, {c['motion_time']:.4f} s, all {max(cu.values()):.4f}{_stop_note(c)}",
+            f"copp/ours {ratio:.2f}x, motion {gap_pct(sch.summary['motion_time'], c['motion_time']):+.2f} %",
             f">= {TARGET_RATIO:g}x, motion <= copp's, samples <= {LIMIT_FACTOR}",
             "info: " + ("all three hold" if meets else "not all hold"),
         ))
