@@ -204,14 +204,13 @@ def sweep(runner: CoppRunner | None, tp: Toolpath, m: Any) -> tuple[list[dict[st
         n = int(sch.summary["checkpoints"])
         rec: dict[str, Any] = {"knot_spacing": knot, "stations": n, "ours": {**summary_subset(sch), **t,
                                                                               "fd_utilisation": u}}
+        recs.append(rec)
         what = f"copp TOPP3-LP flower (jerk), resolution sweep, knots {knot:g} mm: compute at {n} stations"
         ours = f"{t['compute_time'] * 1e3:.1f} ms, {sch.summary['motion_time']:.4f} s, all {max(u.values()):.4f}"
         if runner is None:
             rows.append(row(what, ours, "n/a", "copp-py not importable", f">= {TARGET_RATIO:g}x", "info"))
-            recs.append(rec)
             continue
         c = rec["copp"] = _attempt(runner, n, False, repeats=1, warmup=0)
-        recs.append(rec)
         if "error" in c:
             rows.append(row(what, ours, "failed", c["error"], f">= {TARGET_RATIO:g}x", "info"))
             continue
