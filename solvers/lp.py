@@ -68,6 +68,20 @@ HIGHS_TIME_LIMIT_S = 1.0
 HIGHS_TIME_PER_ROW_S = 2e-4
 #: Coefficients below this (after scaling) are dropped (HiGHS presolve trap, spec §10).
 TINY_COEF = 1e-9
+#: A row with a finite non-zero bound is passed with that bound at least this large (``_Rows.build``), its
+#: coefficients at most ROW_COEF_CAP: HiGHS holds a row to its absolute primal feasibility tolerance (1e-7), so a
+#: bound scaled down to ~1e-5 by the row's largest coefficient was held to ~1 % of the limit only.  Bench seed
+#: 16610 (lp; x amax 5.9e-4 mm/s^2, knots 0.0102 mm): an acceleration row next to a corner's rest end, coefficients up
+#: to 2.8e5 against its bound 1 (the rest shapes' rises), passed as |.| <= 3.5e-6, read 1.0098 x amax in the solution
+#: and in its 1 kHz samples; the cut rounds added the same row again 38 times (1,859 points left "unverified", 1.8 s
+#: of CPU) and the samples were repaired twice.  Floored: 2 cut rounds, nothing unverified, no repair, 0.41 s; the
+#: flower's models (bounds of ~1 against coefficients <= ~30) unchanged.
+#: Only bounds of at least the floor as given are lifted (the rows' units: a limit is 1, q is in units of Q); a
+#: smaller one is ~0: lifting stage 2's q <= q* next to a rest end (q* ~1e-12 Q) held q there to ~1e-11 Q, not
+#: ~1e-7 Q, and stage 2 from scratch (STAGE2_WARM off) lost 0.9 % of the flower's motion and 5 % of a 21 mm line's.
+ROW_BOUND_FLOOR = 1e-3
+#: See ROW_BOUND_FLOOR: the floor does not scale a row's largest coefficient above this.
+ROW_COEF_CAP = 1e4
 #: The q reachable from rest over a window, which caps its scale Q, reads the acceleration limits of the axes the
 #: window moves only (False: all three, as before session 59).  A/B in one run (session 59): cam 0-59 and bench
 #: 0-99, both methods, 0 failures either side; 57/60, 57/60, 89/100, 90/100 motions identical, the rest within
@@ -619,7 +633,9 @@ class _Rows:
         finite bound, so a row whose columns and bound are all ~1e-8 (q capped near a tight turn)
         is O(1), and a row whose coefficients are all tiny against its bound stays as it was (an
         axis barely moving: normalising it by its coefficients gave bounds of ~5e13 and Clarabel
-        stopped with InsufficientProgress)."""
+        stopped with InsufficientProgress).  A row whose bound of at least ROW_BOUND_FLOOR that leaves below
+        it is scaled up to it, its largest coefficient to at most ROW_COEF_CAP: the solvers' tolerances are
+        absolute."""
         if len(self.blocks) <= first:
             return sp.csr_matrix((0, self.ncols)), np.zeros(0), np.zeros(0), np.zeros(0)
         A = stack_rows(self.blocks[first:])
@@ -631,13 +647,20 @@ class _Rows:
         # would give, entry for entry), in place: the stacked copy, never a block (they are built again)
         A.data *= self.col_scale[A.indices]
         lo, hi = np.concatenate(self.lo[first:]), np.concatenate(self.hi[first:])
-        big = np.zeros(A.shape[0])
+        coef = np.zeros(A.shape[0])
         full = np.diff(A.indptr) > 0
         if full.any():
-            big[full] = np.maximum.reduceat(np.abs(A.data), A.indptr[:-1][full])
-        big = np.maximum(big, np.where(np.isfinite(lo), np.abs(lo), 0.0))
-        big = np.maximum(big, np.where(np.isfinite(hi), np.abs(hi), 0.0))
+            coef[full] = np.maximum.reduceat(np.abs(A.data), A.indptr[:-1][full])
+        bound = np.maximum(np.where(np.isfinite(lo), np.abs(lo), 0.0), np.where(np.isfinite(hi), np.abs(hi), 0.0))
+        big = np.maximum(coef, bound)
         r = 1.0 / np.where(big > 0.0, big, 1.0)
+        # a bound not below ROW_BOUND_FLOOR (HiGHS's absolute tolerance against it), coefficients not above
+        # ROW_COEF_CAP: r = min(floor / bound, cap / coef), where that is more than 1 / max(coef, bound); only
+        # for bounds of at least the floor as given (a limit is 1 in the rows' units, q is in units of Q): a
+        # smaller one is ~0 (q <= q* next to a rest end, q* ~1e-12 Q), held to the tolerance in Q's units as before
+        small = (bound >= ROW_BOUND_FLOOR) & (bound < ROW_BOUND_FLOOR * coef)
+        if small.any():
+            r[small] = np.maximum(r[small], np.minimum(ROW_BOUND_FLOOR / bound[small], ROW_COEF_CAP / coef[small]))
         A.data *= np.repeat(r, np.diff(A.indptr))
         return A, lo * r, hi * r, r
 
