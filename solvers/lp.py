@@ -68,9 +68,9 @@ HIGHS_TIME_LIMIT_S = 1.0
 HIGHS_TIME_PER_ROW_S = 2e-4
 #: Coefficients below this (after scaling) are dropped (HiGHS presolve trap, spec §10).
 TINY_COEF = 1e-9
-#: A row with a finite non-zero bound is passed with that bound at least this large (``_Rows.build``), its
+#: A row whose bound as given is at least this is passed with that bound at least this large (``_Rows.build``), its
 #: coefficients at most ROW_COEF_CAP: HiGHS holds a row to its absolute primal feasibility tolerance (1e-7), so a
-#: bound scaled down to ~1e-5 by the row's largest coefficient was held to ~1 % of the limit only.  Bench seed
+#: bound scaled down to ~1e-6 by the row's largest coefficient was held to ~1 % of the limit only.  Bench seed
 #: 16610 (lp; x amax 5.9e-4 mm/s^2, knots 0.0102 mm): an acceleration row next to a corner's rest end, coefficients up
 #: to 2.8e5 against its bound 1 (the rest shapes' rises), passed as |.| <= 3.5e-6, read 1.0098 x amax in the solution
 #: and in its 1 kHz samples; the cut rounds added the same row again 38 times (1,859 points left "unverified", 1.8 s

@@ -1,4 +1,5 @@
-"""The LP rows' scaling (``solvers.lp._Rows.build``): a bound is never passed smaller than ``lp.ROW_BOUND_FLOOR``.
+"""The LP rows' scaling (``solvers.lp._Rows.build``): a bound of at least ``lp.ROW_BOUND_FLOOR`` is never passed
+smaller; a smaller one (~0: q <= q* next to a rest end) is scaled as before.
 
 HiGHS runs with its own scaling off (``lp.SIMPLEX_SCALE``) and holds each row to its absolute primal feasibility
 tolerance (1e-7).  Rows divided by their largest coefficient alone were passed with bounds as small as ~3.5e-6
@@ -29,15 +30,17 @@ SEED_16610_A_X = 1.006
 
 
 def _rows() -> lp._Rows:
-    """Three rows over two columns: coefficients 2.8e5 against bound 1 (floored), a plain one, an equality at 0."""
+    """Four rows over two columns: coefficients 2.8e5 against bound 1 (floored), a plain one, an equality at 0, and
+    q <= 1e-12 Q (a bound below the floor as given: not lifted)."""
     rows = lp._Rows(2)
     rows.add(sp.csr_matrix(np.array([[-2.8e5, 3.0e5]])), np.array([-1.0]), np.array([1.0]))
     rows.add(sp.csr_matrix(np.array([[0.5, 2.0], [1.0e3, 0.0]])), np.array([-np.inf, 0.0]), np.array([4.0, 0.0]))
+    rows.add(sp.csr_matrix(np.array([[0.5, 0.5]])), np.array([0.0]), np.array([1.0e-12]))
     rows.col_scale = np.array([2.0, 0.5])
     return rows
 
 
-def test_rows_are_the_blocks_scaled_and_no_bound_is_passed_below_the_floor() -> None:
+def test_rows_are_the_blocks_scaled_and_bounds_of_at_least_the_floor_are_passed_at_least_that_large() -> None:
     rows = _rows()
     A, lo, hi, r = rows.build()
     A0 = sp.vstack(rows.blocks).toarray() * rows.col_scale[None, :]
@@ -52,6 +55,8 @@ def test_rows_are_the_blocks_scaled_and_no_bound_is_passed_below_the_floor() -> 
     assert coef[0] <= lp.ROW_COEF_CAP * (1 + REL_TOL), coef[0]
     # the others as before: divided by the larger of their largest coefficient and bound
     assert np.isclose(max(coef[1], bound[1]), 1.0) and np.isclose(coef[2], 1.0) and bound[2] == 0.0
+    # q <= 1e-12 Q: its largest coefficient (1 with the column scale) divides it, its bound stays ~0
+    assert np.isclose(coef[3], 1.0) and np.isclose(hi[3], 1.0e-12)
 
 
 def test_the_cap_limits_how_far_a_row_is_scaled_up() -> None:
