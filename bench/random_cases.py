@@ -188,7 +188,7 @@ def summarise(rows: list[dict[str, Any]], profile: str, n: int) -> dict[str, Any
     failures = []
     per_method: dict[str, dict[str, int]] = {}
     per_commit: dict[str, dict[str, int]] = {}  # a resumed run may span solver fixes: which rows ran on which
-    refusals = []  # typed refusals by the output cap (harness.MAX_SAMPLES): a defined outcome, not a failure
+    refusals = []  # typed refusals (harness.REFUSED: output cap, limit below float resolution), not failures
     for r in rows:
         refused = not r["ok"] and (r.get("error") or "").startswith(harness.REFUSED)
         outcome = "ok" if r["ok"] else "refused" if refused else "failed"

@@ -745,6 +745,19 @@ class Toolpath:
                if isinstance(t.segment, NurbsSegment)]
         return max([ends, *cps])
 
+    @cached_property
+    def axis_extent(self) -> FloatArray:
+        """Per axis (3,), mm: the spread (largest - smallest) of the NURBS control points and of the points at the
+        sub-segments' ends and quarters; 0 on an axis the path does not move (a NURBS curve lies in its control
+        points' hull; a line or arc that moves an axis moves it between its quarter points)."""
+        o = self.offsets
+        s = np.concatenate([o, *(o[:-1] + f * np.diff(o) for f in (0.25, 0.5, 0.75))])
+        pts = [self.positions(s)]
+        pts += [np.asarray(t.segment.control_points, dtype=np.float64) for t in self._generic.values()
+                if isinstance(t.segment, NurbsSegment)]
+        allp = np.concatenate(pts)
+        return np.asarray(allp.max(axis=0) - allp.min(axis=0), dtype=np.float64)
+
     def positions(self, s: FloatArray, piece: Piece | None = None) -> FloatArray:
         """C(s) only, (K, 3) mm."""
         s = np.asarray(s, dtype=np.float64)

@@ -201,7 +201,8 @@ def problem_from_exception(exc: BaseException) -> dict[str, Any]:
                         jobs="/v1/jobs")
     if isinstance(exc, ScheduleError):
         kind = type(exc).__name__
-        slug = {"InvalidMachineError": "invalid-machine", "InvalidOptionsError": "invalid-options",
+        slug = {"InvalidMachineError": "invalid-machine", "ResolutionError": "invalid-machine",
+                "InvalidOptionsError": "invalid-options",
                 "InfeasibleError": "infeasible", "SolverFailure": "solver-failure"}.get(kind, "cannot-schedule")
         return _problem(422, slug, "Cannot schedule", str(exc), [_entry(exc.field, exc.value, exc.rule)],
                         window=exc.window, axis=exc.axis, solver_status=exc.status)

@@ -46,6 +46,11 @@ class InvalidMachineError(ScheduleError):
     """Machine model or limits that cannot be used (non-positive, NaN, infeasible)."""
 
 
+class ResolutionError(InvalidMachineError):
+    """A limit too small for float64 positions sampled at the sample period to show it held: their rounding alone
+    reads a large share of it in the sampled differences (``pipeline._noise_room``)."""
+
+
 class InvalidOptionsError(ScheduleError):
     """Scheduling options out of range."""
 

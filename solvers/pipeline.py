@@ -52,6 +52,7 @@ from solvers.errors import (
     InvalidOptionsError,
     LimitViolationError,
     OutputTooLargeError,
+    ResolutionError,
     ScheduleError,
     SolverFailure,
 )
@@ -334,6 +335,23 @@ REPAIR_SUBDIV = 8
 #: 23 GB before the kernel killed it (session 59).  Repairs flagging under 2,500 samples (REPAIR_SUBDIV points
 #: each) are unchanged.
 MAX_REPAIR_POINTS = 20_000
+#: A ``precise`` point is off by at most this many units in the last place of the path's ``coordinate_scale`` (plus
+#: its arc length's rounding): tests/geometry/test_point_precision.py's POINT_ULPS, measured there.
+PRECISE_POINT_ULPS = 4.0
+#: Where the points' rounding (``point_noise``) can read more than this share of a promised kinematic limit in the
+#: sampled differences (``verify.noise_shares``), method lp's LP holds that limit less the share
+#: (``_noise_room``); below it the LP's limits are the machine's, bit for bit.  Bench seed 17117 (lp): x jmax
+#: 0.0127 mm/s^3 on coordinates ~477 mm is 224 units in the last place per Ts^3, and the samples' third differences
+#: read 1.046-1.060 x it through both repair rounds, the LP's own jerk there at most 1.0005 x: rounding of
+#: 5-11 units on a feed at 0.98-0.99 x (share 0.143; LP at 0.857 x jmax: passes).
+NOISE_MARGIN_SHARE = 1e-3
+#: Where the points' rounding alone can read this share of a promised limit (or more) on an axis the path moves, the
+#: schedule refuses up front (``_noise_room``): the LP's limit less the share leaves no room.  Bench seed 16950
+#: (lp): x amax 4.5e-7 mm/s^2 and jmax 5.1e-5 mm/s^3 on coordinates ~499 mm (shares 2.0 and 36): 23.6 x jmax in
+#: the samples after 3 repair rounds and 11 s of compute.  The share is a bound (each point off by the most, in
+#: alternate directions): bench seed 5029's x jmax at 0.88 of it read 0.31 x in its samples without the room,
+#: and with it (the LP at 0.12 x jmax, not the binding limit there) 0.04 x, its motion +0.76 %.
+NOISE_REJECT_SHARE = 1.0
 #: Samples computed per chunk (bounds memory in the reconstruction).
 SAMPLE_CHUNK = 100_000
 #: The noise of plain sample positions (``Toolpath.evaluate`` without ``precise``), in units in the last place of
@@ -2229,6 +2247,73 @@ def precise_points(toolpath: Toolpath, limits: verify.Limits, Ts: float) -> bool
     return verify.noise_share(limits, Ts, noise) > PRECISE_POINTS_SHARE
 
 
+def point_noise(toolpath: Toolpath, precise: bool) -> float:
+    """The most a sample's position (mm) is off by rounding: ``precise`` points PRECISE_POINT_ULPS units in the last
+    place of the path's ``coordinate_scale`` plus the arc length's unit (|C_s| = 1), plain ones POINT_NOISE_ULPS."""
+    unit = float(np.spacing(toolpath.coordinate_scale))
+    if precise:
+        return PRECISE_POINT_ULPS * unit + float(np.spacing(toolpath.length))
+    return POINT_NOISE_ULPS * unit
+
+
+#: The machine's field of each limit ``verify.noise_shares`` reads (``{}``: the axis name) and its unit.
+_NOISE_FIELDS = {
+    "velocity": ("machine.axes.{}.vmax", "mm/s"), "acceleration": ("machine.axes.{}.amax", "mm/s^2"),
+    "jerk": ("machine.axes.{}.jmax", "mm/s^3"), "control_signal": ("machine.axes.{}.drive.umax", "V"),
+    "servo_error": ("machine.axes.{}.drive.emax", "mm"),
+}
+
+
+def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt: Options,
+                precise: bool) -> LimitSet:
+    r"""The LP's limits with room for the rounding of the samples' positions.
+
+    A position off by up to n mm (``point_noise``) moves the sampled differences by up to
+    :math:`\sigma_v = 2n/T_s`, :math:`\sigma_a = 4n/T_s^2`, :math:`\sigma_j = 8n/T_s^3` (``verify.noise_shares``,
+    per axis as a share r of the promised limit).  On an axis the path moves (``Toolpath.axis_extent`` > 0),
+    r >= NOISE_REJECT_SHARE refuses the schedule (``ResolutionError`` naming the limit); method lp's LP holds
+    vmax (1 - r_v), amax (1 - r_a), jmax (1 - r_j) where r > NOISE_MARGIN_SHARE, and the limits made from them in
+    proportion (a_rest, a_step, v_step).  lp+nlp gets the refusal only: its NLP holds the drive's limits as given."""
+    Ts = opt.sample_period
+    noise = point_noise(toolpath, precise)
+    shares = verify.noise_shares(promised, Ts, noise)
+    moving = toolpath.axis_extent > 0.0
+    for kind, share in shares.items():
+        over = np.flatnonzero(moving & (share >= NOISE_REJECT_SHARE))
+        if over.size:
+            k = int(over[np.argmax(share[over])])
+            fld, unit = _NOISE_FIELDS[kind]
+            limit = _promised_value(promised, kind, k)
+            raise ResolutionError(
+                f"{limit:.6g} {unit} is too small to be shown held by float64 positions sampled every {Ts:g} s: their "
+                f"rounding ({noise:.3g} mm on coordinates up to {toolpath.coordinate_scale:.6g} mm) can read "
+                f"{float(share[k]):.4g} x it in the sampled {kind.replace('_', ' ')} (refused from "
+                f"{NOISE_REJECT_SHARE:g} x); raise the limit or options.sample_period",
+                field=fld.format(AXES[k]), value=limit, axis=AXES[k],
+            )
+    if opt.method != "lp":
+        return lim
+    one = np.ones(3)
+    room = {kind: np.where(share > NOISE_MARGIN_SHARE, 1.0 - share, 1.0) for kind, share in shares.items()}
+    if all(bool(np.all(r == 1.0)) for r in room.values()):
+        return lim
+    fv, fa, fj = (room.get(kind, one) for kind in ("velocity", "acceleration", "jerk"))
+    faj = np.minimum(fa, fj)
+    return replace(lim, vmax=lim.vmax * fv, amax=lim.amax * fa, jmax=lim.jmax * fj, a_rest=lim.a_rest * faj,
+                   a_step=None if lim.a_step is None else lim.a_step * fj,
+                   v_step=None if lim.v_step is None else lim.v_step * faj)
+
+
+def _promised_value(promised: verify.Limits, kind: str, k: int) -> float:
+    """Axis ``k``'s promised limit of ``kind`` (a key of ``verify.noise_shares``)."""
+    if kind in ("control_signal", "servo_error"):
+        assert promised.drive is not None
+        return float(promised.drive["umax" if kind == "control_signal" else "emax"][k])
+    arr = {"velocity": promised.vmax, "acceleration": promised.amax, "jerk": promised.jmax}[kind]
+    assert arr is not None
+    return float(arr[k])
+
+
 def _piece_blocks(
     toolpath: Toolpath, piece: Piece, prof: PieceProfile, timing: PieceTiming, t0: float, k_lo: int, k_hi: int,
     block: int, carry: _Carry, last: bool, limits: verify.Limits, lim: LimitSet, Ts: float, workers: int = 1,
@@ -2374,6 +2459,7 @@ def _schedule_stream(
                 field="options.max_samples", value=opt.max_samples,
             )
     precise = precise_points(toolpath, limits, opt.sample_period)  # (the samples' positions, once per schedule)
+    lim = _noise_room(toolpath, lim, limits, opt, precise)  # (promised and floor keep the machine's limits)
     drives = machine.drive_arrays() if machine.has_drives else None
     Ts = opt.sample_period
     starts = np.array([p.s_start for p in toolpath.pieces])

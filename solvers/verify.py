@@ -250,19 +250,26 @@ def check(
     return SampleCheck(spread(rows.over), rows.worst())
 
 
-def noise_share(lim: Limits, Ts: float, noise_mm: float) -> float:
-    """The largest share of a promised limit that position noise of ``noise_mm`` (each sample off by up to that,
-    independently) can put into the finite differences above: v by up to 2 n / Ts, a by 4 n / Ts^2, j by
-    8 n / Ts^3, and u, e by their drive terms' sums of those (|M| a + |b| v, |Kv| v + |Ka| a + |Kj| j; the
-    constant c + d sign(v) is no difference).  0 with no limit enforced."""
+def noise_shares(lim: Limits, Ts: float, noise_mm: float) -> dict[str, FloatArray]:
+    """Per axis (3,), the largest share of each promised limit (keys of ``KINDS`` but feed) that position noise of
+    ``noise_mm`` (each sample off by up to that, independently) can put into the finite differences above: v by up
+    to 2 n / Ts, a by 4 n / Ts^2, j by 8 n / Ts^3, and u, e by their drive terms' sums of those
+    (|M| a + |b| v, |Kv| v + |Ka| a + |Kj| j; the constant c + d sign(v) is no difference).  Kinds not enforced
+    are left out."""
     dv, da, dj = 2.0 * noise_mm / Ts, 4.0 * noise_mm / Ts**2, 8.0 * noise_mm / Ts**3
-    shares = [0.0]
-    for d, limit in ((dv, lim.vmax), (da, lim.amax), (dj, lim.jmax)):
+    out: dict[str, FloatArray] = {}
+    for kind, d, limit in (("velocity", dv, lim.vmax), ("acceleration", da, lim.amax), ("jerk", dj, lim.jmax)):
         if limit is not None:
-            shares.append(float(np.max(d / limit)))
+            out[kind] = np.asarray(d / limit, dtype=np.float64)
     if lim.drive is not None:
         dr = lim.drive
-        shares.append(float(np.max((np.abs(dr["M"]) * da + np.abs(dr["b"]) * dv) / dr["umax"])))
-        shares.append(float(np.max((np.abs(dr["Kv"]) * dv + np.abs(dr["Ka"]) * da + np.abs(dr["Kj"]) * dj)
-                                   / dr["emax"])))
-    return max(shares)
+        out["control_signal"] = np.asarray((np.abs(dr["M"]) * da + np.abs(dr["b"]) * dv) / dr["umax"],
+                                           dtype=np.float64)
+        out["servo_error"] = np.asarray(
+            (np.abs(dr["Kv"]) * dv + np.abs(dr["Ka"]) * da + np.abs(dr["Kj"]) * dj) / dr["emax"], dtype=np.float64)
+    return out
+
+
+def noise_share(lim: Limits, Ts: float, noise_mm: float) -> float:
+    """The largest of ``noise_shares`` over kinds and axes; 0 with no limit enforced."""
+    return max([0.0, *(float(np.max(v)) for v in noise_shares(lim, Ts, noise_mm).values())])
