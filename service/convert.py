@@ -76,6 +76,21 @@ def to_machine(m: str | MachineIn) -> Machine:
     return Machine(name=m.name, axes=(axes[0], axes[1], axes[2]), feed_max=m.feed_max)
 
 
+def machine_fields(m: str | MachineIn) -> dict[str, str]:
+    """The request's field of each machine limit the solvers name by their own (``machine.axes.x.jmax``, the
+    drive's ``machine.axes.x.drive.emax``): a preset's are all ``machine``; an axis's given limits
+    ``machine.axes.x.limits.jmax``; limits derived from the axis's drive model ``machine.axes.x.drive``."""
+    out: dict[str, str] = {}
+    for name in AXES:
+        a = None if isinstance(m, str) else getattr(m.axes, name)
+        for key in ("vmax", "amax", "jmax"):
+            out[f"machine.axes.{name}.{key}"] = ("machine" if a is None else f"machine.axes.{name}.drive"
+                                                 if a.limits is None else f"machine.axes.{name}.limits.{key}")
+        if a is None:
+            out.update({f"machine.axes.{name}.drive.{key}": "machine" for key in ("umax", "emax")})
+    return out
+
+
 def to_problem(req: ScheduleRequest) -> tuple[Toolpath, Machine, Options]:
     corner_tol = float(req.toolpath.corner_tolerance_deg)
     if req.toolpath.gcode is not None:

@@ -18,12 +18,23 @@ from typing import Any
 
 from geometry import Toolpath
 from geometry import native as geometry_native
-from service.convert import Budget, Result, check_budget, columns_of, from_schedule, meta_of, ndjson_rows, to_problem
-from service.errors import problem_from_exception
+from service.convert import (
+    Budget,
+    Result,
+    check_budget,
+    columns_of,
+    from_schedule,
+    machine_fields,
+    meta_of,
+    ndjson_rows,
+    to_problem,
+)
+from service.errors import problem_from_exception, renamed
 from service.resultfile import ResultWriter
 from service.schemas import ScheduleRequest
 from solvers import native as solvers_native
 from solvers import nlp
+from solvers.errors import ScheduleError
 from solvers.machine import Machine
 from solvers.pipeline import STREAM_BLOCK_SAMPLES, Options, SampleBlock, schedule, schedule_stream
 
@@ -49,8 +60,21 @@ def _problem(request: dict[str, Any], budget: Budget) -> tuple[Toolpath, Machine
     return tp, machine, check_budget(tp, machine, opts, budget)  # (F-word knots fitted to the budget; its cap)
 
 
+@contextlib.contextmanager
+def _request_names(request: dict[str, Any]) -> Iterator[None]:
+    """A solver error raised inside, its machine fields named as the request holds them (``machine_fields``)."""
+    try:
+        yield
+    except ScheduleError as exc:
+        named = renamed(exc, machine_fields(ScheduleRequest.model_validate(request).machine))
+        if named is exc:
+            raise
+        raise named from exc
+
+
 def compute(request: dict[str, Any], budget: Budget, progress: Callable[[float], None] | None = None) -> Result:
-    return from_schedule(schedule(*_problem(request, budget), progress=progress))
+    with _request_names(request):
+        return from_schedule(schedule(*_problem(request, budget), progress=progress))
 
 
 def compute_ndjson(
@@ -59,12 +83,13 @@ def compute_ndjson(
     """The schedule as NDJSON while it is computed: ("rows", bytes) for each chunk of sample lines as soon as
     its piece has passed the re-check (``solvers.pipeline.schedule_stream``), then ("end", {"summary",
     "diagnostics"}), the same values as ``compute``'s.  Raises what ``compute`` raises."""
-    for item in schedule_stream(*_problem(request, budget), progress=progress):
-        if isinstance(item, SampleBlock):
-            yield from (("rows", chunk) for chunk in ndjson_rows(columns_of(item.samples)))
-        else:
-            summary, diagnostics = meta_of(item.summary, item.diagnostics, item.profiles)
-            yield "end", {"summary": summary, "diagnostics": diagnostics}
+    with _request_names(request):
+        for item in schedule_stream(*_problem(request, budget), progress=progress):
+            if isinstance(item, SampleBlock):
+                yield from (("rows", chunk) for chunk in ndjson_rows(columns_of(item.samples)))
+            else:
+                summary, diagnostics = meta_of(item.summary, item.diagnostics, item.profiles)
+                yield "end", {"summary": summary, "diagnostics": diagnostics}
 
 
 def compute_to_file(
@@ -81,12 +106,14 @@ def compute_to_file(
     writer = ResultWriter(path)
     summary: dict[str, Any] | None = None
     try:
-        for item in schedule_stream(*_problem(request, budget), progress=progress, block_samples=JOB_BLOCK_SAMPLES):
-            if isinstance(item, SampleBlock):
-                writer.append(columns_of(item.samples))
-            else:  # (the last item)
-                summary, diagnostics = meta_of(item.summary, item.diagnostics, item.profiles)
-                writer.finish(summary, diagnostics)
+        with _request_names(request):
+            for item in schedule_stream(*_problem(request, budget), progress=progress,
+                                        block_samples=JOB_BLOCK_SAMPLES):
+                if isinstance(item, SampleBlock):
+                    writer.append(columns_of(item.samples))
+                else:  # (the last item)
+                    summary, diagnostics = meta_of(item.summary, item.diagnostics, item.profiles)
+                    writer.finish(summary, diagnostics)
     except BaseException:
         writer.abort()
         raise

@@ -474,3 +474,28 @@ def test_a_deeply_nested_body_is_422(client: TestClient, depth: int) -> None:
         dup = body.replace('{"a": 1}', '{"a": 1, "a": 2}')
         r = client.post("/v1/schedule", content=dup, headers={"content-type": "application/json"})
         assert assert_problem(r, 422, "toolpath" + "[0]" * depth + ".a")["errors"][0]["value"] == "a"
+
+
+def test_a_limit_under_the_samples_float_resolution_is_a_422_naming_its_request_field(client: TestClient) -> None:
+    """A line along x at ~500 mm whose x jmax the rounding of 1 ms float64 positions could read twice over
+    (``pipeline._noise_room``): 422 invalid-machine naming the request's field and pointer, given limits
+    (``machine.axes.x.limits.jmax``) or limits derived from the drive model (``machine.axes.x.drive``)."""
+    tiny = 8.0 * (4.0 * float(np.spacing(500.5)) + float(np.spacing(0.5))) / 1e-9 / 2.0
+    line = {"segments": [{"type": "line", "start": [500.0, 20.0, 0.0], "end": [500.5, 20.0, 0.0]}]}
+    axes: dict[str, Any] = {ax: {"limits": {"vmax": 100.0, "amax": 400.0, "jmax": 50000.0}} for ax in ("x", "y", "z")}
+    axes["x"] = {"limits": {"vmax": 100.0, "amax": 400.0, "jmax": tiny}}
+    body = {**EXAMPLE, "toolpath": line, "machine": {"axes": axes}, "options": {"method": "lp"}}
+    b = assert_problem(client.post("/v1/schedule", json=body), 422, "machine.axes.x.limits.jmax")
+    assert b["type"].endswith("invalid-machine") and b["errors"][0]["pointer"] == "#/machine/axes/x/limits/jmax"
+    assert b["errors"][0]["value"] == tiny and "sample_period" in b["errors"][0]["rule"]
+    # the same limits on y, which the line does not move: scheduled
+    body["machine"] = {"axes": {**axes, "x": axes["y"], "y": axes["x"]}}
+    assert client.post("/v1/schedule", json=body).status_code == 200
+    # x's limits derived from a drive whose Kj leaves a jerk that small: the drive is the field
+    d = {k: getattr(ROUTER_DRIVES["x"], k) for k in ("M", "b", "c", "d", "Kv", "Ka", "Kj", "umax", "emax")}
+    lim = derive_limits(ROUTER_DRIVES["x"], 100.0, "x")
+    d["Kj"] *= lim.jmax / tiny
+    axes["x"] = {"drive": d, "vmax_request": 100.0}
+    body["machine"] = {"axes": axes}
+    b = assert_problem(client.post("/v1/schedule", json=body), 422, "machine.axes.x.drive")
+    assert b["type"].endswith("invalid-machine")
