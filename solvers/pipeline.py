@@ -2287,8 +2287,8 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
             raise ResolutionError(
                 f"{limit:.6g} {unit} is too small to be shown held by float64 positions sampled every {Ts:g} s: their "
                 f"rounding ({noise:.3g} mm on coordinates up to {toolpath.coordinate_scale:.6g} mm) can read "
-                f"{float(share[k]):.4g} x it in the sampled {kind.replace('_', ' ')} (refused from "
-                f"{NOISE_REJECT_SHARE:g} x); raise the limit or options.sample_period",
+                f"{float(share[k]):.4g} x it in the sampled {kind.replace('_', ' ')} (refused at "
+                f"{NOISE_REJECT_SHARE:g} x or more); raise the limit or options.sample_period",
                 field=fld.format(AXES[k]), value=limit, axis=AXES[k],
             )
     if opt.method != "lp":
