@@ -2273,7 +2273,9 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
     per axis as a share r of the promised limit).  On an axis the path moves (``Toolpath.axis_extent`` > 0),
     r >= NOISE_REJECT_SHARE refuses the schedule (``ResolutionError`` naming the limit); method lp's LP holds
     vmax (1 - r_v), amax (1 - r_a), jmax (1 - r_j) where r > NOISE_MARGIN_SHARE, and the limits made from them in
-    proportion (a_rest, a_step, v_step).  lp+nlp gets the refusal only: its NLP holds the drive's limits as given."""
+    proportion (a_rest, a_step, v_step).  lp+nlp gets the refusal only: its NLP holds the drive's limits as given.
+    The promise, the sampled checks and ``motion_time_floor`` keep the machine's limits; ``diagnostics.binding``
+    reads the LP's (where its rows bind)."""
     Ts = opt.sample_period
     noise = point_noise(toolpath, precise)
     shares = verify.noise_shares(promised, Ts, noise)
