@@ -2280,12 +2280,16 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
     noise = point_noise(toolpath, precise)
     shares = verify.noise_shares(promised, Ts, noise)
     moving = toolpath.axis_extent > 0.0
+    given = {kind: arr for kind, arr in (("velocity", promised.vmax), ("acceleration", promised.amax),
+                                         ("jerk", promised.jmax)) if arr is not None}
+    if promised.drive is not None:
+        given.update(control_signal=promised.drive["umax"], servo_error=promised.drive["emax"])
     for kind, share in shares.items():
         over = np.flatnonzero(moving & (share >= NOISE_REJECT_SHARE))
         if over.size:
             k = int(over[np.argmax(share[over])])
             fld, unit = _NOISE_FIELDS[kind]
-            limit = _promised_value(promised, kind, k)
+            limit = float(given[kind][k])
             raise ResolutionError(
                 f"{limit:.6g} {unit} is too small to be shown held by float64 positions sampled every {Ts:g} s: their "
                 f"rounding ({noise:.3g} mm on coordinates up to {toolpath.coordinate_scale:.6g} mm) can read "
@@ -2304,16 +2308,6 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
     return replace(lim, vmax=lim.vmax * fv, amax=lim.amax * fa, jmax=lim.jmax * fj, a_rest=lim.a_rest * faj,
                    a_step=None if lim.a_step is None else lim.a_step * fj,
                    v_step=None if lim.v_step is None else lim.v_step * faj)
-
-
-def _promised_value(promised: verify.Limits, kind: str, k: int) -> float:
-    """Axis ``k``'s promised limit of ``kind`` (a key of ``verify.noise_shares``)."""
-    if kind in ("control_signal", "servo_error"):
-        assert promised.drive is not None
-        return float(promised.drive["umax" if kind == "control_signal" else "emax"][k])
-    arr = {"velocity": promised.vmax, "acceleration": promised.amax, "jerk": promised.jmax}[kind]
-    assert arr is not None
-    return float(arr[k])
 
 
 def _piece_blocks(
