@@ -2243,8 +2243,7 @@ def precise_points(toolpath: Toolpath, limits: verify.Limits, Ts: float) -> bool
     promised limit in the differences of ``solvers.verify`` (never on the router: ~1e-8 of its amax; bench
     seed 5029, amax_x = 9.7e-6 mm/s^2: 6 x).  Precise points cost about twice the geometry of a sample (flower:
     +13 % of the schedule's compute)."""
-    noise = POINT_NOISE_ULPS * float(np.spacing(toolpath.coordinate_scale))
-    return verify.noise_share(limits, Ts, noise) > PRECISE_POINTS_SHARE
+    return verify.noise_share(limits, Ts, point_noise(toolpath, precise=False)) > PRECISE_POINTS_SHARE
 
 
 def point_noise(toolpath: Toolpath, precise: bool) -> float:
@@ -2279,13 +2278,14 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
     Ts = opt.sample_period
     noise = point_noise(toolpath, precise)
     shares = verify.noise_shares(promised, Ts, noise)
-    moving = toolpath.axis_extent > 0.0
     given = {kind: arr for kind, arr in (("velocity", promised.vmax), ("acceleration", promised.amax),
                                          ("jerk", promised.jmax)) if arr is not None}
     if promised.drive is not None:
         given.update(control_signal=promised.drive["umax"], servo_error=promised.drive["emax"])
     for kind, share in shares.items():
-        over = np.flatnonzero(moving & (share >= NOISE_REJECT_SHARE))
+        over = np.flatnonzero(share >= NOISE_REJECT_SHARE)
+        if over.size:  # (on the axes the path moves: its extent is evaluated only here)
+            over = over[toolpath.axis_extent[over] > 0.0]
         if over.size:
             k = int(over[np.argmax(share[over])])
             fld, unit = _NOISE_FIELDS[kind]
