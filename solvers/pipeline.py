@@ -2300,7 +2300,9 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
     if opt.method != "lp":
         return lim
     one = np.ones(3)
-    room = {kind: np.where(share > NOISE_MARGIN_SHARE, 1.0 - share, 1.0) for kind, share in shares.items()}
+    # (a share at the refusal's is on an axis the path does not move: its rows have nothing to hold)
+    room = {kind: np.where((share > NOISE_MARGIN_SHARE) & (share < NOISE_REJECT_SHARE), 1.0 - share, 1.0)
+            for kind, share in shares.items()}
     if all(bool(np.all(r == 1.0)) for r in room.values()):
         return lim
     fv, fa, fj = (room.get(kind, one) for kind in ("velocity", "acceleration", "jerk"))

@@ -79,6 +79,10 @@ def test_a_limit_under_the_rounding_on_a_moving_axis_is_refused_naming_it() -> N
     assert (e.field, e.axis, e.value) == ("machine.axes.x.jmax", "x", tiny), e
     assert "options.sample_period" in e.rule and "sampled jerk" in e.rule
     m = _with_limit(router(), 1, "jmax", tiny)
+    lim, promised, precise = _parts(tp, m, Options(method="lp"))
+    room = pipeline._noise_room(tp, lim, promised, Options(method="lp"), precise)
+    np.testing.assert_array_equal(room.jmax, lim.jmax)  # (no room taken off an axis that does not move)
+    assert np.all(room.a_rest > 0.0) and room.a_step is not None and np.all(room.a_step > 0.0)
     sch = schedule(tp, m, Options(method="lp"))
     vmax, amax, jmax = m.limit_arrays()
     u = fdcheck.utilisation(sch.samples.position, TS, vmax, amax, jmax)
