@@ -746,17 +746,23 @@ class Toolpath:
         return max([ends, *cps])
 
     @cached_property
-    def axis_extent(self) -> FloatArray:
-        """Per axis (3,), mm: the spread (largest - smallest) of the NURBS control points and of the points at the
-        sub-segments' ends and quarters; 0 on an axis the path does not move (a NURBS curve lies in its control
-        points' hull; a line or arc that moves an axis moves it between its quarter points)."""
+    def axis_range(self) -> FloatArray:
+        """(2, 3) mm: per axis the smallest and largest of the NURBS control points and of the points at the
+        sub-segments' ends and quarters (a NURBS curve lies in its control points' hull; a line or arc that moves an
+        axis moves it between its quarter points, an arc's extremes may lie a little outside them)."""
         o = self.offsets
         s = np.concatenate([o, *(o[:-1] + f * np.diff(o) for f in (0.25, 0.5, 0.75))])
         pts = [self.positions(s)]
         pts += [np.asarray(t.segment.control_points, dtype=np.float64) for t in self._generic.values()
                 if isinstance(t.segment, NurbsSegment)]
         allp = np.concatenate(pts)
-        return np.asarray(allp.max(axis=0) - allp.min(axis=0), dtype=np.float64)
+        return np.stack([allp.min(axis=0), allp.max(axis=0)])
+
+    @property
+    def axis_extent(self) -> FloatArray:
+        """Per axis (3,), mm: the spread of ``axis_range``; 0 on an axis the path does not move."""
+        lo, hi = self.axis_range
+        return np.asarray(hi - lo, dtype=np.float64)
 
     def positions(self, s: FloatArray, piece: Piece | None = None) -> FloatArray:
         """C(s) only, (K, 3) mm."""

@@ -338,20 +338,26 @@ MAX_REPAIR_POINTS = 20_000
 #: A ``precise`` point is off by at most this many units in the last place of the path's ``coordinate_scale`` (plus
 #: its arc length's rounding): tests/geometry/test_point_precision.py's POINT_ULPS, measured there.
 PRECISE_POINT_ULPS = 4.0
-#: Where the points' rounding (``point_noise``) can read more than this share of a promised kinematic limit in the
-#: sampled differences (``verify.noise_shares``), method lp's LP holds that limit less the share
-#: (``_noise_room``); below it the LP's limits are the machine's, bit for bit.  Bench seed 17117 (lp): x jmax
-#: 0.0127 mm/s^3 on coordinates ~477 mm is 224 units in the last place per Ts^3, and the samples' third differences
-#: read 1.046-1.060 x it through both repair rounds, the LP's own jerk there at most 1.0005 x: rounding of
-#: 5-11 units on a feed at 0.98-0.99 x (share 0.143; LP at 0.857 x jmax: passes).
+#: Where the points' rounding (``point_noise``) can read more than this share r of a promised kinematic limit in the
+#: sampled differences (``verify.noise_shares``), method lp's LP holds that limit times (1 - r), at least
+#: NOISE_ROOM_FLOOR (``_noise_room``); below it the LP's limits are the machine's, bit for bit.  Bench seed 17117
+#: (lp): x jmax 0.0127 mm/s^3 on coordinates ~477 mm is 224 units in the last place per Ts^3, and the samples' third
+#: differences read 1.046-1.060 x it through both repair rounds, the LP's own jerk there at most 1.0005 x: rounding
+#: of 5-11 units on a feed at 0.98-0.99 x (r = 0.143; LP at 0.857 x jmax: passes).
 NOISE_MARGIN_SHARE = 1e-3
-#: Where the points' rounding alone can read this share of a promised limit (or more) on an axis the path moves, the
-#: schedule refuses up front (``_noise_room``): the LP's limit less the share leaves no room.  Bench seed 16950
-#: (lp): x amax 4.5e-7 mm/s^2 and jmax 5.1e-5 mm/s^3 on coordinates ~499 mm (shares 2.0 and 36): 23.6 x jmax in
-#: the samples after 3 repair rounds and 11 s of compute.  The share is a bound (each point off by the most, in
-#: alternate directions): bench seed 5029's x jmax at 0.88 of it read 0.31 x in its samples without the room,
-#: and with it (the LP at 0.12 x jmax, not the binding limit there) 0.04 x, its motion +0.76 %.
-NOISE_REJECT_SHARE = 1.0
+#: ... the LP's limit is at least this share of the machine's.  r is a bound (each point off by the most, in
+#: alternate directions) and the samples' check, not the room, is what holds the promise: past r = 1 - this the
+#: room would cost motion for a reading the samples do not show.  Bench seed 5029 lp: x jmax at r = 0.88 read
+#: 0.31 x in its samples without any room; bench 17828 lp: z jmax at r = 1.77 read 0.44 x.
+NOISE_ROOM_FLOOR = 0.5
+#: Refused up front (``_noise_room``): an axis the path moves whose limit is under what one unit in the last place
+#: of its coordinates reads in the differences as they are checked (a step of one unit u reads u / Ts as a
+#: velocity, u / Ts^2 as an acceleration, 2 u / Ts^3 as a jerk): no float64 positions can show it held.  Read as
+#: ``verify.noise_shares`` of u / NOISE_FLOOR_UNITS (1 / 4: v u / (2 Ts), a u / Ts^2, j 2 u / Ts^3) against 1, u
+#: the unit of the axis's smallest |coordinate| on the path (0 where the axis crosses 0: never refused).  Bench
+#: seed 16950 (lp): x jmax 5.1e-5 mm/s^3 on x ~ 499 mm, 9 x that floor: 23.6 x jmax in the samples after 3 repair
+#: rounds and 11 s of compute.
+NOISE_FLOOR_UNITS = 4.0
 #: Samples computed per chunk (bounds memory in the reconstruction).
 SAMPLE_CHUNK = 100_000
 #: The noise of plain sample positions (``Toolpath.evaluate`` without ``precise``), in units in the last place of
@@ -2269,42 +2275,43 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
 
     A position off by up to n mm (``point_noise``) moves the sampled differences by up to
     :math:`\sigma_v = 2n/T_s`, :math:`\sigma_a = 4n/T_s^2`, :math:`\sigma_j = 8n/T_s^3` (``verify.noise_shares``,
-    per axis as a share r of the promised limit).  On an axis the path moves (``Toolpath.axis_extent`` > 0),
-    r >= NOISE_REJECT_SHARE refuses the schedule (``ResolutionError`` naming the limit); method lp's LP holds
-    vmax (1 - r_v), amax (1 - r_a), jmax (1 - r_j) where r > NOISE_MARGIN_SHARE, and the limits made from them in
-    proportion (a_rest, a_step, v_step).  lp+nlp gets the refusal only: its NLP holds the drive's limits as given.
-    The promise, the sampled checks and ``motion_time_floor`` keep the machine's limits; ``diagnostics.binding``
-    reads the LP's (where its rows bind)."""
+    per axis as a share r of the promised limit).  Method lp's LP holds vmax f_v, amax f_a, jmax f_j,
+    f = max(1 - r, NOISE_ROOM_FLOOR) where r > NOISE_MARGIN_SHARE (else 1), and the limits made from them in
+    proportion (a_rest, a_step, v_step).  A limit on an axis the path moves under what one unit in the last place of
+    its coordinates reads (NOISE_FLOOR_UNITS) refuses the schedule (``ResolutionError`` naming it).  lp+nlp gets the
+    refusal only: its NLP holds the drive's limits as given.  The promise, the sampled checks and
+    ``motion_time_floor`` keep the machine's limits; ``diagnostics.binding`` reads the LP's (where its rows bind)."""
     Ts = opt.sample_period
-    noise = point_noise(toolpath, precise)
-    shares = verify.noise_shares(promised, Ts, noise)
+    per_mm = verify.noise_shares(promised, Ts, 1.0)  # (linear in the noise: the shares of 1 mm)
+    if max([0.0, *(float(np.max(v)) for v in per_mm.values())]) * point_noise(toolpath, precise) <= NOISE_MARGIN_SHARE:
+        return lim  # (the router: r ~1e-8)
+    lo, hi = toolpath.axis_range
+    unit = np.where((lo <= 0.0) & (hi >= 0.0), 0.0, np.spacing(np.minimum(np.abs(lo), np.abs(hi))))
     given = {kind: arr for kind, arr in (("velocity", promised.vmax), ("acceleration", promised.amax),
                                          ("jerk", promised.jmax)) if arr is not None}
     if promised.drive is not None:
         given.update(control_signal=promised.drive["umax"], servo_error=promised.drive["emax"])
-    for kind, share in shares.items():
-        over = np.flatnonzero(share >= NOISE_REJECT_SHARE)
-        if over.size:  # (on the axes the path moves: its extent is evaluated only here)
-            over = over[toolpath.axis_extent[over] > 0.0]
+    for kind, share in per_mm.items():
+        floor = share * unit / NOISE_FLOOR_UNITS
+        over = np.flatnonzero((floor >= 1.0) & (hi > lo))
         if over.size:
-            k = int(over[np.argmax(share[over])])
-            fld, unit = _NOISE_FIELDS[kind]
+            k = int(over[np.argmax(floor[over])])
+            fld, what = _NOISE_FIELDS[kind]
             limit = float(given[kind][k])
+            near = float(min(abs(lo[k]), abs(hi[k])))
             raise ResolutionError(
-                f"{limit:.6g} {unit} is too small to be shown held by float64 positions sampled every {Ts:g} s: their "
-                f"rounding ({noise:.3g} mm on coordinates up to {toolpath.coordinate_scale:.6g} mm) can read "
-                f"{float(share[k]):.4g} x it in the sampled {kind.replace('_', ' ')} (refused at "
-                f"{NOISE_REJECT_SHARE:g} x or more); raise the limit or options.sample_period",
+                f"{limit:.6g} {what} is too small for float64 positions sampled every {Ts:g} s to show held: one unit "
+                f"in the last place of the axis's coordinates ({float(unit[k]):.3g} mm at {near:.6g} mm and beyond) "
+                f"alone reads {float(floor[k]):.4g} x it in the sampled {kind.replace('_', ' ')}; raise the limit or "
+                "options.sample_period",
                 field=fld.format(AXES[k]), value=limit, axis=AXES[k],
             )
     if opt.method != "lp":
         return lim
+    noise = point_noise(toolpath, precise)
     one = np.ones(3)
-    # (a share at the refusal's is on an axis the path does not move: its rows have nothing to hold)
-    room = {kind: np.where((share > NOISE_MARGIN_SHARE) & (share < NOISE_REJECT_SHARE), 1.0 - share, 1.0)
-            for kind, share in shares.items()}
-    if all(bool(np.all(r == 1.0)) for r in room.values()):
-        return lim
+    room = {kind: np.where(share * noise > NOISE_MARGIN_SHARE, np.maximum(1.0 - share * noise, NOISE_ROOM_FLOOR), 1.0)
+            for kind, share in per_mm.items()}
     fv, fa, fj = (room.get(kind, one) for kind in ("velocity", "acceleration", "jerk"))
     faj = np.minimum(fa, fj)
     return replace(lim, vmax=lim.vmax * fv, amax=lim.amax * fa, jmax=lim.jmax * fj, a_rest=lim.a_rest * faj,

@@ -477,10 +477,10 @@ def test_a_deeply_nested_body_is_422(client: TestClient, depth: int) -> None:
 
 
 def test_a_limit_under_the_samples_float_resolution_is_a_422_naming_its_request_field(client: TestClient) -> None:
-    """A line along x at ~500 mm whose x jmax the rounding of 1 ms float64 positions could read twice over
-    (``pipeline._noise_room``): 422 invalid-machine naming the request's field and pointer, given limits
+    """A line along x from 500 mm whose x jmax one unit in the last place of 500 mm reads twice over as a jerk at
+    1 ms (``pipeline._noise_room``): 422 invalid-machine naming the request's field and pointer, given limits
     (``machine.axes.x.limits.jmax``) or limits derived from the drive model (``machine.axes.x.drive``)."""
-    tiny = 8.0 * (4.0 * float(np.spacing(500.5)) + float(np.spacing(0.5))) / 1e-9 / 2.0
+    tiny = 2.0 * float(np.spacing(500.0)) / 1e-9 / 2.0
     line = {"segments": [{"type": "line", "start": [500.0, 20.0, 0.0], "end": [500.5, 20.0, 0.0]}]}
     axes: dict[str, Any] = {ax: {"limits": {"vmax": 100.0, "amax": 400.0, "jmax": 50000.0}} for ax in ("x", "y", "z")}
     axes["x"] = {"limits": {"vmax": 100.0, "amax": 400.0, "jmax": tiny}}

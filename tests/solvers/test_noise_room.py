@@ -66,22 +66,26 @@ def test_axis_extent_is_zero_exactly_on_the_axes_the_path_does_not_move() -> Non
     assert arc.axis_extent[2] == 0.0
 
 
-def test_a_limit_under_the_rounding_on_a_moving_axis_is_refused_naming_it() -> None:
-    """A line along x at ~500 mm, x jmax at which the rounding could read 2 x it: refused up front, naming
-    machine.axes.x.jmax and its value.  The same jmax on y, which the line does not move: scheduled, and the
-    samples' differences hold every limit."""
+def test_a_limit_under_one_unit_of_a_moving_axis_is_refused_naming_it() -> None:
+    """A line along x from 500 mm, x jmax at which one unit in the last place of 500 mm reads 2 x it as a jerk
+    (2 u / Ts^3): refused up front, naming machine.axes.x.jmax and its value; at 0.8 x that reading: scheduled
+    (the LP at NOISE_ROOM_FLOOR x jmax).  The refused jmax on y, which the line does not move: scheduled (its LP
+    jmax at the floor too), and the samples' differences hold every limit."""
     tp = Toolpath([examples.line((500.0, 20.0, 0.0), (500.5, 20.0, 0.0))])
-    noise = pipeline.point_noise(tp, precise=True)
-    tiny = 8.0 * noise / TS**3 / 2.0  # (share 2 of it)
+    unit = float(np.spacing(500.0))
+    tiny = 2.0 * unit / TS**3 / 2.0
     with pytest.raises(ResolutionError) as err:
         schedule(tp, _with_limit(router(), 0, "jmax", tiny), Options(method="lp"))
     e = err.value
     assert (e.field, e.axis, e.value) == ("machine.axes.x.jmax", "x", tiny), e
     assert "options.sample_period" in e.rule and "sampled jerk" in e.rule
+    lim, promised, precise = _parts(tp, _with_limit(router(), 0, "jmax", tiny * 2.5), Options(method="lp"))
+    room = pipeline._noise_room(tp, lim, promised, Options(method="lp"), precise)
+    np.testing.assert_allclose(room.jmax, lim.jmax * [pipeline.NOISE_ROOM_FLOOR, 1.0, 1.0], rtol=1e-15)
     m = _with_limit(router(), 1, "jmax", tiny)
     lim, promised, precise = _parts(tp, m, Options(method="lp"))
     room = pipeline._noise_room(tp, lim, promised, Options(method="lp"), precise)
-    np.testing.assert_array_equal(room.jmax, lim.jmax)  # (no room taken off an axis that does not move)
+    np.testing.assert_allclose(room.jmax, lim.jmax * [1.0, pipeline.NOISE_ROOM_FLOOR, 1.0], rtol=1e-15)
     assert np.all(room.a_rest > 0.0) and room.a_step is not None and np.all(room.a_step > 0.0)
     sch = schedule(tp, m, Options(method="lp"))
     vmax, amax, jmax = m.limit_arrays()
@@ -90,15 +94,14 @@ def test_a_limit_under_the_rounding_on_a_moving_axis_is_refused_naming_it() -> N
 
 
 def test_a_drive_limit_under_the_rounding_is_refused_under_lp_nlp_too() -> None:
-    """lp+nlp gets the refusal (its NLP holds the drive's limits as given): emax at which the servo error's
-    jerk term alone could read 1.5 x it."""
+    """lp+nlp gets the refusal (its NLP holds the drive's limits as given): emax at which one unit's jerk through
+    the servo error's Kj term alone reads 1.5 x it."""
     tp = Toolpath([examples.line((500.0, 20.0, 0.0), (500.5, 20.0, 0.0))])
     opt = Options(method="lp+nlp")
     lim, promised, precise = _parts(tp, router(), opt)
     assert promised.drive is not None
-    noise = pipeline.point_noise(tp, precise)
     drive = {k: v.copy() for k, v in promised.drive.items()}
-    drive["emax"][0] = drive["Kj"][0] * 8.0 * noise / TS**3 / 1.5
+    drive["emax"][0] = drive["Kj"][0] * 2.0 * float(np.spacing(500.0)) / TS**3 / 1.5
     with pytest.raises(ResolutionError) as err:
         pipeline._noise_room(tp, lim, replace(promised, drive=drive), opt, precise)
     assert (err.value.field, err.value.axis) == ("machine.axes.x.drive.emax", "x")
