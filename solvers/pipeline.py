@@ -355,8 +355,8 @@ NOISE_ROOM_FLOOR = 0.5
 #: velocity, u / Ts^2 as an acceleration, 2 u / Ts^3 as a jerk): no float64 positions can show it held.  Read as
 #: ``verify.noise_shares`` of u / NOISE_FLOOR_UNITS (1 / 4: v u / (2 Ts), a u / Ts^2, j 2 u / Ts^3) against 1, u
 #: the unit of the axis's smallest |coordinate| on the path (0 where the axis crosses 0: never refused).  Bench
-#: seed 16950 (lp): x jmax 5.1e-5 mm/s^3 on x ~ 499 mm, 9 x that floor: 23.6 x jmax in the samples after 3 repair
-#: rounds and 11 s of compute.
+#: seed 16950 (lp): x jmax 5.1e-5 mm/s^3 on x 479-499 mm, one unit there reads 2.2 x it: 23.6 x jmax in the samples
+#: after 3 repair rounds and 11 s of compute.
 NOISE_FLOOR_UNITS = 4.0
 #: Samples computed per chunk (bounds memory in the reconstruction).
 SAMPLE_CHUNK = 100_000
@@ -2308,10 +2308,9 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
             )
     if opt.method != "lp":
         return lim
-    noise = point_noise(toolpath, precise)
     one = np.ones(3)
-    room = {kind: np.where(share * noise > NOISE_MARGIN_SHARE, np.maximum(1.0 - share * noise, NOISE_ROOM_FLOOR), 1.0)
-            for kind, share in per_mm.items()}
+    room = {kind: np.where(r > NOISE_MARGIN_SHARE, np.maximum(1.0 - r, NOISE_ROOM_FLOOR), 1.0)
+            for kind, r in verify.noise_shares(promised, Ts, point_noise(toolpath, precise)).items()}
     fv, fa, fj = (room.get(kind, one) for kind in ("velocity", "acceleration", "jerk"))
     faj = np.minimum(fa, fj)
     return replace(lim, vmax=lim.vmax * fv, amax=lim.amax * fa, jmax=lim.jmax * fj, a_rest=lim.a_rest * faj,

@@ -17,7 +17,7 @@ METHODS = ("lp", "lp+nlp")
 MAX_SAMPLES = 20_000_000
 #: How a refusal reads in ``Outcome.error`` (the bench counts these apart from failures): by that cap, or by a
 #: limit too small for float64 positions at TS to show held (``solvers.errors.ResolutionError``: bench seed 16950,
-#: whose rounding can read 2 x its x amax and 36 x its x jmax).
+#: whose x jmax one unit in the last place of its x coordinates reads 2.2 x over as a jerk).
 REFUSED = ("solvers.errors.OutputTooLargeError", "solvers.errors.ResolutionError")
 
 
