@@ -1,7 +1,8 @@
-"""Room for the rounding of the samples' positions (``pipeline._noise_room``): a limit that the rounding of float64
-positions can read a large share of in the sampled differences is refused naming it (``ResolutionError``) on an axis
-the path moves; a smaller share is taken off method lp's LP limits, so the samples' finite differences hold the
-promise; the router's limits (~1e-8 shares) are the machine's, bit for bit."""
+"""Room for the rounding of the samples' positions (``pipeline._noise_room``): the share r of a limit that the
+rounding of float64 positions can read in the sampled differences is taken off method lp's LP limits (down to
+NOISE_ROOM_FLOOR), so the samples' finite differences hold the promise; a limit under what one unit in the last place
+of a moving axis's coordinates reads is refused naming it (``ResolutionError``); the router's limits (~1e-8 shares)
+are the machine's, bit for bit."""
 
 from __future__ import annotations
 
