@@ -2282,9 +2282,10 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
     refusal only: its NLP holds the drive's limits as given.  The promise, the sampled checks and
     ``motion_time_floor`` keep the machine's limits; ``diagnostics.binding`` reads the LP's (where its rows bind)."""
     Ts = opt.sample_period
-    per_mm = verify.noise_shares(promised, Ts, 1.0)  # (linear in the noise: the shares of 1 mm)
-    if max([0.0, *(float(np.max(v)) for v in per_mm.values())]) * point_noise(toolpath, precise) <= NOISE_MARGIN_SHARE:
+    noise = point_noise(toolpath, precise)
+    if verify.noise_share(promised, Ts, noise) <= NOISE_MARGIN_SHARE:
         return lim  # (the router: r ~1e-8)
+    per_mm = verify.noise_shares(promised, Ts, 1.0)  # (linear in the noise: the shares of 1 mm)
     lo, hi = toolpath.axis_range
     unit = np.where((lo <= 0.0) & (hi >= 0.0), 0.0, np.spacing(np.minimum(np.abs(lo), np.abs(hi))))
     given = {kind: arr for kind, arr in (("velocity", promised.vmax), ("acceleration", promised.amax),
@@ -2310,7 +2311,7 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
         return lim
     one = np.ones(3)
     room = {kind: np.where(r > NOISE_MARGIN_SHARE, np.maximum(1.0 - r, NOISE_ROOM_FLOOR), 1.0)
-            for kind, r in verify.noise_shares(promised, Ts, point_noise(toolpath, precise)).items()}
+            for kind, r in verify.noise_shares(promised, Ts, noise).items()}
     fv, fa, fj = (room.get(kind, one) for kind in ("velocity", "acceleration", "jerk"))
     faj = np.minimum(fa, fj)
     return replace(lim, vmax=lim.vmax * fv, amax=lim.amax * fa, jmax=lim.jmax * fj, a_rest=lim.a_rest * faj,
