@@ -2279,7 +2279,7 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
     f = max(1 - r, NOISE_ROOM_FLOOR) where r > NOISE_MARGIN_SHARE (else 1), and the limits made from them in
     proportion (a_rest, a_step, v_step).  A limit on an axis the path moves under what one unit in the last place of
     its coordinates reads (NOISE_FLOOR_UNITS) refuses the schedule (``ResolutionError`` naming it).  lp+nlp gets the
-    refusal only: its NLP holds the drive's limits as given.  The promise, the sampled checks and
+    refusal here and its room from ``_drive_room``.  The promise, the sampled checks and
     ``motion_time_floor`` keep the machine's limits; ``diagnostics.binding`` reads the LP's (where its rows bind)."""
     Ts = opt.sample_period
     noise = point_noise(toolpath, precise)
@@ -2309,14 +2309,67 @@ def _noise_room(toolpath: Toolpath, lim: LimitSet, promised: verify.Limits, opt:
             )
     if opt.method != "lp":
         return lim
-    one = np.ones(3)
-    room = {kind: np.where(r > NOISE_MARGIN_SHARE, np.maximum(1.0 - r, NOISE_ROOM_FLOOR), 1.0)
-            for kind, r in verify.noise_shares(promised, Ts, noise).items()}
-    fv, fa, fj = (room.get(kind, one) for kind in ("velocity", "acceleration", "jerk"))
+    shares = verify.noise_shares(promised, Ts, noise)
+    fv, fa, fj = (_room_factors(shares, kind) for kind in ("velocity", "acceleration", "jerk"))
     faj = np.minimum(fa, fj)
     return replace(lim, vmax=lim.vmax * fv, amax=lim.amax * fa, jmax=lim.jmax * fj, a_rest=lim.a_rest * faj,
                    a_step=None if lim.a_step is None else lim.a_step * fj,
                    v_step=None if lim.v_step is None else lim.v_step * faj)
+
+
+def _room_factors(shares: dict[str, FloatArray], kind: str) -> FloatArray:
+    """Per axis (3,), the share of a limit its LP or NLP holds for ``noise_shares`` r of the kind:
+    max(1 - r, NOISE_ROOM_FLOOR) where r > NOISE_MARGIN_SHARE, else 1 (and 1 for a kind not promised)."""
+    r = shares.get(kind)
+    if r is None:
+        return np.ones(3)
+    return np.asarray(np.where(r > NOISE_MARGIN_SHARE, np.maximum(1.0 - r, NOISE_ROOM_FLOOR), 1.0), dtype=np.float64)
+
+
+def _drive_room(toolpath: Toolpath, machine: Machine, promised: verify.Limits, opt: Options,
+                precise: bool) -> Machine:
+    r"""lp+nlp: the machine its NLP and LP hold, with room for the rounding of the samples' positions (method lp's
+    is ``_noise_room``); ``machine`` itself where every share is under NOISE_MARGIN_SHARE (the router).
+
+    Position noise of n mm (``point_noise``) reads up to r = (|M| 4n/T_s^2 + |b| 2n/T_s) / u_max in the sampled
+    control signal and r = (K_v 2n/T_s + K_a 4n/T_s^2 + K_j 8n/T_s^3) / e_max in the servo error
+    (``verify.noise_shares``).  Each drive holds
+
+    .. math:: e'_{max} = e_{max} f_e, \qquad u'_{max} = |c| + |d| + (u_{max} - |c| - |d|) f_u,
+
+    f = max(1 - r, NOISE_ROOM_FLOOR), with u's r taken over its dynamic part u_max - |c| - |d| (the bias and the
+    friction are no differences: all of the noise comes off what the motion may use); the drive's and, where they
+    are promised, the axes' vmax (and amax, jmax with ``Options.nlp_kinematic``) f_v, f_a, f_j as in
+    ``_noise_room``.  Everything the solvers make from the machine follows: the NLP's limits
+    (``NlpLimits.from_machine``), its velocity steps (``v_step_limit``) and the LP's limits at rest and at steps
+    (``LimitSet.from_machine`` with ``rest_from_drive``).  The promise, the output's u and e, the knot plans and
+    ``motion_time_floor`` keep ``machine``.  Arguments as ``_noise_room``'s, after its refusal."""
+    if opt.method != "lp+nlp" or not machine.has_drives:
+        return machine
+    Ts = opt.sample_period
+    noise = point_noise(toolpath, precise)
+    if verify.noise_share(promised, Ts, noise) <= NOISE_MARGIN_SHARE:
+        return machine
+    shares = verify.noise_shares(promised, Ts, noise)
+    dr = machine.drive_arrays()
+    fixed = np.abs(dr["c"]) + np.abs(dr["d"])
+    dyn = dr["umax"] - fixed
+    if "control_signal" in shares:  # (over the dynamic part; none where friction takes all of umax)
+        shares["control_signal"] = np.where(dyn > 0.0, shares["control_signal"] * dr["umax"] / np.where(
+            dyn > 0.0, dyn, 1.0), 0.0)
+    fv, fa, fj, fu, fe = (_room_factors(shares, kind) for kind in (
+        "velocity", "acceleration", "jerk", "control_signal", "servo_error"))
+    axis_v = opt.nlp_axis_velocity or opt.nlp_kinematic  # (the axes' vmax promised, ``_promised``)
+    axes = []
+    for k, ax in enumerate(machine.axes):
+        drive = ax.drive
+        assert drive is not None  # (``has_drives``)
+        drive = replace(drive, umax=float(fixed[k] + dyn[k] * fu[k]) if fu[k] < 1.0 else drive.umax,
+                        emax=drive.emax * float(fe[k]), vmax=None if drive.vmax is None else drive.vmax * float(fv[k]))
+        limits = replace(ax.limits, vmax=ax.limits.vmax * float(fv[k] if axis_v else 1.0),
+                         amax=ax.limits.amax * float(fa[k]), jmax=ax.limits.jmax * float(fj[k]))
+        axes.append(replace(ax, limits=limits, drive=drive))
+    return replace(machine, axes=(axes[0], axes[1], axes[2]))
 
 
 def _piece_blocks(
@@ -2431,10 +2484,6 @@ def _schedule_stream(
         )
     nlp = opt.method == "lp+nlp"
     nlp_stats = NlpStats() if nlp else None
-    nlp_lim = NlpLimits.from_machine(
-        machine, opt.nlp_axis_velocity, opt.nlp_kinematic, lim.a_step, opt.sample_period,
-        v_step_limit(machine, opt.sample_period, opt.jerk, True, opt.nlp_kinematic, share=NLP_V_STEP_SHARE),
-    ) if nlp else None
     # shared by the first NLP solve of every piece, in path order (repairs get their own)
     refiners: dict[tuple[int, int, int | None], NlpRefiner] = {}
     # progress: the LP stage is LP_PROGRESS_SHARE of each piece's work when the NLP follows
@@ -2465,6 +2514,13 @@ def _schedule_stream(
             )
     precise = precise_points(toolpath, limits, opt.sample_period)  # (the samples' positions, once per schedule)
     lim = _noise_room(toolpath, lim, limits, opt, precise)  # (promised and floor keep the machine's limits)
+    held = _drive_room(toolpath, machine, limits, opt, precise)  # (lp+nlp: the limits its solvers hold)
+    if held is not machine:
+        lim = _limit_set(held, opt)
+    nlp_lim = NlpLimits.from_machine(
+        held, opt.nlp_axis_velocity, opt.nlp_kinematic, lim.a_step, opt.sample_period,
+        v_step_limit(held, opt.sample_period, opt.jerk, True, opt.nlp_kinematic, share=NLP_V_STEP_SHARE),
+    ) if nlp else None
     drives = machine.drive_arrays() if machine.has_drives else None
     Ts = opt.sample_period
     starts = np.array([p.s_start for p in toolpath.pieces])

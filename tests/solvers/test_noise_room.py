@@ -141,3 +141,61 @@ def test_seed_17117_samples_hold_the_x_jerk_with_room_for_the_rounding() -> None
     u = fdcheck.utilisation(sch.samples.position, TS, lim.vmax, lim.amax, lim.jmax)
     assert u["jx"] <= SEED_17117_JERK_X, u
     assert max(u.values()) <= PROMISE, u
+
+
+def _with_drive(m: Machine, axis: int, **values: float) -> Machine:
+    axes = list(m.axes)
+    drive = axes[axis].drive
+    assert drive is not None
+    axes[axis] = replace(axes[axis], drive=replace(drive, **values))
+    return replace(m, axes=(axes[0], axes[1], axes[2]))
+
+
+def test_lp_nlp_drives_hold_the_room_and_the_router_is_the_machine() -> None:
+    """``_drive_room``: the router under lp+nlp (the flower) is handed back as it is.  A line at x = 500 mm whose
+    x drive has Kj 2 (the jerk's rounding ~0.18 of emax) and y drive M 1e6 (the acceleration's, ~0.09 of umax):
+    emax f_e and umax |c| + |d| + (umax - |c| - |d|) f_u, f = 1 - r with u's r over its dynamic part, the other
+    axes as given; the LP's limits at steps (from the drive, ``LimitSet.from_machine``) follow emax, and the axes'
+    limits (the knot plans') are the same."""
+    opt = Options(method="lp+nlp")
+    tp = examples.flower(1)
+    m = router()
+    lim, promised, precise = _parts(tp, m, opt)
+    assert pipeline._drive_room(tp, m, promised, opt, precise) is m
+    tp = Toolpath([examples.line((500.0, 20.0, 0.0), (500.5, 20.5, 0.0))])
+    m = _with_drive(_with_drive(router(), 0, Kj=2.0), 1, M=1e6)
+    lim, promised, precise = _parts(tp, m, opt)
+    sh = verify.noise_shares(promised, TS, pipeline.point_noise(tp, precise))
+    r_e, r_u = sh["servo_error"], sh["control_signal"]
+    assert 0.05 < r_e[0] < 0.5 and r_e[1] < pipeline.NOISE_MARGIN_SHARE, r_e
+    assert 0.05 < r_u[1] < 0.5 and r_u[0] < pipeline.NOISE_MARGIN_SHARE, r_u
+    held = pipeline._drive_room(tp, m, promised, opt, precise)
+    dr, dh = m.drive_arrays(), held.drive_arrays()
+    np.testing.assert_allclose(dh["emax"], dr["emax"] * [1.0 - r_e[0], 1.0, 1.0], rtol=1e-12)
+    fixed = np.abs(dr["c"]) + np.abs(dr["d"])
+    dyn = dr["umax"] - fixed
+    np.testing.assert_allclose(dh["umax"][1], fixed[1] + dyn[1] * (1.0 - r_u[1] * dr["umax"][1] / dyn[1]),
+                               rtol=1e-12)
+    np.testing.assert_array_equal(dh["umax"][[0, 2]], dr["umax"][[0, 2]])
+    for key in ("M", "b", "c", "d", "Kv", "Ka", "Kj"):
+        np.testing.assert_array_equal(dh[key], dr[key])
+    for a, b in zip(m.limit_arrays(), held.limit_arrays(), strict=True):
+        np.testing.assert_array_equal(a, b)
+    lim_h = pipeline._limit_set(held, opt)
+    assert lim.a_step is not None and lim_h.a_step is not None
+    np.testing.assert_allclose(lim_h.a_step[0], lim.a_step[0] * (1.0 - r_e[0]), rtol=1e-12)
+
+
+def test_lp_nlp_samples_hold_the_servo_error_where_the_rounding_reads_half_of_it() -> None:
+    """A 0.5 mm line from x = 500 mm under lp+nlp, the x drive's Kj 5 s^3 (emax / Kj = 0.004 mm/s^3: the jerk's
+    rounding, 8 n / Ts^3, reads ~0.45 of emax through Kj).  Without room its samples read 1.07 x emax after three
+    repair rounds and the schedule was refused (27 s of CPU); with it the servo error and control signal that
+    finite differences of the returned positions give (``fdcheck.fd_drive``, the machine's own drive) hold."""
+    tp = Toolpath([examples.line((500.0, 1.0, 0.0), (500.5, 1.5, 0.0))])
+    m = _with_drive(router(), 0, Kj=5.0)
+    sch = schedule(tp, m, Options(method="lp+nlp", sample_period=TS))
+    dr = m.drive_arrays()
+    u, e = fdcheck.fd_drive(sch.samples.position, TS, dr)
+    worst_e = float(np.max(np.abs(e) / dr["emax"]))
+    worst_u = float(np.max(np.abs(u) / dr["umax"]))
+    assert worst_e <= PROMISE and worst_u <= PROMISE, (worst_e, worst_u)
