@@ -1229,16 +1229,23 @@ def test_a_corner_stopped_within_one_sample_gets_a_round_more_under_lp_nlp(monke
     left within one sample; the third differences of the samples across it read e_y 1.0219 x emax (Kj j alone
     0.99) through both repair rounds, the NLP's own sampled check 1.0016: a 422.  A piece still over the promise
     after them gets one round more with its steps at ``pipeline.REPAIR_EXTRA_STEP_SHARE`` (0.962).  Checked by the
-    independent checker; with the extra round at the last round's share the schedule still fails.  Since session
-    61's flat column bounds the program passes without that round: its feed as it was (``_session_60_feed``)."""
+    independent checker; with the extra round at the last round's share the schedule still fails (without
+    ``pipeline.REPAIR_UNDO``; with it, since session 66, its first solve, e_y 1.0088, is kept: that is how it
+    passes).  Since session 61's flat column bounds the program passes without that round: its feed as it was
+    (``_session_60_feed``)."""
     case = gen.cam_case(2076)
     assert harness.run(case, "lp+nlp").ok
     _session_60_feed(monkeypatch)
     out = harness.run(case, "lp+nlp")
     assert out.ok, out.describe()
     monkeypatch.setattr(pipeline, "REPAIR_EXTRA_STEP_SHARE", pipeline.REPAIR_STEP_SHARE)
+    opt = Options(method="lp+nlp", sample_period=TS, nlp_workers=1)
+    kept = schedule(case.toolpath(), case.machine, opt)
+    assert kept.summary["repairs_undone"] == 1, kept.summary
+    assert harness.run(case, "lp+nlp").ok
+    monkeypatch.setattr(pipeline, "REPAIR_UNDO", False)
     with pytest.raises(ScheduleError, match="sampled servo error"):
-        schedule(case.toolpath(), case.machine, Options(method="lp+nlp", sample_period=TS, nlp_workers=1))
+        schedule(case.toolpath(), case.machine, opt)
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
@@ -1275,3 +1282,68 @@ def test_sample_repairs_verify_at_most_max_repair_points(monkeypatch: pytest.Mon
     vmax, amax, jmax = m.limit_arrays()
     u = utilisation(out.samples.position, out.summary["sample_period"], vmax, amax, jmax)
     assert max(u.values()) <= checker.LIMIT_FACTOR, u
+
+
+#: How far above the machine's limits the spied repair rounds below solve (their samples then exceed the promise).
+REPAIR_OVER = 1.3
+
+
+def test_repair_rounds_that_break_the_promise_are_undone(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A piece whose repair rounds end over the promise where an earlier round of theirs held it gets that round's
+    profile (``summary.repairs_undone``), not a LimitViolationError.  Forced here: every sample over half a limit
+    is flagged (so the repairs run), and the repair rounds solve with the limits 1.3 x the machine's: the circle's
+    first round holds, its repairs do not.  The schedule is the one with no repair rounds at all, sample for
+    sample, and finite differences of its positions hold every limit; without ``pipeline.REPAIR_UNDO`` the last
+    round's LimitViolationError."""
+    import solvers.pipeline as P
+
+    tp = Toolpath([ex.circle(10.0)])
+    m = router()
+    opt = Options(method="lp")
+    real = P.solve_piece
+    repaired: list[int] = []
+
+    def over(*args: Any, **kw: Any) -> Any:
+        vs = args[7] if len(args) > 7 else kw.get("verify")
+        if vs is not None and np.asarray(vs).size:
+            repaired.append(1)
+            lim = args[4]
+            args = (*args[:4], _scaled(lim, REPAIR_OVER), *args[5:])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(verify, "REPAIR_TOL", -0.5)
+    monkeypatch.setattr(verify, "FD_REPAIR_TOL", -0.5)
+    monkeypatch.setattr(P, "SAMPLE_REPAIR_ROUNDS", 0)
+    once = schedule(tp, m, opt)
+    assert once.summary["sample_repairs"] == 0 and once.summary["repairs_undone"] == 0
+    monkeypatch.setattr(P, "SAMPLE_REPAIR_ROUNDS", 2)
+    monkeypatch.setattr(P, "solve_piece", over)
+    out = schedule(tp, m, opt)
+    assert repaired, "the repair rounds did not run"
+    assert out.summary["repairs_undone"] == 1 and out.summary["sample_repairs"] >= 1, out.summary
+    np.testing.assert_array_equal(out.samples.position, once.samples.position)
+    vmax, amax, jmax = m.limit_arrays()
+    u = utilisation(out.samples.position, out.summary["sample_period"], vmax, amax, jmax)
+    assert max(u.values()) <= checker.LIMIT_FACTOR, u
+    monkeypatch.setattr(P, "REPAIR_UNDO", False)
+    with pytest.raises(ScheduleError, match="repair rounds"):
+        schedule(tp, m, opt)
+
+
+def _scaled(lim: lp.LimitSet, f: float) -> lp.LimitSet:
+    """``lim`` with every kinematic limit, and those made from them, times f."""
+    from dataclasses import replace
+
+    return replace(lim, vmax=lim.vmax * f, amax=lim.amax * f, jmax=lim.jmax * f, a_rest=lim.a_rest * f,
+                   a_step=None if lim.a_step is None else lim.a_step * f,
+                   v_step=None if lim.v_step is None else lim.v_step * f)
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_bench_18692_lp_nlp_keeps_the_round_that_held_the_servo_error() -> None:
+    """Bench seed 18692 (lp+nlp, found in session 66): its second piece's samples read e_x 1.0091 x emax, within
+    the promise but flagged; the repair rounds left 1.0091, then (the steps at their repair share) 1.0158 and
+    1.0168 at another point, a LimitViolationError.  Now the first round's profile is kept.  (Which round holds
+    may differ with the CPU's LP vertices; on any, the schedule must pass the independent checker.)"""
+    out = harness.run(gen.case(18692, "bench"), "lp+nlp")
+    assert out.ok, out.describe()
