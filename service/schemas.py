@@ -235,7 +235,10 @@ class OptionsIn(BaseModel):
         "kept if within 0.2 % of its motion's lower bound)"
     )
     checkpoints_per_interval: StrictInt = Field(default=5, ge=1, le=64)
-    jerk: StrictBool = True
+    jerk: StrictBool = Field(
+        default=True, description="the LP's pseudo-jerk stage; false (velocity and acceleration limits only) needs "
+        'method "lp"'
+    )
     solver: Literal["highs", "clarabel"] = "highs"
     feed_max: Speed | None = Field(default=None, description="mm/s (overrides the machine's)")
     plots: list[PlotName] | None = Field(

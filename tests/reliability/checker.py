@@ -528,10 +528,11 @@ def _limit_checks(checks: list[tuple[str, FloatArray, FloatArray]], rep: Report,
 
 def check(
     path: Sequence[Segment], lim: Limits, Ts: float, t: FloatArray, feed: FloatArray, position: FloatArray,
-    kinematic: bool, drive: bool, axis_velocity: bool = False, program: Program | None = None,
+    kinematic: bool, drive: bool, axis_velocity: bool = False, program: Program | None = None, jerk: bool = True,
 ) -> Report:
-    """Check one sampled schedule; ``kinematic``: v, a, j limits; ``drive``: u, e (and v if ``axis_velocity``:
-    lp+nlp holds the LP's vmax only with ``Options.nlp_axis_velocity``; by default speed is limited through u, e).
+    """Check one sampled schedule; ``kinematic``: v, a, j limits (j only with ``jerk``: method lp without its
+    jerk stage promises v and a); ``drive``: u, e (and v if ``axis_velocity``: lp+nlp holds the LP's vmax only
+    with ``Options.nlp_axis_velocity``; by default speed is limited through u, e).
 
     With ``program`` (a G-code program whose corners ``path`` blends), also: every sample within the program's
     tolerance (+ PATH_TOL_MM) of the programmed path, and the speed between samples and the reported feed
@@ -572,7 +573,9 @@ def check(
     v, a, j = fd_kinematics(position, Ts)
     checks: list[tuple[str, FloatArray, FloatArray]] = []
     if kinematic:
-        checks += [("velocity", v, lim.vmax), ("acceleration", a, lim.amax), ("jerk", j, lim.jmax)]
+        checks += [("velocity", v, lim.vmax), ("acceleration", a, lim.amax)]
+        if jerk:
+            checks.append(("jerk", j, lim.jmax))
     elif drive and axis_velocity:
         checks.append(("velocity", v, lim.vmax))
     if drive:

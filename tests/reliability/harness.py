@@ -39,6 +39,29 @@ class Outcome:
         return f"seed {self.seed} method {self.method}: {what}"
 
 
+def options_for(case: gen.Case, method: str) -> Options:
+    """The ``Options`` a run of ``case`` with ``method`` uses: the method, TS (or the case's sample period) and
+    MAX_SAMPLES, with the case's options (``gen.random_options``; its knot spacing, a factor, times 0.1 x the
+    stopping distance of the run's machine, the product's default spacing; "jerk" for method lp only)."""
+    given = dict(case.options)
+    if method != "lp":
+        given.pop("jerk", None)  # (the jerk stage is off with method lp only: ``Options``)
+    if "knot_spacing" in given:
+        m = case.lp_machine if method == "lp" else case.machine
+        given["knot_spacing"] = float(given["knot_spacing"]) * 0.1 * m.stopping_distance()  # type: ignore[arg-type]
+    given.setdefault("sample_period", TS)
+    return Options(method=method, max_samples=MAX_SAMPLES, **given)  # type: ignore[arg-type]
+
+
+def promised(opt: Options) -> dict[str, bool]:
+    """What the run promises in its samples (``pipeline._promised``), as ``checker.check``'s switches: lp -> v, a
+    and j with the jerk stage; lp+nlp -> u, e, and v with ``nlp_axis_velocity``, v, a, j with ``nlp_kinematic``."""
+    if opt.method == "lp":
+        return {"kinematic": True, "drive": False, "jerk": opt.jerk, "axis_velocity": False}
+    kin = opt.nlp_kinematic
+    return {"kinematic": kin, "drive": True, "jerk": True, "axis_velocity": opt.nlp_axis_velocity or kin}
+
+
 def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None = None,
         before_schedule: Callable[[float], None] | None = None) -> Outcome:
     """Schedule ``case`` with ``method`` and check the samples: lp -> v, a, j; lp+nlp -> u, e, v.
@@ -46,8 +69,8 @@ def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None 
     ``before_schedule(floor)``, if given, is called with ``motion_time_floor`` (s) before the schedule, and
     ``before_check(samples)`` between the schedule and the check (the bench's time budgets)."""
     m = case.lp_machine if method == "lp" else case.machine
-    opt = Options(method=method, sample_period=TS, max_samples=MAX_SAMPLES)
     try:
+        opt = options_for(case, method)
         tp = case.toolpath()
         floor = motion_time_floor(tp, m, opt)
         if before_schedule is not None:
@@ -59,8 +82,8 @@ def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None 
     smp = sch.samples
     if before_check is not None:
         before_check(int(smp.t.size))
-    rep = checker.check(case.segments, gen.limits_of(m), TS, smp.t, smp.feed, smp.position,
-                        kinematic=method == "lp", drive=method == "lp+nlp", program=case.program)
+    rep = checker.check(case.segments, gen.limits_of(m), opt.sample_period, smp.t, smp.feed, smp.position,
+                        program=case.program, **promised(opt))
     # the bound the schedule refuses by up front must be one: never over the motion it returns
     motion = sch.summary["motion_time"]
     if not floor <= motion:

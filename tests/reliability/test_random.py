@@ -21,14 +21,19 @@ differences' u and e checked in the NLP; see ``solvers/nlp.py``).
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
+from solvers.pipeline import Options, schedule
 from tests.reliability import checker, gen, harness
 
 #: Seeds 0 .. RANDOM_CASES - 1 run in ``make test`` (issue: at least 200).
 RANDOM_CASES = 200
 #: Random G-code programs (``gen.cam_case``, profile "cam") run in ``make test``.
 CAM_CASES = 30
+#: Random cases with random scheduling options (profile "test+opts": ``gen.random_options``) run in ``make test``.
+OPTS_CASES = 20
 
 KNOWN_FAILURES: dict[int, dict[str, str]] = {}
 
@@ -60,6 +65,51 @@ def test_random_program(seed: int, method: str) -> None:
     case = gen.cam_case(seed, "cam")
     out = harness.run(case, method)
     assert out.ok, f"{out.describe()} tags={case.tags}"
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize("method", harness.METHODS)
+@pytest.mark.parametrize("seed", range(OPTS_CASES))
+def test_random_case_with_options(seed: int, method: str) -> None:
+    """The "test" case of ``seed`` scheduled with random options (sample period, jerk stage, knot spacing,
+    checkpoints, windows, solver, ...: ``gen.random_options``), checked against what those options promise
+    (``harness.promised``: without the jerk stage method lp holds v and a only)."""
+    case = gen.case(seed, "test+opts")
+    out = harness.run(case, method)
+    assert out.ok, f"{out.describe()} options={case.options} tags={case.tags}"
+
+
+def test_random_options_are_deterministic_varied_and_keep_the_base_case() -> None:
+    """A "+opts" case is its base profile's case (the same segments and machines) with options drawn from a
+    stream of its own; over OPTS_CASES seeds every drawn option shows up, each valid for ``Options``."""
+    a, b = gen.case(3, "test+opts"), gen.case(3, "test+opts")
+    assert a.options == b.options
+    base = gen.case(3, "test")
+    assert [s.ctrl.tolist() for s in a.segments] == [s.ctrl.tolist() for s in base.segments]
+    assert a.machine == base.machine and a.lp_machine == base.lp_machine and base.options == {}
+    cam, cam_base = gen.case(3, "cam+opts"), gen.case(3, "cam")
+    assert cam.gcode == cam_base.gcode and cam.options == a.options
+    seen = {k for s in range(10 * OPTS_CASES) for k in gen.random_options(s)}
+    assert seen == {k for k, chance in gen.OPTS_CHANCE.items() if chance > 0}
+    for c in (gen.case(s, "test+opts") for s in range(OPTS_CASES)):
+        for method in harness.METHODS:
+            opt = harness.options_for(c, method)
+            assert opt.sample_period == c.options.get("sample_period", harness.TS)
+
+
+def test_checker_reads_jerk_only_where_promised() -> None:
+    """Method lp without its jerk stage promises v and a: the checker's ``jerk`` switch leaves j out (and only j)."""
+    case = gen.case(0, "test")
+    sch = schedule(case.toolpath(), case.lp_machine, Options(method="lp", jerk=False))
+    smp = sch.samples
+    lim = gen.limits_of(case.lp_machine)
+    tight = dataclasses.replace(lim, jmax=lim.jmax * 1e-3)
+    args = (case.segments, tight, 1e-3, smp.t, smp.feed, smp.position)
+    assert not checker.check(*args, kinematic=True, drive=False).ok  # (its jerk, 1000 x over the tight jmax)
+    rep = checker.check(*args, kinematic=True, drive=False, jerk=False)
+    assert rep.ok, rep.violations
+    assert "jerk_x" not in rep.utilisation and "acceleration_x" in rep.utilisation
+    assert harness.promised(Options(method="lp", jerk=False))["jerk"] is False
 
 
 def test_program_generator_is_deterministic_and_varied() -> None:

@@ -6,6 +6,7 @@ the diagnosis, so a fix turns them into a failure-to-fail that must be looked at
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -16,7 +17,7 @@ from geometry import primitives
 from geometry.nurbs import NurbsSegment
 from geometry.toolpath import Toolpath
 from solvers import lp, pipeline, verify
-from solvers.errors import ScheduleError
+from solvers.errors import InvalidOptionsError, ScheduleError
 from solvers.machine import Axis, AxisLimits, Machine, router
 from solvers.pipeline import Options, schedule
 from solvers.timing import PieceProfile, PieceTiming
@@ -1347,3 +1348,42 @@ def test_bench_18692_lp_nlp_keeps_the_round_that_held_the_servo_error() -> None:
     may differ with the CPU's LP vertices; on any, the schedule must pass the independent checker.)"""
     out = harness.run(gen.case(18692, "bench"), "lp+nlp")
     assert out.ok, out.describe()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize(("seed", "status"), [(25, "stall"), (33, "NumericalError")])
+def test_clarabel_window_falls_back_to_highs(monkeypatch: pytest.MonkeyPatch, seed: int, status: str) -> None:
+    """Found by the "+opts" random cases (session 67): with ``solver="clarabel"`` test seed 25 (a near-cusp, where
+    HiGHS's q dips to 1.6e-10 of its peak) stalled at every knot refinement on Clarabel's q (-83 under a peak of
+    1.0e6), and seed 33's options (0.45 ms samples, 1.13 x the knot spacing) ended in Clarabel's NumericalError.
+    Such windows are solved again with HiGHS (``pipeline.SOLVER_FALLBACK``): both pass the independent checker,
+    and the summary and diagnostics say which windows fell back."""
+    base = gen.case(seed, "test+opts") if seed == 33 else gen.case(seed, "test")
+    case = dataclasses.replace(base, options={**base.options, "solver": "clarabel"})
+    assert case.options["solver"] == "clarabel"
+    opt = harness.options_for(case, "lp")
+    sch = schedule(case.toolpath(), case.lp_machine, opt)
+    assert sch.summary["solver_fallbacks"] >= 1
+    assert status in {f["status"] for f in sch.diagnostics["solver_fallbacks"]}
+    smp = sch.samples
+    rep = checker.check(case.segments, gen.limits_of(case.lp_machine), opt.sample_period, smp.t, smp.feed,
+                        smp.position, program=case.program, **harness.promised(opt))
+    assert rep.ok, rep.violations
+    monkeypatch.setattr(pipeline, "SOLVER_FALLBACK", False)
+    with pytest.raises(ScheduleError):
+        schedule(case.toolpath(), case.lp_machine, opt)
+
+
+def test_lp_nlp_refuses_the_jerk_stage_off() -> None:
+    """Found by the "+opts" random cases (session 67): under lp+nlp with ``jerk=False`` bench seeds 2, 14 and 29 of
+    0-39 read 1.15-6.2 x emax after their repair rounds (test seed 14 with ``nlp_overlap=2`` 9.7 x: 468 of 621 NLP
+    windows failed and kept the LP's feed).  lp+nlp keeps the LP's feed in places (its rest intervals, NLP windows
+    that fail), whose servo error only the drive-made jerk limit holds, so the jerk stage is off with method lp only:
+    ``Options`` refuses the pair, naming ``options.jerk`` (the service's 422), and the random harness drops it."""
+    with pytest.raises(InvalidOptionsError) as err:
+        Options(method="lp+nlp", jerk=False)
+    assert err.value.field == "options.jerk" and "method lp" in str(err.value)
+    assert not Options(method="lp", jerk=False).jerk
+    case = gen.case(14, "test+opts")
+    assert case.options["jerk"] is False
+    assert harness.options_for(case, "lp+nlp").jerk and not harness.options_for(case, "lp").jerk

@@ -154,6 +154,11 @@ def test_lp_nlp_is_the_default_method_and_reports_drive_columns(client: TestClie
     assert {"u_x", "e_x", "u_y", "e_y"} <= set(out["samples"])
     assert out["diagnostics"]["nlp_fallbacks"] == []
     assert_problem(client.post("/v1/schedule", json={**EXAMPLE, "options": {"method": "nlp"}}), 422, "options.method")
+    # (the jerk stage is off with method lp only: lp+nlp keeps the LP's feed in places, held by it)
+    r = client.post("/v1/schedule", json={**EXAMPLE, "options": {"jerk": False}})
+    assert_problem(r, 422, "options.jerk")
+    assert "method lp" in r.text
+    assert client.post("/v1/schedule", json={**EXAMPLE, "options": {"method": "lp", "jerk": False}}).status_code == 200
 
 
 def test_bad_knots_is_problem_json_naming_field(client: TestClient) -> None:
