@@ -380,6 +380,12 @@ def _dense_solve(ipm: DenseIpm | None, x: FloatArray, p: FloatArray, lbx: FloatA
     return dataclasses.replace(res, iterations=used)
 
 
+#: With the kinematic limits (``NlpLimits.amax``, ``jmax``: ``Options.nlp_kinematic``) the sampled check
+#: (``NlpRefiner._sampled``) also reads the samples' acceleration and jerk (``util["sampled_acceleration"]``,
+#: ``util["sampled_jerk"]``): at curvature jumps the model's points did not see bench seed 23's 1.16 x jmax.
+SAMPLED_KINEMATIC = True
+
+
 class NlpFailure(Exception):
     """An NLP window did not produce a verified feasible feed (handled by falling back to the LP)."""
 
@@ -2615,6 +2621,10 @@ class NlpRefiner:
             impulses.append((lo, hi, (Ts - np.abs(tu[lo:hi] - t_b)) / Ts**2, dv))
         e_s = np.zeros((n_u, 3))
         u_s = np.zeros((n_u, 3))
+        # with the kinematic limits (``Options.nlp_kinematic``) the samples' acceleration and jerk too: bench seeds
+        # 14 and 23 read 1.06 / 1.16 x jmax at curvature jumps, which the model's points do not see
+        a_s = np.zeros((n_u, 3)) if lim.amax is not None and SAMPLED_KINEMATIC else None
+        j_s = np.zeros((n_u, 3)) if lim.jmax is not None and SAMPLED_KINEMATIC else None
         for i in range(3):
             if not (v[:, i].any() or acc[:, i].any()):
                 # a standing axis: the means below are exact zeros, so e = 0 and u = c (the same values)
@@ -2630,7 +2640,13 @@ class NlpRefiner:
             u = lim.M[i] * am + lim.b[i] * vm + lim.c[i] + lim.d[i] * np.sign(vm)
             e_s[valid, i] = np.abs(e[valid]) / lim.emax[i]
             u_s[valid, i] = np.abs(u[valid]) / lim.umax[i]
-        for name, val in (("sampled_servo_error", e_s), ("sampled_control_signal", u_s)):
+            if a_s is not None and lim.amax is not None:
+                a_s[valid, i] = np.abs(am[valid]) / lim.amax[i]
+            if j_s is not None and lim.jmax is not None:
+                j_s[valid, i] = np.abs(jm[valid]) / lim.jmax[i]
+        named = [("sampled_servo_error", e_s), ("sampled_control_signal", u_s)]
+        named += [(k, x) for k, x in (("sampled_acceleration", a_s), ("sampled_jerk", j_s)) if x is not None]
+        for name, val in named:
             spread = maximum_filter1d(val, size=4 * M + 1, axis=0)
             util[name] = np.column_stack([np.interp(t_fine, tu, spread[:, i]) for i in range(3)])
 
@@ -3035,7 +3051,7 @@ def _tighten_points(util: dict[str, FloatArray], fine: FloatArray, s_pts: FloatA
     if not s_pts.size:
         return
     names = [k for k in ("control_signal", "servo_error", "sampled_control_signal", "sampled_servo_error",
-                         "acceleration", "jerk") if k in util]
+                         "acceleration", "jerk", "sampled_acceleration", "sampled_jerk") if k in util]
     if not names:
         return
     r = _worst_util(util, names)

@@ -430,7 +430,9 @@ class Options:
             and the limits are verified between checkpoints).
         nlp_axis_velocity: also hold |v| <= the LP's vmax per axis in the NLP (off: the NLP limits
             speed through the control signal, servo error and the drive's own vmax if given).
-        nlp_kinematic: keep the velocity, acceleration and true-jerk limits in the NLP too.
+        nlp_kinematic: keep the velocity, acceleration and true-jerk limits in the NLP too (the rest and step
+            accelerations held by the jerk as method lp's: ``lp.KINEMATIC_REST_FROM_JERK``; not offered by the
+            service).
         max_samples: most time samples the schedule may have (None: no cap); a piece whose samples
             would take the total over it raises ``OutputTooLargeError`` before they are built (the
             service sets its budget here: the motion time is known only once the pieces are solved).

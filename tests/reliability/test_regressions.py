@@ -1387,3 +1387,30 @@ def test_lp_nlp_refuses_the_jerk_stage_off() -> None:
     case = gen.case(14, "test+opts")
     assert case.options["jerk"] is False
     assert harness.options_for(case, "lp+nlp").jerk and not harness.options_for(case, "lp").jerk
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize(("seed", "profile", "switch"), [
+    (0, "test", "rest"), (15, "test", "rest"), (23, "bench", "sampled"),
+])
+def test_lp_nlp_with_kinematic_limits_holds_the_sampled_jerk(
+    monkeypatch: pytest.MonkeyPatch, seed: int, profile: str, switch: str,
+) -> None:
+    """Found by the "+opts" random cases (session 67): ``Options.nlp_kinematic`` promises the true jerk, but lp+nlp's
+    rest and step accelerations came from the drive's servo error alone: test seeds 0 and 15 read 1.99 / 3.62 x
+    jmax (29 of test seeds 0-59 refused).  They are now held by the jerk too (``lp.KINEMATIC_REST_FROM_JERK``), and
+    the NLP's sampled check reads the samples' jerk (``nlp.SAMPLED_KINEMATIC``: bench seed 23, 1.16 x at a
+    curvature jump).  Each case passes the independent checker (v, a, j and u, e) and fails with its switch off."""
+    from solvers import nlp
+
+    case = dataclasses.replace(gen.case(seed, profile), options={"nlp_kinematic": True})
+    assert harness.promised(harness.options_for(case, "lp+nlp")) == {
+        "kinematic": True, "drive": True, "jerk": True, "axis_velocity": True}
+    out = harness.run(case, "lp+nlp")
+    assert out.ok, out.describe()
+    if switch == "rest":
+        monkeypatch.setattr(lp, "KINEMATIC_REST_FROM_JERK", False)
+    else:
+        monkeypatch.setattr(nlp, "SAMPLED_KINEMATIC", False)
+    off = harness.run(case, "lp+nlp")
+    assert not off.ok and off.error is not None and "jerk" in off.error
