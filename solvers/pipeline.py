@@ -2142,6 +2142,24 @@ def _in_rest_intervals(s_loc: FloatArray, prof: PieceProfile) -> bool:
     return bool(np.any((s_loc < prof.d) | (s_loc > prof.length - prof.d)))
 
 
+def _overlap_hint(exc: InfeasibleError, piece: Piece, machine: Machine, opt: Options) -> InfeasibleError:
+    """``exc`` (an LP window of ``piece`` found infeasible), naming ``options.lp_overlap`` where it was given under the
+    overlap the piece's stopping distance sizes (``plan_piece``'s default): a window joined to the next that close
+    may have to stop where it cannot (cam seed 109 with lp_overlap 3 where 24 is the default: window 256 infeasible,
+    feasible with the default).  Otherwise ``exc`` itself."""
+    if opt.lp_overlap is None:
+        return exc
+    default = plan_piece(piece, machine, replace(opt, lp_overlap=None)).overlap
+    given = plan_piece(piece, machine, opt).overlap
+    if given >= default:
+        return exc
+    return InfeasibleError(
+        f"an LP window of piece {piece.index} is infeasible with windows overlapping by {given} knot intervals, under "
+        f"the {default} that the machine's stopping distance needs there (the default overlap)",
+        field="options.lp_overlap", value=opt.lp_overlap, window=exc.window, status=exc.status,
+    )
+
+
 def _repair_limits(lim: LimitSet, rounds: int, at_rest: bool = False) -> LimitSet:
     """The LP's limits in a piece's repair round ``rounds`` (1, 2, ..) for its samples (``SAMPLE_REPAIR_ROUNDS``);
     ``at_rest``: samples over a limit lie in a rest interval of the piece.
@@ -2633,6 +2651,8 @@ def _schedule_stream(
                         lp_prof, prof = _nlp_on_coarser_knots(toolpath, piece, machine, opt, (lp_prof, prof), plain,
                                                            nlp_lim, refiners, nlp_stats, n_failed, lead_in, pool)
                     t_nlp += time.perf_counter() - t0
+            except InfeasibleError as exc:
+                raise _overlap_hint(exc, piece, machine, opt) from exc
             finally:
                 if pipe is not None:
                     pipe.close()

@@ -18,7 +18,10 @@ MAX_SAMPLES = 20_000_000
 #: How a refusal reads in ``Outcome.error`` (the bench counts these apart from failures): by that cap, or by a
 #: limit too small for float64 positions at TS to show held (``solvers.errors.ResolutionError``: bench seed 16950,
 #: whose x jmax one unit in the last place of its x coordinates reads 2.2 x over as a jerk).
-REFUSED = ("solvers.errors.OutputTooLargeError", "solvers.errors.ResolutionError")
+#: Also an LP window found infeasible where ``Options.lp_overlap`` was given under the overlap the machine's
+#: stopping distance needs (``pipeline._overlap_hint``: the "+opts" profiles draw overlaps from 3 intervals).
+REFUSED = ("solvers.errors.OutputTooLargeError", "solvers.errors.ResolutionError",
+           "solvers.errors.InfeasibleError: options.lp_overlap:")
 
 
 @dataclass

@@ -17,7 +17,7 @@ from geometry import primitives
 from geometry.nurbs import NurbsSegment
 from geometry.toolpath import Toolpath
 from solvers import lp, pipeline, verify
-from solvers.errors import InvalidOptionsError, ScheduleError
+from solvers.errors import InfeasibleError, InvalidOptionsError, ScheduleError
 from solvers.machine import Axis, AxisLimits, Machine, router
 from solvers.pipeline import Options, schedule
 from solvers.timing import PieceProfile, PieceTiming
@@ -1414,3 +1414,18 @@ def test_lp_nlp_with_kinematic_limits_holds_the_sampled_jerk(
         monkeypatch.setattr(nlp, "SAMPLED_KINEMATIC", False)
     off = harness.run(case, "lp+nlp")
     assert not off.ok and off.error is not None and "jerk" in off.error
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_an_lp_overlap_under_the_stopping_distance_is_named() -> None:
+    """Found by the "+opts" random cases (session 67): cam seed 109 with ``lp_window=11, lp_overlap=3`` (the default
+    overlap there: 24 knot intervals, the machine's stopping distance) ended in "LP window is infeasible" naming no
+    input.  The refusal now names ``options.lp_overlap`` and the overlap the piece needs (a 422 naming the field);
+    with the default overlap the same program passes the checker."""
+    case = gen.case(109, "cam+opts")
+    assert case.options["lp_overlap"] == 3
+    with pytest.raises(InfeasibleError) as err:
+        schedule(case.toolpath(), case.lp_machine, harness.options_for(case, "lp"))
+    assert err.value.field == "options.lp_overlap" and err.value.value == 3 and "24" in str(err.value)
+    out = harness.run(dataclasses.replace(case, options={"sample_period": case.options["sample_period"]}), "lp")
+    assert out.ok, out.describe()
