@@ -2621,8 +2621,8 @@ class NlpRefiner:
             impulses.append((lo, hi, (Ts - np.abs(tu[lo:hi] - t_b)) / Ts**2, dv))
         e_s = np.zeros((n_u, 3))
         u_s = np.zeros((n_u, 3))
-        # with the kinematic limits (``Options.nlp_kinematic``) the samples' acceleration and jerk too: bench seeds
-        # 14 and 23 read 1.06 / 1.16 x jmax at curvature jumps, which the model's points do not see
+        # with the kinematic limits (``Options.nlp_kinematic``) the samples' acceleration and jerk too: bench seed 23
+        # read 1.16 x jmax at a curvature jump, which the model's points did not see
         a_s = np.zeros((n_u, 3)) if lim.amax is not None and SAMPLED_KINEMATIC else None
         j_s = np.zeros((n_u, 3)) if lim.jmax is not None and SAMPLED_KINEMATIC else None
         for i in range(3):

@@ -1275,6 +1275,7 @@ class _WindowWalk:
         # only the window's own breaks (WindowLP looks at no others): masking all of a long piece's
         # breaks in every window grew with the square of the path length
         b0, b1 = np.searchsorted(self.breaks, (k0 * plan.d, k1 * plan.d))
+
         def solve(solver: str) -> WindowResult:
             return WindowLP(spec, self.lim, self.geometry, solver, self.breaks[b0:b1], v_in).solve(s_check)
 
