@@ -2143,6 +2143,12 @@ def _in_rest_intervals(s_loc: FloatArray, prof: PieceProfile) -> bool:
     return bool(np.any((s_loc < prof.d) | (s_loc > prof.length - prof.d)))
 
 
+#: With ``Options.nlp_kinematic`` the repair rounds that hold a piece's steps at REPAIR_STEP_SHARE of the budget do
+#: so in its NLP too (the LP's alone otherwise): bench seed 14 read 1.0117, 1.0127, then 1.0525 and 1.0521 x jmax
+#: at s = 0.52 mm in its rounds 0-3, a refusal; with it it passes (session 67).  Default options: unchanged.
+REPAIR_NLP_STEP = True
+
+
 def _overlap_hint(exc: InfeasibleError, piece: Piece, machine: Machine, opt: Options) -> InfeasibleError:
     """``exc`` (an LP window of ``piece`` found infeasible), naming ``options.lp_overlap`` where it was given under the
     overlap the piece's stopping distance sizes (``plan_piece``'s default): a window joined to the next that close
@@ -2729,7 +2735,11 @@ def _schedule_stream(
                                              None, first, first_bound=first_bound)
                 prof = lp_prof
                 if nlp_stats is not None and nlp_lim is not None:
-                    prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, {}, nlp_stats,
+                    nlp_r = nlp_lim
+                    if (REPAIR_NLP_STEP and opt.nlp_kinematic and rounds >= SAMPLE_REPAIR_ROUNDS
+                            and nlp_lim.a_step is not None):
+                        nlp_r = replace(nlp_lim, a_step=lim_r.a_step)  # (the NLP's steps as the LP's)
+                    prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_r, {}, nlp_stats,
                                          None, verify_s, lead_in=lead_in, pool=pool)
             stats["sample_repairs"] = max(stats["sample_repairs"], rounds)
             kind, axis, util, s_worst, t_worst = worst
