@@ -67,7 +67,8 @@ def promised(opt: Options) -> dict[str, bool]:
 
 def run(case: gen.Case, method: str, before_check: Callable[[int], None] | None = None,
         before_schedule: Callable[[float], None] | None = None) -> Outcome:
-    """Schedule ``case`` with ``method`` and check the samples: lp -> v, a, j; lp+nlp -> u, e, v.
+    """Schedule ``case`` with ``method`` (and its options: ``options_for``) and check the samples for what they
+    promise (``promised``; default options: lp -> v, a, j; lp+nlp -> u, e).
 
     ``before_schedule(floor)``, if given, is called with ``motion_time_floor`` (s) before the schedule, and
     ``before_check(samples)`` between the schedule and the check (the bench's time budgets)."""
