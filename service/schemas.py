@@ -239,7 +239,10 @@ class OptionsIn(BaseModel):
         default=True, description="the LP's pseudo-jerk stage; false (velocity and acceleration limits only) needs "
         'method "lp"'
     )
-    solver: Literal["highs", "clarabel"] = "highs"
+    solver: Literal["highs", "clarabel"] = Field(
+        default="highs", description='the LP solver; under "clarabel" an LP window it fails on, or whose feed comes to '
+        "rest inside it, is solved again with HiGHS (summary.solver_fallbacks)"
+    )
     feed_max: Speed | None = Field(default=None, description="mm/s (overrides the machine's)")
     plots: list[PlotName] | None = Field(
         default=None, max_length=len(PLOT_NAMES),
