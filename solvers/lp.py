@@ -380,6 +380,11 @@ class WindowResult:
 #: 60 runs (most at t = 0 or a corner: the drive's rest step, 2-4 x jmax Ts / 2); with it (and the NLP's sampled
 #: jerk, ``nlp.SAMPLED_KINEMATIC``) 0 of 60, bench 0-39 1 of 40 (session 67).
 KINEMATIC_REST_FROM_JERK = True
+#: ... and its acceleration and jerk rows next to a tangent break passed at speed are coupled to the feed there
+#: (``LimitSet.v_step_period``, ``WindowLP._vstep_coupling``) as method lp's are: where an NLP window fails the LP's
+#: feed is the output, and it must hold the true jerk too (cam+opts seed 183 lp+nlp: 47 NLP windows infeasible,
+#: the LP's feed kept, 1.26 x jmax after the repair rounds where two lines meet at 0.05 degrees; session 68).
+KINEMATIC_VSTEP_COUPLING = True
 
 
 @dataclass(frozen=True)
@@ -452,7 +457,7 @@ class LimitSet:
                    sample_period if jerk and not rest_from_drive else None,
                    v_step_limit(m, sample_period, jerk, rest_from_drive, kinematic,
                                 V_STEP_SHARE_DRIVE if rest_from_drive else V_STEP_SHARE),
-                   None if rest_from_drive else sample_period,
+                   sample_period if not rest_from_drive or (kinematic and jerk and KINEMATIC_VSTEP_COUPLING) else None,
                    m.drive_arrays() if rest_from_drive and not kinematic and m.has_drives else None,
                    not rest_from_drive, time_stage=not rest_from_drive)
 

@@ -163,7 +163,8 @@ REFINE_TURN = 0.05
 REFINE_UTIL = 0.05
 REFINE_MAX_POINTS = 20_000
 #: Sampled check (``NlpRefiner._sampled``): time steps per sample period of its uniform grid, and the
-#: largest grid (a window slower than that per sample is not checked: its e changes little per sample).
+#: largest grid (a window slower than that per sample is not checked: its e changes little per sample).  Even: the
+#: plain third difference (``util["sampled_jerk"]``) reads the second differences Ts / 2 either side of its centre.
 SAMPLED_SUBDIV = 8
 SAMPLED_MAX_POINTS = 400_000
 #: The sampled check also reads the motion just outside the window (``_Context``): this many sample
@@ -384,6 +385,11 @@ def _dense_solve(ipm: DenseIpm | None, x: FloatArray, p: FloatArray, lbx: FloatA
 #: (``NlpRefiner._sampled``) also reads the samples' acceleration and jerk (``util["sampled_acceleration"]``,
 #: ``util["sampled_jerk"]``): at curvature jumps the model's points did not see bench seed 23's 1.16 x jmax.
 SAMPLED_KINEMATIC = True
+#: ... and reads the jerk as the plain third difference the promise is checked by (``tests/fdcheck``), with each
+#: velocity step's impulse at its exact peak (``_impulse_peaks``), not the drive model's central difference, which
+#: reads an impulse at half: cam+opts seeds 183 and 235 lp+nlp, 1.05-1.26 x jmax where lines meet at 0.05 degrees
+#: (session 68).
+SAMPLED_PLAIN_JERK = True
 
 
 class NlpFailure(Exception):
@@ -2614,6 +2620,7 @@ class NlpRefiner:
         box = np.where(np.abs(k) == M, 0.5, 1.0) / (2 * M)
         hat = (M - np.abs(k)) / M**2
         valid = slice(2 * M, n_u - 2 * M)
+        half = M // 2  # (SAMPLED_SUBDIV is even: the plain third difference's second differences at +-Ts / 2)
         # each velocity step's impulse dv delta(t - t_b) under the hat: dv (Ts - |t - t_b|) / Ts^2 on its +-Ts
         impulses: list[tuple[int, int, FloatArray, FloatArray]] = []
         for t_b, dv in steps:
@@ -2631,7 +2638,8 @@ class NlpRefiner:
                 u_s[valid, i] = abs(lim.c[i]) / lim.umax[i]
                 continue
             vm = np.convolve(np.interp(tu, t, v[:, i]), box, mode="same")
-            am = np.convolve(np.interp(tu, t, acc[:, i]), hat, mode="same")
+            am_motion = np.convolve(np.interp(tu, t, acc[:, i]), hat, mode="same")
+            am = am_motion.copy()
             for lo, hi, w, dv in impulses:
                 am[lo:hi] += dv[i] * w
             jm = np.zeros(n_u)
@@ -2640,10 +2648,24 @@ class NlpRefiner:
             u = lim.M[i] * am + lim.b[i] * vm + lim.c[i] + lim.d[i] * np.sign(vm)
             e_s[valid, i] = np.abs(e[valid]) / lim.emax[i]
             u_s[valid, i] = np.abs(u[valid]) / lim.umax[i]
+            probes = _impulse_peaks(tu, am_motion, steps, i, Ts, half) if steps and SAMPLED_PLAIN_JERK else None
             if a_s is not None and lim.amax is not None:
-                a_s[valid, i] = np.abs(am[valid]) / lim.amax[i]
+                a_abs = np.abs(am)
+                if probes is not None:
+                    np.maximum.at(a_abs, probes[0], probes[1])
+                a_s[valid, i] = a_abs[valid] / lim.amax[i]
             if j_s is not None and lim.jmax is not None:
-                j_s[valid, i] = np.abs(jm[valid]) / lim.jmax[i]
+                # the promised jerk is the plain third difference (``tests/fdcheck``): two adjacent second
+                # differences Ts apart, where the drive model's is their mean over 2 Ts (``jm``), which read a
+                # velocity step's impulse and the motion's jerk next to it at half and its mean
+                jp = np.zeros(n_u)
+                jp[half:-half] = (am[2 * half :] - am[: -2 * half]) / Ts
+                if not SAMPLED_PLAIN_JERK:
+                    jp = jm
+                j_abs = np.abs(jp)
+                if probes is not None:
+                    np.maximum.at(j_abs, probes[2], probes[3])
+                j_s[valid, i] = j_abs[valid] / lim.jmax[i]
         named = [("sampled_servo_error", e_s), ("sampled_control_signal", u_s)]
         named += [(k, x) for k, x in (("sampled_acceleration", a_s), ("sampled_jerk", j_s)) if x is not None]
         for name, val in named:
@@ -3725,6 +3747,38 @@ class ChainPipeline:
 STEP_PAIR_MM = 4.0 * BREAK_EPS_MM
 #: A velocity change across such a pair beyond its smooth part over this share of the largest axis speed is a step.
 STEP_MIN_SHARE = 1e-6
+
+
+def _impulse_peaks(
+    tu: FloatArray, am_motion: FloatArray, steps: list[tuple[float, FloatArray]], axis: int, Ts: float, half: int
+) -> tuple[NDArray[np.int64], FloatArray, NDArray[np.int64], FloatArray]:
+    r"""The sampled acceleration and plain jerk of axis ``axis`` where the velocity steps' impulses peak
+    (``NlpRefiner._sampled``), at their exact instants rather than on the uniform grid ``tu`` (step h).
+
+    A step dv at t_b adds dv H(t - t_b) to the hat mean of a (the second difference centred at t), with
+    H(x) = max(0, Ts - |x|) / Ts^2, and dv (H(t + Ts/2 - t_b) - H(t - Ts/2 - t_b)) / Ts to the plain third
+    difference centred at t: peaks dv / Ts at t_b and -+dv / Ts^2 at t_b -+ Ts / 2.  On the grid a peak
+    between two points reads down to 1 - h / Ts of it (h = Ts / 8: 0.875 x the jerk's), so at each peak
+    instant the motion's part is interpolated from ``am_motion`` (the hat mean of a without the steps, on
+    ``tu``) and every step's part added exactly.  Returns (grid index, |a|) at the t_b and (grid index,
+    |j|) at the t_b -+ Ts / 2, each at the grid point nearest its instant."""
+    tb = np.array([t_b for t_b, _ in steps])
+    dv = np.array([d[axis] for _, d in steps])
+    h = float(tu[1] - tu[0])
+
+    def hat_sum(x: FloatArray) -> FloatArray:
+        w = np.maximum(0.0, Ts - np.abs(x[:, None] - tb[None, :]))
+        return np.asarray(w @ dv / Ts**2, dtype=np.float64)
+
+    def nearest(x: FloatArray) -> NDArray[np.int64]:
+        return np.asarray(np.clip(np.rint((x - tu[0]) / h), 0, tu.size - 1), dtype=np.int64)
+
+    a_at = np.abs(np.interp(tb, tu, am_motion) + hat_sum(tb))
+    pj = np.concatenate([tb - 0.5 * Ts, tb + 0.5 * Ts])
+    jp_motion = np.zeros(tu.size)
+    jp_motion[half:-half] = (am_motion[2 * half :] - am_motion[: -2 * half]) / Ts
+    j_at = np.abs(np.interp(pj, tu, jp_motion) + (hat_sum(pj + 0.5 * Ts) - hat_sum(pj - 0.5 * Ts)) / Ts)
+    return nearest(tb), a_at, nearest(pj), j_at
 
 
 def _velocity_steps(fine: FloatArray, t: FloatArray, v: FloatArray, acc: FloatArray) -> list[tuple[float, FloatArray]]:

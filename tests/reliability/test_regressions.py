@@ -1402,7 +1402,8 @@ def test_lp_nlp_with_kinematic_limits_holds_the_sampled_jerk(
     the NLP's sampled check reads the samples' jerk (``nlp.SAMPLED_KINEMATIC``: bench seed 23, 1.16 x at a
     curvature jump), and the repair rounds that scale the LP's steps scale the NLP's too (``pipeline.REPAIR_NLP_STEP``:
     bench seed 14, 1.05 x after them).  Each case passes the independent checker (v, a, j and u, e) and fails with
-    its switch off.  Open: cam seeds 163, 177, 183 of 150-199 with it (1.05-1.15 x at line-arc junctions)."""
+    its switch off.  (cam seeds 163, 177, 183 of 150-199 with it, 1.05-1.15 x where lines meet at speed: session 68,
+    ``test_lp_nlp_with_kinematic_limits_holds_the_jerk_where_lines_meet_at_speed``.)"""
     from solvers import nlp
 
     case = dataclasses.replace(gen.case(seed, profile), options={"nlp_kinematic": True})
@@ -1415,7 +1416,41 @@ def test_lp_nlp_with_kinematic_limits_holds_the_sampled_jerk(
     elif switch == "sampled":
         monkeypatch.setattr(nlp, "SAMPLED_KINEMATIC", False)
     else:
+        # (since session 68's plain third difference in the NLP's sampled check, ``nlp.SAMPLED_PLAIN_JERK``, bench
+        # seed 14 passes with either: 1.0035 x with only the repair's steps, 0.99995 x with only the plain jerk)
         monkeypatch.setattr(pipeline, "REPAIR_NLP_STEP", False)
+        monkeypatch.setattr(nlp, "SAMPLED_PLAIN_JERK", False)
+    off = harness.run(case, "lp+nlp")
+    assert not off.ok and off.error is not None and "jerk" in off.error
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize(("seed", "only_kinematic", "switch"), [
+    (183, True, "plain"), (235, False, "plain"), (183, False, "coupling"),
+])
+def test_lp_nlp_with_kinematic_limits_holds_the_jerk_where_lines_meet_at_speed(
+    monkeypatch: pytest.MonkeyPatch, seed: int, only_kinematic: bool, switch: str,
+) -> None:
+    """Found by the "+opts" random cases (session 67, fixed in 68): cam+opts seeds 183 and 235 lp+nlp with
+    ``nlp_kinematic`` were refused, the sampled jerk 1.26 / 1.08 x jmax after the repair rounds (183 with only that
+    option: 1.05 x), each where two lines meet at ~0.05 degrees, a tangent break passed at speed: the axis velocity
+    steps there, an impulse in the samples' differences.  The NLP's sampled check read the jerk as the drive model's
+    central difference, the impulse at half (``nlp.SAMPLED_PLAIN_JERK``: now the plain third difference the promise
+    is checked by), and where 47 NLP windows of 183 failed and kept the LP's feed, the LP had capped the feed at the
+    break without coupling its acceleration and jerk rows to the impulse (``lp.KINEMATIC_VSTEP_COUPLING``).  Each
+    case passes the independent checker (v, a, j and u, e) and is refused for the jerk with its switch off."""
+    from solvers import nlp
+
+    case = gen.case(seed, "cam+opts")
+    assert case.options.get("nlp_kinematic") is True
+    if only_kinematic:
+        case = dataclasses.replace(case, options={"nlp_kinematic": True})
+    out = harness.run(case, "lp+nlp")
+    assert out.ok, out.describe()
+    if switch == "plain":
+        monkeypatch.setattr(nlp, "SAMPLED_PLAIN_JERK", False)
+    else:
+        monkeypatch.setattr(lp, "KINEMATIC_VSTEP_COUPLING", False)
     off = harness.run(case, "lp+nlp")
     assert not off.ok and off.error is not None and "jerk" in off.error
 

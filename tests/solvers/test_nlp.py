@@ -938,3 +938,53 @@ def test_sampled_check_skips_a_window_whose_feed_reaches_zero() -> None:
     util: dict[str, Any] = {}
     ref._sampled(fine, None, (f, np.zeros(11), np.zeros(11)), util)  # type: ignore[arg-type]
     assert util == {}
+
+
+#: The NLP's sampled check against the positions' own differences over every phase of the sample clock: relative.
+SAMPLED_VS_FD_TOL = 5e-3
+
+
+@pytest.mark.parametrize("f0, acc", [(40.0, 0.0), (40.0, 3000.0), (120.0, -600.0)])
+@pytest.mark.parametrize("s_b", [5.0, 5.0011, 5.0025, 5.0037])
+def test_sampled_check_reads_a_tangent_breaks_impulse_as_the_plain_differences_do(
+    f0: float, acc: float, s_b: float
+) -> None:
+    """``NlpRefiner._sampled`` with the kinematic limits (``Options.nlp_kinematic``) reads the samples' acceleration
+    and jerk as ``tests/fdcheck`` does: the second and the plain third difference of the positions at Ts.  A
+    tangent break passed at speed steps the axis velocity, an impulse in those differences: the check read the
+    jerk as the drive model's central difference (half the impulse: cam+opts seeds 183 and 235 lp+nlp, sampled
+    jerk 1.26 / 1.08 x at line-line junctions turning by 0.05 degrees), and on its grid of Ts / 8 an impulse
+    between two grid points read down to 0.875 x.  Truth: a line turning by 0.3 degrees at s_b, the feed with
+    constant sddot = ``acc`` from ``f0``, its exact positions sampled at 256 phases of the clock."""
+    from geometry.toolpath import PathSamples
+    from solvers import nlp
+
+    Ts = 1e-3
+    lim = nlp.NlpLimits.from_machine(router(), False, True, sample_period=Ts)
+    ref = object.__new__(nlp.NlpRefiner)
+    ref.lim = lim
+    e0, th = np.array([1.0, 0.0, 0.0]), np.radians(0.3)
+    e1 = np.array([np.cos(th), np.sin(th), 0.0])
+    eps = nlp.BREAK_EPS_MM
+    fine = np.linspace(0.0, 10.0, 801)
+    fine = np.sort(np.concatenate([fine[np.abs(fine - s_b) > eps], [s_b - eps, s_b + eps]]))
+
+    def line(s: np.ndarray) -> np.ndarray:
+        return np.where((s < s_b)[:, None], s[:, None] * e0, s_b * e0 + (s - s_b)[:, None] * e1)
+
+    d1 = np.where((fine < s_b)[:, None], e0, e1)
+    z = np.zeros_like(d1)
+    f = np.sqrt(f0**2 + 2.0 * acc * fine)
+    util: dict[str, Any] = {}
+    ref._sampled(fine, PathSamples(fine, line(fine), d1, z, z), (f, np.full(fine.size, acc), np.zeros(fine.size)),
+                 util)
+    t_b = s_b / f0 if acc == 0.0 else (np.sqrt(f0**2 + 2.0 * acc * s_b) - f0) / acc
+    j_fd = a_fd = 0.0
+    for ph in np.linspace(0.0, 1.0, 256, endpoint=False):
+        t = t_b + (np.arange(-20, 21) + ph) * Ts
+        x = line(f0 * t + 0.5 * acc * t * t)
+        j_fd = max(j_fd, float(np.abs(np.diff(x, 3, axis=0)[:, 1]).max()) / Ts**3 / lim.jmax[1])
+        a_fd = max(a_fd, float(np.abs(np.diff(x, 2, axis=0)[:, 1]).max()) / Ts**2 / lim.amax[1])
+    near = np.abs(fine - s_b) < 1.0
+    assert float(util["sampled_jerk"][near, 1].max()) == pytest.approx(j_fd, rel=SAMPLED_VS_FD_TOL)
+    assert float(util["sampled_acceleration"][near, 1].max()) == pytest.approx(a_fd, rel=SAMPLED_VS_FD_TOL)
