@@ -390,6 +390,9 @@ SAMPLED_KINEMATIC = True
 #: reads an impulse at half: cam+opts seeds 183 and 235 lp+nlp, 1.05-1.26 x jmax where lines meet at 0.05 degrees
 #: (session 68).
 SAMPLED_PLAIN_JERK = True
+#: The sampled check's servo error and control signal at each velocity step's exact kinks too (``_impulse_probes``):
+#: on its grid of Ts / SAMPLED_SUBDIV they read ~0.95 x of the samples' own next to a tangent break (session 68).
+SAMPLED_IMPULSE_PROBES = True
 
 
 class NlpFailure(Exception):
@@ -2644,15 +2647,20 @@ class NlpRefiner:
                 am[lo:hi] += dv[i] * w
             jm = np.zeros(n_u)
             jm[M:-M] = (am[2 * M :] - am[: -2 * M]) / (2.0 * Ts)
-            e = lim.Kv[i] * vm + lim.Ka[i] * am + lim.Kj[i] * jm
-            u = lim.M[i] * am + lim.b[i] * vm + lim.c[i] + lim.d[i] * np.sign(vm)
-            e_s[valid, i] = np.abs(e[valid]) / lim.emax[i]
-            u_s[valid, i] = np.abs(u[valid]) / lim.umax[i]
-            probes = _impulse_peaks(tu, am_motion, steps, i, Ts, half) if steps and SAMPLED_PLAIN_JERK else None
+            e = np.abs(lim.Kv[i] * vm + lim.Ka[i] * am + lim.Kj[i] * jm)
+            u = np.abs(lim.M[i] * am + lim.b[i] * vm + lim.c[i] + lim.d[i] * np.sign(vm))
+            pr = _impulse_probes(tu, vm, am_motion, steps, i, Ts, M) if steps else None
+            if pr is not None and SAMPLED_IMPULSE_PROBES:
+                np.maximum.at(e, pr.index, np.abs(lim.Kv[i] * pr.vm + lim.Ka[i] * pr.am + lim.Kj[i] * pr.jm))
+                np.maximum.at(u, pr.index, np.abs(lim.M[i] * pr.am + lim.b[i] * pr.vm + lim.c[i]
+                                                  + lim.d[i] * np.sign(pr.vm)))
+            e_s[valid, i] = e[valid] / lim.emax[i]
+            u_s[valid, i] = u[valid] / lim.umax[i]
+            plain = pr if SAMPLED_PLAIN_JERK else None
             if a_s is not None and lim.amax is not None:
                 a_abs = np.abs(am)
-                if probes is not None:
-                    np.maximum.at(a_abs, probes[0], probes[1])
+                if plain is not None:
+                    np.maximum.at(a_abs, plain.index, np.abs(plain.am))
                 a_s[valid, i] = a_abs[valid] / lim.amax[i]
             if j_s is not None and lim.jmax is not None:
                 # the promised jerk is the plain third difference (``tests/fdcheck``): two adjacent second
@@ -2663,8 +2671,8 @@ class NlpRefiner:
                 if not SAMPLED_PLAIN_JERK:
                     jp = jm
                 j_abs = np.abs(jp)
-                if probes is not None:
-                    np.maximum.at(j_abs, probes[2], probes[3])
+                if plain is not None:
+                    np.maximum.at(j_abs, plain.index, np.abs(plain.jp))
                 j_s[valid, i] = j_abs[valid] / lim.jmax[i]
         named = [("sampled_servo_error", e_s), ("sampled_control_signal", u_s)]
         named += [(k, x) for k, x in (("sampled_acceleration", a_s), ("sampled_jerk", j_s)) if x is not None]
@@ -3749,36 +3757,55 @@ STEP_PAIR_MM = 4.0 * BREAK_EPS_MM
 STEP_MIN_SHARE = 1e-6
 
 
-def _impulse_peaks(
-    tu: FloatArray, am_motion: FloatArray, steps: list[tuple[float, FloatArray]], axis: int, Ts: float, half: int
-) -> tuple[NDArray[np.int64], FloatArray, NDArray[np.int64], FloatArray]:
-    r"""The sampled acceleration and plain jerk of axis ``axis`` where the velocity steps' impulses peak
-    (``NlpRefiner._sampled``), at their exact instants rather than on the uniform grid ``tu`` (step h).
+@dataclass(frozen=True)
+class _Probes:
+    """The sampled means of one axis at instants next to velocity steps (``_impulse_probes``), each (P,): the grid
+    point nearest each instant, the box mean of v (mm/s), the hat mean of a (mm/s^2), the drive model's central
+    jerk (the mean of two third differences) and the plain third difference (mm/s^3)."""
+
+    index: NDArray[np.int64]
+    vm: FloatArray
+    am: FloatArray
+    jm: FloatArray
+    jp: FloatArray
+
+
+def _impulse_probes(
+    tu: FloatArray, vm: FloatArray, am_motion: FloatArray, steps: list[tuple[float, FloatArray]], axis: int,
+    Ts: float, M: int,
+) -> _Probes:
+    r"""The sampled means of axis ``axis`` (``NlpRefiner._sampled``) at the instants where the velocity steps'
+    impulses peak, exactly rather than on the uniform grid ``tu`` (step h = Ts / M).
 
     A step dv at t_b adds dv H(t - t_b) to the hat mean of a (the second difference centred at t), with
-    H(x) = max(0, Ts - |x|) / Ts^2, and dv (H(t + Ts/2 - t_b) - H(t - Ts/2 - t_b)) / Ts to the plain third
-    difference centred at t: peaks dv / Ts at t_b and -+dv / Ts^2 at t_b -+ Ts / 2.  On the grid a peak
-    between two points reads down to 1 - h / Ts of it (h = Ts / 8: 0.875 x the jerk's), so at each peak
-    instant the motion's part is interpolated from ``am_motion`` (the hat mean of a without the steps, on
-    ``tu``) and every step's part added exactly.  Returns (grid index, |a|) at the t_b and (grid index,
-    |j|) at the t_b -+ Ts / 2, each at the grid point nearest its instant."""
+    H(x) = max(0, Ts - |x|) / Ts^2, dv (H(t + Ts - t_b) - H(t - Ts - t_b)) / (2 Ts) to the central jerk and
+    dv (H(t + Ts/2 - t_b) - H(t - Ts/2 - t_b)) / Ts to the plain third difference: each piecewise linear in t,
+    with its kinks (so the extremes of e, u, a and j where the impulse dominates) at t_b + k Ts / 2, k = -4 .. 4.
+    On the grid a kink between two points read down to 1 - h / Ts of the plain jerk's peak (0.875 x at M = 8)
+    and ~0.95 x of the servo error's.  At each such instant the motion's part is interpolated from the grid
+    (``vm``; ``am_motion``, the hat mean of a without the steps, and the differences of it) and every step's
+    part added exactly; each goes to the grid point nearest its instant."""
     tb = np.array([t_b for t_b, _ in steps])
     dv = np.array([d[axis] for _, d in steps])
     h = float(tu[1] - tu[0])
+    half = M // 2
+    at = (tb[:, None] + 0.5 * Ts * np.arange(-4, 5)[None, :]).ravel()
 
     def hat_sum(x: FloatArray) -> FloatArray:
         w = np.maximum(0.0, Ts - np.abs(x[:, None] - tb[None, :]))
         return np.asarray(w @ dv / Ts**2, dtype=np.float64)
 
-    def nearest(x: FloatArray) -> NDArray[np.int64]:
-        return np.asarray(np.clip(np.rint((x - tu[0]) / h), 0, tu.size - 1), dtype=np.int64)
-
-    a_at = np.abs(np.interp(tb, tu, am_motion) + hat_sum(tb))
-    pj = np.concatenate([tb - 0.5 * Ts, tb + 0.5 * Ts])
+    jm_motion = np.zeros(tu.size)
+    jm_motion[M:-M] = (am_motion[2 * M :] - am_motion[: -2 * M]) / (2.0 * Ts)
     jp_motion = np.zeros(tu.size)
     jp_motion[half:-half] = (am_motion[2 * half :] - am_motion[: -2 * half]) / Ts
-    j_at = np.abs(np.interp(pj, tu, jp_motion) + (hat_sum(pj + 0.5 * Ts) - hat_sum(pj - 0.5 * Ts)) / Ts)
-    return nearest(tb), a_at, nearest(pj), j_at
+    return _Probes(
+        np.asarray(np.clip(np.rint((at - tu[0]) / h), 0, tu.size - 1), dtype=np.int64),
+        np.interp(at, tu, vm),
+        np.interp(at, tu, am_motion) + hat_sum(at),
+        np.interp(at, tu, jm_motion) + (hat_sum(at + Ts) - hat_sum(at - Ts)) / (2.0 * Ts),
+        np.interp(at, tu, jp_motion) + (hat_sum(at + 0.5 * Ts) - hat_sum(at - 0.5 * Ts)) / Ts,
+    )
 
 
 def _velocity_steps(fine: FloatArray, t: FloatArray, v: FloatArray, acc: FloatArray) -> list[tuple[float, FloatArray]]:

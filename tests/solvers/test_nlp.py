@@ -19,7 +19,7 @@ from solvers.errors import InvalidMachineError
 from solvers.machine import Axis, Machine, router
 from solvers.nlp import ACCEPT_TOL
 from solvers.pipeline import Options, Schedule, schedule
-from tests.fdcheck import fd_drive
+from tests.fdcheck import REST_PAD, fd_drive
 
 TS = 1e-3
 #: Allowed overshoot of umax / emax in the sampled output (issue: 1.01 x).
@@ -946,7 +946,7 @@ SAMPLED_VS_FD_TOL = 5e-3
 
 @pytest.mark.parametrize("f0, acc", [(40.0, 0.0), (40.0, 3000.0), (120.0, -600.0)])
 @pytest.mark.parametrize("s_b", [5.0, 5.0011, 5.0025, 5.0037])
-def test_sampled_check_reads_a_tangent_breaks_impulse_as_the_plain_differences_do(
+def test_sampled_check_reads_a_tangent_breaks_impulse_as_the_samples_differences_do(
     f0: float, acc: float, s_b: float
 ) -> None:
     """``NlpRefiner._sampled`` with the kinematic limits (``Options.nlp_kinematic``) reads the samples' acceleration
@@ -954,8 +954,10 @@ def test_sampled_check_reads_a_tangent_breaks_impulse_as_the_plain_differences_d
     tangent break passed at speed steps the axis velocity, an impulse in those differences: the check read the
     jerk as the drive model's central difference (half the impulse: cam+opts seeds 183 and 235 lp+nlp, sampled
     jerk 1.26 / 1.08 x at line-line junctions turning by 0.05 degrees), and on its grid of Ts / 8 an impulse
-    between two grid points read down to 0.875 x.  Truth: a line turning by 0.3 degrees at s_b, the feed with
-    constant sddot = ``acc`` from ``f0``, its exact positions sampled at 256 phases of the clock."""
+    between two grid points read down to 0.875 x (the drive model's servo error ~0.95 x: now each impulse's kinks are
+    read at their exact instants, ``nlp._impulse_probes``).  Truth: a line turning by 0.3 degrees at s_b, the feed
+    with constant sddot = ``acc`` from ``f0``, its exact positions sampled at 256 phases of the clock: the plain
+    differences (a, j) and ``tests/fdcheck.fd_drive`` (u, e)."""
     from geometry.toolpath import PathSamples
     from solvers import nlp
 
@@ -979,12 +981,20 @@ def test_sampled_check_reads_a_tangent_breaks_impulse_as_the_plain_differences_d
     ref._sampled(fine, PathSamples(fine, line(fine), d1, z, z), (f, np.full(fine.size, acc), np.zeros(fine.size)),
                  util)
     t_b = s_b / f0 if acc == 0.0 else (np.sqrt(f0**2 + 2.0 * acc * s_b) - f0) / acc
-    j_fd = a_fd = 0.0
+    dr = _drive(router())
+    fd = dict.fromkeys(("jerk", "acceleration", "servo_error", "control_signal"), 0.0)
     for ph in np.linspace(0.0, 1.0, 256, endpoint=False):
         t = t_b + (np.arange(-20, 21) + ph) * Ts
-        x = line(f0 * t + 0.5 * acc * t * t)
-        j_fd = max(j_fd, float(np.abs(np.diff(x, 3, axis=0)[:, 1]).max()) / Ts**3 / lim.jmax[1])
-        a_fd = max(a_fd, float(np.abs(np.diff(x, 2, axis=0)[:, 1]).max()) / Ts**2 / lim.amax[1])
+        s = f0 * t + 0.5 * acc * t * t
+        x = line(s)
+        fd["jerk"] = max(fd["jerk"], float(np.abs(np.diff(x, 3, axis=0)[:, 1]).max()) / Ts**3 / lim.jmax[1])
+        fd["acceleration"] = max(fd["acceleration"],
+                                 float(np.abs(np.diff(x, 2, axis=0)[:, 1]).max()) / Ts**2 / lim.amax[1])
+        u, e = fd_drive(x, Ts, dr)  # (row r is sample r + 2 - REST_PAD; the padding's rows are outside ``keep``)
+        pad = np.zeros(REST_PAD - 2, dtype=bool)
+        keep = np.concatenate([pad, np.abs(s - s_b) < 0.6, pad])
+        fd["servo_error"] = max(fd["servo_error"], float(np.abs(e[keep, 1]).max()) / dr["emax"][1])
+        fd["control_signal"] = max(fd["control_signal"], float(np.abs(u[keep, 1]).max()) / dr["umax"][1])
     near = np.abs(fine - s_b) < 1.0
-    assert float(util["sampled_jerk"][near, 1].max()) == pytest.approx(j_fd, rel=SAMPLED_VS_FD_TOL)
-    assert float(util["sampled_acceleration"][near, 1].max()) == pytest.approx(a_fd, rel=SAMPLED_VS_FD_TOL)
+    for name, want in fd.items():
+        assert float(util[f"sampled_{name}"][near, 1].max()) == pytest.approx(want, rel=SAMPLED_VS_FD_TOL), name
