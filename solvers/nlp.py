@@ -386,7 +386,7 @@ def _dense_solve(ipm: DenseIpm | None, x: FloatArray, p: FloatArray, lbx: FloatA
 #: ``util["sampled_jerk"]``): at curvature jumps the model's points did not see bench seed 23's 1.16 x jmax.
 SAMPLED_KINEMATIC = True
 #: ... and reads the jerk as the plain third difference the promise is checked by (``tests/fdcheck``), with each
-#: velocity step's impulse at its exact peak (``_impulse_peaks``), not the drive model's central difference, which
+#: velocity step's impulse at its exact peak (``_impulse_probes``), not the drive model's central difference, which
 #: reads an impulse at half: cam+opts seeds 183 and 235 lp+nlp, 1.05-1.26 x jmax where lines meet at 0.05 degrees
 #: (session 68).
 SAMPLED_PLAIN_JERK = True
