@@ -195,6 +195,11 @@ V_STEP_SHARE = 0.98
 #: not e and u, so it only caps the feed at the break, leaving room for the motion around it; the
 #: NLP verifies the impulse on top of e and u (``solvers.nlp.V_STEP_SHARE``).
 V_STEP_SHARE_DRIVE = 0.5
+#: The servo error a velocity step's impulse adds to the samples (``vstep_servo_error``): its own peak,
+#: max(Ka V_KERNEL_A / Ts, Kj V_KERNEL_JC / Ts^2) |step| (the hat mean of a peaks at the break, the central jerk
+#: Ts either side of it, where the other is 0), not the sum of the two peaks (session 69; the sum read the router's
+#: x and z impulse at 1.77 x, y at 1.17 x its peak).  False: the sum.
+V_STEP_E_PEAK = False
 #: Velocity steps whose impulse stays below this share of a limit even at the break's largest feed
 #: get no coupled rows.
 V_STEP_MIN = 1e-3
@@ -470,7 +475,7 @@ def v_step_limit(
     Sampled at Ts, a step Delta v adds an impulse to the differences of the positions (``V_KERNEL_*``):
     lp holds V_KERNEL_A Delta v / Ts <= share amax and, with jerk, V_KERNEL_J Delta v / Ts^2 <=
     share jmax; lp+nlp (``from_drive``) holds the drive model's e and u,
-    (Ka V_KERNEL_A / Ts + Kj V_KERNEL_JC / Ts^2) Delta v <= share emax and
+    ``vstep_servo_error`` Delta v <= share emax and
     M V_KERNEL_A Delta v / Ts <= share (umax - |c| - |d|), and with ``kinematic`` both."""
     _, amax, jmax = m.limit_arrays()
     dv = amax * Ts / V_KERNEL_A
@@ -479,12 +484,27 @@ def v_step_limit(
     if from_drive:
         dr = m.drive_arrays()
         with np.errstate(divide="ignore"):
-            by_e = dr["emax"] / (dr["Ka"] * V_KERNEL_A / Ts + dr["Kj"] * V_KERNEL_JC / Ts**2)
+            by_e = dr["emax"] / vstep_servo_error(dr["Ka"], dr["Kj"], Ts)
             room = np.maximum(dr["umax"] - np.abs(dr["c"]) - np.abs(dr["d"]), 0.0)
             by_u = np.where(dr["M"] > 0.0, room * Ts / (V_KERNEL_A * np.where(dr["M"] > 0.0, dr["M"], 1.0)), np.inf)
         drive = np.minimum(by_e, by_u)
         dv = np.minimum(dv, drive) if kinematic else drive
     return np.asarray(share * dv, dtype=np.float64)
+
+
+def vstep_servo_error(Ka: FloatArray, Kj: FloatArray, Ts: float) -> FloatArray:
+    r"""Peak servo error a velocity step of 1 mm/s adds to the samples at period Ts, per axis (s^-1 x the drive's
+    mm / (mm/s) gains: mm per mm/s).
+
+    Sampled at Ts, a step dv at t_b is an impulse dv delta(t - t_b) in a: the hat mean of a (the second difference
+    centred at t) gains dv H(t - t_b), H(x) = max(0, Ts - |x|) / Ts^2, and the drive model's central jerk (the mean
+    of two third differences over 2 Ts) dv (H(t + Ts - t_b) - H(t - Ts - t_b)) / (2 Ts).  Both are piecewise linear
+    in t with kinks at t_b + k Ts, k = -2 .. 2, where Ka x the first plus Kj x the second is Ka V_KERNEL_A / Ts
+    (k = 0, the jerk 0), +-Kj V_KERNEL_JC / Ts^2 (k = -+1, the hat 0) or 0 (k = +-2): the larger of the two is the
+    peak (``V_STEP_E_PEAK``; else their sum, a looser bound).  Ka, Kj (3,) s^2 and s^3; returns (3,)."""
+    ka = np.asarray(Ka, dtype=np.float64) * V_KERNEL_A / Ts
+    kj = np.asarray(Kj, dtype=np.float64) * V_KERNEL_JC / Ts**2
+    return np.maximum(ka, kj) if V_STEP_E_PEAK else ka + kj
 
 
 def _admit(

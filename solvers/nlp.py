@@ -87,7 +87,15 @@ from scipy.ndimage import maximum_filter1d
 from geometry.toolpath import PathSamples
 from solvers import bspline, ccompile, kinematics
 from solvers.ipm import STATUS_INFEASIBLE, DenseIpm, IpmResult
-from solvers.lp import SIGN_EPS, V_KERNEL_A, V_KERNEL_JC, axis_moves, flat_bound, step_cap, tangent_jump
+from solvers.lp import (
+    SIGN_EPS,
+    V_KERNEL_A,
+    axis_moves,
+    flat_bound,
+    step_cap,
+    tangent_jump,
+    vstep_servo_error,
+)
 from solvers.machine import Machine
 
 FloatArray = NDArray[np.float64]
@@ -2562,7 +2570,7 @@ class NlpRefiner:
         seen = lim.Kj * np.abs(acc[lt.size :] - acc[: lt.size]) / (2.0 * Ts)
         # a velocity step (tangent break passed at speed) is an impulse in the differences
         dv = np.abs(v[lt.size :] - v[: lt.size])
-        seen = seen + (lim.Ka * V_KERNEL_A / Ts + lim.Kj * V_KERNEL_JC / Ts**2) * dv
+        seen = seen + vstep_servo_error(lim.Ka, lim.Kj, Ts) * dv
         u = np.abs(lim.M * acc + lim.b * v + lim.c + lim.d * np.sign(v)).reshape(2, lt.size, 3)
         for side, idx in enumerate((lt, rt)):
             np.maximum.at(util["servo_error"], idx, (e[side] + seen) / lim.emax)
@@ -2649,7 +2657,8 @@ class NlpRefiner:
             jm[M:-M] = (am[2 * M :] - am[: -2 * M]) / (2.0 * Ts)
             e = np.abs(lim.Kv[i] * vm + lim.Ka[i] * am + lim.Kj[i] * jm)
             u = np.abs(lim.M[i] * am + lim.b[i] * vm + lim.c[i] + lim.d[i] * np.sign(vm))
-            pr = _impulse_probes(tu, vm, am_motion, steps, i, Ts, M) if steps else None
+            probe = steps and (SAMPLED_IMPULSE_PROBES or SAMPLED_PLAIN_JERK)
+            pr = _impulse_probes(tu, vm, am_motion, steps, i, Ts, M) if probe else None
             if pr is not None and SAMPLED_IMPULSE_PROBES:
                 np.maximum.at(e, pr.index, np.abs(lim.Kv[i] * pr.vm + lim.Ka[i] * pr.am + lim.Kj[i] * pr.jm))
                 np.maximum.at(u, pr.index, np.abs(lim.M[i] * pr.am + lim.b[i] * pr.vm + lim.c[i]
@@ -2666,9 +2675,10 @@ class NlpRefiner:
                 # the promised jerk is the plain third difference (``tests/fdcheck``): two adjacent second
                 # differences Ts apart, where the drive model's is their mean over 2 Ts (``jm``), which read a
                 # velocity step's impulse and the motion's jerk next to it at half and its mean
-                jp = np.zeros(n_u)
-                jp[half:-half] = (am[2 * half :] - am[: -2 * half]) / Ts
-                if not SAMPLED_PLAIN_JERK:
+                if SAMPLED_PLAIN_JERK:
+                    jp = np.zeros(n_u)
+                    jp[half:-half] = (am[2 * half :] - am[: -2 * half]) / Ts
+                else:
                     jp = jm
                 j_abs = np.abs(jp)
                 if plain is not None:
