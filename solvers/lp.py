@@ -198,7 +198,12 @@ V_STEP_SHARE_DRIVE = 0.5
 #: The servo error a velocity step's impulse adds to the samples (``vstep_servo_error``): its own peak,
 #: max(Ka V_KERNEL_A / Ts, Kj V_KERNEL_JC / Ts^2) |step| (the hat mean of a peaks at the break, the central jerk
 #: Ts either side of it, where the other is 0), not the sum of the two peaks (session 69; the sum read the router's
-#: x and z impulse at 1.77 x, y at 1.17 x its peak).  False: the sum.
+#: x and z impulse at 1.77 x, y at 1.17 x its peak).  False: the sum.  Not kept: both are bounds for one break, but
+#: the LP of lp+nlp holds no e rows, and where breaks crowd (a dense polyline: a step every 2-5 Ts, their impulses
+#: adding up like a curve's acceleration) its faster feed at the breaks was over e: an unblended G01 spiral of
+#: 0.2 mm chords, 8 of 25 NLP windows fell back to it, 3 repair rounds, e 1.006 x in the samples (1.0 x with the
+#: sum); with the peak only in the NLP's caps, the spiral of 1.0 mm chords ran 7.64 s against 4.81 s (3 NLP windows'
+#: tightening did not converge and fell back to the LP's feed; 5.88 s with ``nlp.STEP_BOUND_VSTEP`` on).
 V_STEP_E_PEAK = False
 #: Velocity steps whose impulse stays below this share of a limit even at the break's largest feed
 #: get no coupled rows.

@@ -110,9 +110,9 @@ Span = tuple[int, int, FloatArray, tuple[Rise, Rise]]
 _Left = tuple[int, FloatArray, Rise]
 
 #: Share of the sampled e and u budgets the impulse of a velocity step (a tangent break passed at speed)
-#: may take (``solvers.lp.v_step_limit``): the impulse is verified on top of e and u either side and a
-#: violation tightens the rows and the feed cap there (``NlpRefiner._step_servo_error``), so the NLP
-#: takes more than the LP's V_STEP_SHARE, whose rows keep a fixed share free instead.
+#: may take (``solvers.lp.v_step_limit``): the impulse is verified on top of the motion's e and u by the sampled
+#: check (``NlpRefiner._sampled_and_steps``) and a violation tightens the rows there, so the NLP takes more than
+#: the LP's V_STEP_SHARE, whose rows keep a fixed share free instead.
 V_STEP_SHARE = 0.9
 #: Relative overshoot at a verification point that triggers a tightening round.
 VERIFY_TOL = 2e-3
@@ -401,6 +401,14 @@ SAMPLED_PLAIN_JERK = True
 #: The sampled check's servo error and control signal at each velocity step's exact kinks too (``_impulse_probes``):
 #: on its grid of Ts / SAMPLED_SUBDIV they read ~0.95 x of the samples' own next to a tangent break (session 68).
 SAMPLED_IMPULSE_PROBES = True
+#: ``NlpRefiner._step_servo_error`` bounds a velocity step's impulse too (e and u either side plus the impulse's
+#: bound, at the break's two points) everywhere.  False (session 69): only where the sampled check cannot read the
+#: impulse (``_sampled_and_steps``); it reads it exactly (``_impulse_probes``), the bound ~1.3-1.8 x that.  On dense
+#: unblended G01 spirals (0.1-1 mm chords turning by 0.14-0.45 degrees, lp+nlp) the bound's tightening did not
+#: converge: 1-4 NLP windows fell back to the LP's feed; without it 0-1, motion -0.3 to -18 % (1.0 mm chords at
+#: R 150-300 mm: 5.88 -> 4.81 s), NLP CPU down, the samples' e and u as before (``tests/solvers/test_tangent_breaks``).
+#: cam 3750-3809 lp+nlp: 60/60 both, none longer, 5 shorter by up to 0.06 %.
+STEP_BOUND_VSTEP = False
 
 
 class NlpFailure(Exception):
@@ -1785,7 +1793,7 @@ class NlpRefiner:
         br, f_cap = self._step_caps(geometry, s0, s1, breaks)
         # (with the feed's share of each step cap and the servo error of the step across it, as a window's)
         util = self._fine_utilisation(fine, g, fd, br, f_cap)
-        self._sampled(fine, g, fd, util)
+        self._sampled_and_steps(fine, g, fd, util, br)
         # (the feed and axis-speed rows are the feed bound itself)
         for k, u in util.items():
             cap = 1.0 + VERIFY_TOL if k in ("feed", "velocity") else LP_KEPT_UTIL
@@ -1826,7 +1834,7 @@ class NlpRefiner:
                 break
             fine, g = _merge(fine, g, mids, geometry(mids))
             fd, util = verify()
-        self._sampled(fine, g, fd, util)
+        self._sampled_and_steps(fine, g, fd, util, br)
         return max(float(np.max(u)) for u in util.values())
 
     def _fine_utilisation(
@@ -1842,8 +1850,23 @@ class NlpRefiner:
             step[at[ok_at]] = fd[0][at[ok_at]] / f_cap[ok_at]
             util["step"] = step
             if self.lim.sample_period is not None:
-                self._step_servo_error(g, fd, _find(fine, br - BREAK_EPS_MM), at, util)
+                self._step_servo_error(g, fd, _find(fine, br - BREAK_EPS_MM), at, util, STEP_BOUND_VSTEP)
         return util
+
+    def _sampled_and_steps(
+        self, fine: FloatArray, g: PathSamples, fd: kinematics.FeedDerivs, util: dict[str, FloatArray],
+        br: FloatArray, ctx: _ContextMotion | None = None, rest_span: tuple[float, float] = (-math.inf, math.inf),
+    ) -> None:
+        """``_sampled``, then, without STEP_BOUND_VSTEP, the velocity-step bound of ``_step_servo_error`` at the
+        breaks ``br`` whose impulse the sampled check did not read exactly (it did not run, or the break is within
+        2 Ts of the ends of the centres it checks)."""
+        covered = self._sampled(fine, g, fd, util, ctx, rest_span)
+        if STEP_BOUND_VSTEP or not br.size or self.lim.sample_period is None:
+            return
+        out = np.ones(br.size, dtype=bool) if covered is None else (br < covered[0]) | (br > covered[1])
+        if out.any():
+            self._step_servo_error(g, fd, _find(fine, br[out] - BREAK_EPS_MM), _find(fine, br[out] + BREAK_EPS_MM),
+                                   util, True)
 
     def _record(self, a: int, b: int, d: float, window: int, reason: str, status: str, fallback: str) -> None:
         self.stats.failures.append({
@@ -2302,7 +2325,7 @@ class NlpRefiner:
                 fine, g_fine = _merge(fine, g_fine, mids, geometry(mids))
                 fd, util = verify(pw)
             # (after the refinement: its utilisations are spread)
-            self._sampled(fine, g_fine, fd, util, ctx_motion, rest_span)
+            self._sampled_and_steps(fine, g_fine, fd, util, br, ctx_motion, rest_span)
             inside = np.ones(fine.size, dtype=bool)  # (the feed is 0 at a rest end itself)
             if head:
                 inside &= fine > 0.0
@@ -2550,14 +2573,18 @@ class NlpRefiner:
 
     def _step_servo_error(
         self, g: PathSamples, fd: kinematics.FeedDerivs, left: NDArray[np.int64], right: NDArray[np.int64],
-        util: dict[str, FloatArray],
+        util: dict[str, FloatArray], impulse: bool,
     ) -> None:
         """Servo error of the sampled acceleration step at curvature jumps (fine-grid indices of the left
         and right side of each, -1 if absent).  A step of the axis acceleration between two samples
         (x_ss jump x f^2) is seen in the central third difference as at most |step| / (2 Ts) of jerk on
         top of the e either side, so each side's servo-error utilisation is raised to
         (|e_side| + Kj |step| / (2 Ts)) / emax, and ``util["step"]`` to the larger of the two: a violation
-        tightens the e rows next to the jump (or gets a cut slot there) and the feed cap at it."""
+        tightens the e rows next to the jump (or gets a cut slot there) and the feed cap at it.
+
+        ``impulse``: with a velocity step's impulse too (a tangent break passed at speed), bounded by e either side
+        plus ``solvers.lp.vstep_servo_error`` |dv| (and u by M V_KERNEL_A |dv| / Ts), the triangle inequality over
+        instants up to Ts apart: loose where the sampled check reads the impulse exactly (``STEP_BOUND_VSTEP``)."""
         lim = self.lim
         Ts = lim.sample_period
         ok = (left >= 0) & (right >= 0)
@@ -2569,7 +2596,7 @@ class NlpRefiner:
         e = np.abs(lim.Kv * v + lim.Ka * acc + lim.Kj * j).reshape(2, lt.size, 3)
         seen = lim.Kj * np.abs(acc[lt.size :] - acc[: lt.size]) / (2.0 * Ts)
         # a velocity step (tangent break passed at speed) is an impulse in the differences
-        dv = np.abs(v[lt.size :] - v[: lt.size])
+        dv = np.abs(v[lt.size :] - v[: lt.size]) if impulse else np.zeros((lt.size, 3))
         seen = seen + vstep_servo_error(lim.Ka, lim.Kj, Ts) * dv
         u = np.abs(lim.M * acc + lim.b * v + lim.c + lim.d * np.sign(v)).reshape(2, lt.size, 3)
         for side, idx in enumerate((lt, rt)):
@@ -2580,7 +2607,7 @@ class NlpRefiner:
     def _sampled(
         self, fine: FloatArray, g: PathSamples, fd: kinematics.FeedDerivs, util: dict[str, FloatArray],
         ctx: _ContextMotion | None = None, rest_span: tuple[float, float] = (-math.inf, math.inf),
-    ) -> None:
+    ) -> tuple[float, float] | None:
         """u and e as the finite differences of the positions sampled at Ts see them, at every sample phase.
 
         The differences are exact kernel averages of the motion: with T = Ts,
@@ -2597,11 +2624,14 @@ class NlpRefiner:
         ``ctx``: the motion just outside the window (``_Context``), read by the differences of the centres
         near the window's ends (without it those within 2 Ts of an end are not checked).  Outside
         ``rest_span`` (the rest intervals of a window that solves them) the time of a step of the grid is
-        2 ds / (f_0 + f_1), exact for a constant sddot as at rest, where the trapezoid of 1 / f is not."""
+        2 ds / (f_0 + f_1), exact for a constant sddot as at rest, where the trapezoid of 1 / f is not.
+
+        Returns the span of s (mm) whose velocity steps' impulses it read exactly (``_impulse_probes`` with
+        SAMPLED_IMPULSE_PROBES; the centres within 2 Ts of each step checked), or None if it read none."""
         lim = self.lim
         Ts = lim.sample_period
         if Ts is None or fine.size < 3:
-            return
+            return None
         f = fd[0]
         dsf = np.diff(fine)
         with np.errstate(divide="ignore"):
@@ -2612,7 +2642,7 @@ class NlpRefiner:
         if not np.all(np.isfinite(dt)):
             # a feed of 0 inside the window (an iterate that stalls; test seed 14 with nlp_overlap 2 raised an
             # OverflowError below and lost the window): no time grid, the sampled check is left to the pipeline
-            return
+            return None
         t = np.concatenate([[0.0], np.cumsum(dt)])
         v, acc, _ = kinematics.axis_kinematics(g, *fd)
         t_fine = t
@@ -2625,7 +2655,7 @@ class NlpRefiner:
         h = Ts / M
         n_u = int((t[-1] - t[0]) / h) + 1
         if n_u < 4 * M + 1 or n_u > SAMPLED_MAX_POINTS:
-            return
+            return None
         tu = t[0] + np.arange(n_u) * h
         k = np.arange(-M, M + 1)
         box = np.where(np.abs(k) == M, 0.5, 1.0) / (2 * M)
@@ -2689,6 +2719,11 @@ class NlpRefiner:
         for name, val in named:
             spread = maximum_filter1d(val, size=4 * M + 1, axis=0)
             util[name] = np.column_stack([np.interp(t_fine, tu, spread[:, i]) for i in range(3)])
+        if not SAMPLED_IMPULSE_PROBES:
+            return None
+        # (np.interp clamps to the window's own points where the checked centres reach into its context)
+        t_lo, t_hi = tu[valid.start] + 2.0 * Ts, tu[valid.stop - 1] - 2.0 * Ts
+        return float(np.interp(t_lo, t_fine, fine)), float(np.interp(t_hi, t_fine, fine))
 
     def _feed_bound(self, g: PathSamples) -> FloatArray:
         """Upper bound on f at points g: min(Fmax, min_x vmax_x / |x_s|) (inf if neither applies), (K,)."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geometry import Toolpath, primitives
+from geometry import Toolpath, gcode, primitives
 from solvers.machine import router
 from solvers.pipeline import Options, schedule
 from tests.fdcheck import fd_drive, utilisation
@@ -91,6 +91,48 @@ def test_dense_polyline_of_small_turns_schedules_within_limits() -> None:
     vmax, amax, jmax = m.limit_arrays()
     util = utilisation(sch.samples.position, TS, vmax, amax, jmax)
     assert max(util.values()) <= LIMIT_FACTOR, util
+
+
+#: The dense spirals below: chord (mm), radius from / to (mm), chords, feed (G-code F, mm/min)
+SPIRALS = [(1.0, 150.0, 300.0, 300, 9000), (0.1, 15.0, 40.0, 600, 3000)]
+#: ... at least this much slower with the velocity steps' bound in the NLP's check (measured 1.22 x and 1.09 x)
+BOUND_SLOWER = 1.05
+
+
+def _spiral_program(chord: float, r0: float, r1: float, n: int, feed: int) -> Toolpath:
+    """An unblended G01 spiral of n chords turning by chord / r (0.14-0.45 degrees: passed at speed)."""
+    r = np.linspace(r0, r1, n + 1)
+    th = np.concatenate([[0.0], np.cumsum(chord / r[:-1])])
+    x, y = r * np.cos(th), r * np.sin(th)
+    moves = [f"X{a:.4f} Y{b:.4f}" for a, b in zip(x[1:], y[1:], strict=True)]
+    return gcode.parse("\n".join(["G21 G90", f"G00 X{x[0]:.4f} Y{y[0]:.4f}", f"G01 F{feed}", *moves])).toolpath(0.5)
+
+
+@pytest.mark.parametrize("spiral", SPIRALS)
+def test_lp_nlp_reads_the_impulses_of_a_dense_polyline_in_its_samples(
+    monkeypatch: pytest.MonkeyPatch, spiral: tuple[float, float, float, int, int],
+) -> None:
+    """Session 69: the NLP's check bounded each velocity step's servo error by e either side plus the impulse's
+    bound at the break's two points (``nlp._step_servo_error``), ~1.3-1.8 x what the samples read; on a dense
+    unblended polyline its tightening did not converge and windows fell back to the LP's slower feed.  The
+    sampled check reads the impulses exactly (``nlp._impulse_probes``), so that bound is left out
+    (``nlp.STEP_BOUND_VSTEP``): no window falls back, the samples hold u and e (finite differences of the
+    positions), and the motion is faster than with the bound."""
+    from solvers import nlp
+
+    tp = _spiral_program(*spiral)
+    assert [c.segment for c in tp.corners] == [1]  # (the G00's end; every G01 junction is passed at speed)
+    m = router()
+    sch = schedule(tp, m, Options(method="lp+nlp"))
+    dr = m.drive_arrays()
+    u, e = fd_drive(sch.samples.position, TS, dr)
+    assert float(np.max(np.abs(u) / dr["umax"])) <= LIMIT_FACTOR
+    assert float(np.max(np.abs(e) / dr["emax"])) <= LIMIT_FACTOR
+    assert sch.diagnostics["nlp_fallbacks"] == []
+    monkeypatch.setattr(nlp, "STEP_BOUND_VSTEP", True)
+    bound = schedule(tp, m, Options(method="lp+nlp"))
+    assert bound.diagnostics["nlp_fallbacks"] != []
+    assert bound.summary["motion_time"] > BOUND_SLOWER * sch.summary["motion_time"]
 
 
 def test_smooth_path_and_corners_report_no_passed_turns() -> None:
