@@ -2595,13 +2595,15 @@ class NlpRefiner:
         v, acc, j = kinematics.axis_kinematics(g.subset(both), *(x[both] for x in fd))
         e = np.abs(lim.Kv * v + lim.Ka * acc + lim.Kj * j).reshape(2, lt.size, 3)
         seen = lim.Kj * np.abs(acc[lt.size :] - acc[: lt.size]) / (2.0 * Ts)
-        # a velocity step (tangent break passed at speed) is an impulse in the differences
-        dv = np.abs(v[lt.size :] - v[: lt.size]) if impulse else np.zeros((lt.size, 3))
-        seen = seen + vstep_servo_error(lim.Ka, lim.Kj, Ts) * dv
         u = np.abs(lim.M * acc + lim.b * v + lim.c + lim.d * np.sign(v)).reshape(2, lt.size, 3)
+        if impulse:
+            # a velocity step (tangent break passed at speed) is an impulse in the differences
+            dv = np.abs(v[lt.size :] - v[: lt.size])
+            seen = seen + vstep_servo_error(lim.Ka, lim.Kj, Ts) * dv
+            u = u + lim.M * V_KERNEL_A * dv / Ts
         for side, idx in enumerate((lt, rt)):
             np.maximum.at(util["servo_error"], idx, (e[side] + seen) / lim.emax)
-            np.maximum.at(util["control_signal"], idx, (u[side] + lim.M * V_KERNEL_A * dv / Ts) / lim.umax)
+            np.maximum.at(util["control_signal"], idx, u[side] / lim.umax)
         np.maximum.at(util["step"], rt, np.max((np.maximum(e[0], e[1]) + seen) / lim.emax, axis=1))
 
     def _sampled(
