@@ -88,6 +88,7 @@ from geometry.toolpath import PathSamples
 from solvers import bspline, ccompile, kinematics
 from solvers.ipm import STATUS_INFEASIBLE, DenseIpm, IpmResult
 from solvers.lp import (
+    AXIS_EPS,
     SIGN_EPS,
     V_KERNEL_A,
     axis_moves,
@@ -409,6 +410,18 @@ SAMPLED_IMPULSE_PROBES = True
 #: R 150-300 mm: 5.88 -> 4.81 s), NLP CPU down, the samples' e and u as before (``tests/solvers/test_tangent_breaks``).
 #: cam 3750-3809 lp+nlp: 60/60 both, none longer, 5 shorter by up to 0.06 %.
 STEP_BOUND_VSTEP = False
+#: From a window's second tightening round on, a sampled servo error or control signal over its limit within reach
+#: of a velocity step (a tangent break passed at speed) tightens the e and u rows of the checkpoints around it as an
+#: overshoot of this power (``NlpRefiner._vstep_boost``): the step's impulse f |jump of x_s| is in the sampled
+#: differences, not in the rows (x_ss = 0 along a polyline's chords), so the rows must come down further than the
+#: overshoot for the sum to come down by it.  1: off.  Session 70: dense unblended G01 spirals (lp+nlp) whose window
+#: stayed over after 4 rounds (1.0108, 1.0496) and fell back to the LP's feed: 0.2 mm chords 2.193 -> 1.705 s,
+#: 0.3 mm 2.787 -> 2.031 s, no fallback (``tests/solvers/test_tangent_breaks``).  From the first round (tried) the
+#: 0.3 mm spiral read 1.950 s, but 5 of cam 3870-3929 ran up to 0.13 % longer (a window that would pass anyway
+#: tightened harder than it needed); with 1.5 the 0.3 mm spiral still fell back.
+VSTEP_TIGHTEN_BOOST = 2.0
+#: ... the first round (``rnd``) whose tightening it boosts
+VSTEP_BOOST_ROUND = 2
 
 
 class NlpFailure(Exception):
@@ -2196,6 +2209,8 @@ class NlpRefiner:
             for off in (0, 1):
                 np.minimum.at(feed_ub, kc + off, np.where(near_lp[kc + off], np.inf, f_cap))
             lp_side = _LpSideCaps.at(br, f_cap, kc, near_lp, f_lp)
+        # the velocity steps among them, whose impulses the e and u rows do not hold (``_vstep_boost``)
+        vbr = self._velocity_breaks(geometry, br) if VSTEP_TIGHTEN_BOOST != 1.0 else br[:0]
         if FLAT_FEED_COLUMNS:  # (a control point under a flat feed bound is held at it: ``flat_feed_columns``)
             col_ub = flat_feed_columns(feed_ub, n, N, head, tail) / Fs
             held = (lbx[: n + 2] < ubx[: n + 2]) & np.isfinite(col_ub)
@@ -2353,7 +2368,8 @@ class NlpRefiner:
                 shape = self._shape(n, moving, slotted=True, head=head, tail=tail)
                 cut = lam_g.size - shape.n_rest
                 lam_g = np.concatenate([lam_g[:cut], np.zeros(shape.rows - lam_g.size), lam_g[cut:]])
-            self._tighten(util, fine, a * d, d, moving, fac_u, fac_e, fac_k)
+            boosted = self._vstep_boost(util, fine, fd[0], vbr if rnd >= VSTEP_BOOST_ROUND else vbr[:0])
+            self._tighten(boosted, fine, a * d, d, moving, fac_u, fac_e, fac_k)
             _tighten_points(util, fine, s_rest, d / (N * REST_SUBDIV), rest_fac)
             fac_k[added] = prev_fac[2][added]  # (a cap just added is not tightened: its overshoot was without it)
             # bounds of constant rows stay as they are (tightening them could only make the window infeasible)
@@ -2479,6 +2495,36 @@ class NlpRefiner:
             else:
                 ratio = arr if arr.ndim == 1 else kinematics.row_max(arr)
                 fac_k[:] = np.maximum(MIN_BOUND_FACTOR, fac_k * scale_for(ratio))
+
+    def _velocity_breaks(self, geometry: GeometryFn, br: FloatArray) -> FloatArray:
+        """The breaks of ``br`` (mm) where x_s jumps (``solvers.lp.tangent_jump``): velocity steps at speed."""
+        if not br.size or self.lim.sample_period is None:
+            return br[:0]
+        jump = tangent_jump(geometry(br + BREAK_EPS_MM), geometry(br - BREAK_EPS_MM), BREAK_EPS_MM)
+        moves: NDArray[np.bool_] = np.max(jump, axis=1) > AXIS_EPS
+        return br[moves]
+
+    def _vstep_boost(
+        self, util: dict[str, FloatArray], fine: FloatArray, f_fine: FloatArray, vbr: FloatArray,
+    ) -> dict[str, FloatArray]:
+        """``util`` with the sampled servo error and control signal over their limits within reach of a velocity
+        step at ``vbr`` (mm, sorted) raised to VSTEP_TIGHTEN_BOOST (a copy; the rest shared).
+
+        The impulse of a step enters the sampled differences of the centres within 2 Ts of it and each centre's
+        utilisation is spread over the points within 2 Ts (``_sampled``): reach 4 Ts f."""
+        Ts = self.lim.sample_period
+        if Ts is None or not vbr.size:
+            return util
+        j = np.searchsorted(vbr, fine)
+        gap = np.minimum(np.abs(fine - vbr[np.maximum(j - 1, 0)]), np.abs(vbr[np.minimum(j, vbr.size - 1)] - fine))
+        near = gap <= 4.0 * Ts * f_fine + BREAK_EPS_MM
+        out = dict(util)
+        for name in ("sampled_servo_error", "sampled_control_signal"):
+            if name in util:
+                arr = util[name]
+                boost = near[:, None] & (arr > 1.0)
+                out[name] = np.where(boost, arr ** VSTEP_TIGHTEN_BOOST, arr)
+        return out
 
     def _row_bounds(
         self,

@@ -1030,3 +1030,26 @@ def test_a_velocity_steps_bound_is_only_where_the_sampled_check_cannot_read_it(f
             assert e_bound == 0.0 and u_bound == 0.0 and float(util["step"].max()) == 0.0
             assert float(util["sampled_servo_error"][:, 1].max()) == pytest.approx(truth["servo_error"],
                                                                                    rel=SAMPLED_VS_FD_TOL)
+
+
+def test_a_velocity_steps_overshoot_tightens_squared_within_its_reach_only() -> None:
+    """Session 70 (``nlp._vstep_boost``): the e and u rows hold none of a velocity step's impulse, so a sampled
+    overshoot within reach of one (4 Ts of travel: the centres within 2 Ts of the step, each spread over 2 Ts) counts
+    as overshoot^VSTEP_TIGHTEN_BOOST in the tightening; farther away, or under the limit, it counts as it is, and
+    the model's own utilisations pass through untouched."""
+    from solvers import nlp
+
+    ref, fine, _g, fds, _truth = _turn_at_speed(40.0, 0.0, 5.0)  # 40 mm/s: reach 4 Ts f = 0.16 mm
+    reach = 4.0 * ref.lim.sample_period * 40.0
+    over = np.full((fine.size, 3), 1.02)
+    over[::7] = 0.9  # (some under the limit)
+    util = {"sampled_servo_error": over.copy(), "sampled_control_signal": over.copy(),
+            "servo_error": over.copy()}
+    out = ref._vstep_boost(util, fine, fds[0], np.array([5.0]))
+    near = (np.abs(fine - 5.0) <= reach + nlp.BREAK_EPS_MM)[:, None] & (over > 1.0)
+    assert near.any() and (~near & (over > 1.0)).any()
+    for name in ("sampled_servo_error", "sampled_control_signal"):
+        np.testing.assert_array_equal(out[name], np.where(near, 1.02**nlp.VSTEP_TIGHTEN_BOOST, over))
+    assert out["servo_error"] is util["servo_error"]
+    np.testing.assert_array_equal(util["sampled_servo_error"], over)  # (the caller's dict is not changed)
+    assert ref._vstep_boost(util, fine, fds[0], np.zeros(0)) is util

@@ -135,6 +135,37 @@ def test_lp_nlp_reads_the_impulses_of_a_dense_polyline_in_its_samples(
     assert bound.summary["motion_time"] > BOUND_SLOWER * sch.summary["motion_time"]
 
 
+#: Dense spirals whose NLP windows fell back to the LP's feed without ``nlp.VSTEP_TIGHTEN_BOOST`` (session 70) ...
+BOOST_SPIRALS = [(0.2, 30.0, 60.0, 500, 6000), (0.3, 40.0, 80.0, 400, 9000)]
+#: ... this much slower at least without it (measured 1.29 x and 1.37 x)
+BOOST_SLOWER = 1.1
+
+
+@pytest.mark.parametrize("spiral", BOOST_SPIRALS)
+def test_lp_nlp_tightens_harder_where_a_velocity_steps_impulse_is_over(
+    monkeypatch: pytest.MonkeyPatch, spiral: tuple[float, float, float, int, int],
+) -> None:
+    """Session 70: along a polyline's chords x_ss = 0, so the NLP's e and u rows hold none of the impulses of the
+    velocity steps that the sampled check reads; scaled by overshoot^-2 they came down too little for the sum, and
+    a window ended over its limit after 4 rounds (1.0108, 1.05) and fell back to the LP's slower feed.  Near a
+    velocity step the overshoot counts squared (``nlp._vstep_boost``): no fallback, the samples' finite
+    differences hold u and e, and the motion is faster than without it."""
+    from solvers import nlp
+
+    tp = _spiral_program(*spiral)
+    m = router()
+    sch = schedule(tp, m, Options(method="lp+nlp"))
+    dr = m.drive_arrays()
+    u, e = fd_drive(sch.samples.position, TS, dr)
+    assert float(np.max(np.abs(u) / dr["umax"])) <= LIMIT_FACTOR
+    assert float(np.max(np.abs(e) / dr["emax"])) <= LIMIT_FACTOR
+    assert sch.diagnostics["nlp_fallbacks"] == []
+    monkeypatch.setattr(nlp, "VSTEP_TIGHTEN_BOOST", 1.0)
+    plain = schedule(tp, m, Options(method="lp+nlp"))
+    assert plain.diagnostics["nlp_fallbacks"] != []
+    assert plain.summary["motion_time"] > BOOST_SLOWER * sch.summary["motion_time"]
+
+
 def test_smooth_path_and_corners_report_no_passed_turns() -> None:
     from geometry import examples as ex
 
