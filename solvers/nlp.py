@@ -412,15 +412,19 @@ SAMPLED_IMPULSE_PROBES = True
 STEP_BOUND_VSTEP = False
 #: From a window's second tightening round on, a sampled servo error or control signal over its limit within reach
 #: of a velocity step (a tangent break passed at speed) tightens the e and u rows of the checkpoints around it as an
-#: overshoot of this power (``NlpRefiner._vstep_boost``): the step's impulse f |jump of x_s| is in the sampled
-#: differences, not in the rows (x_ss = 0 along a polyline's chords), so the rows must come down further than the
-#: overshoot for the sum to come down by it.  1: off.  Session 70: dense unblended G01 spirals (lp+nlp) whose window
-#: stayed over after 4 rounds (1.0108, 1.0496) and fell back to the LP's feed: 0.2 mm chords 2.193 -> 1.705 s,
-#: 0.3 mm 2.787 -> 2.031 s, no fallback (``tests/solvers/test_tangent_breaks``).  From the first round (tried) the
-#: 0.3 mm spiral read 1.950 s, but 5 of cam 3870-3929 ran up to 0.13 % longer (a window that would pass anyway
-#: tightened harder than it needed); with 1.5 the 0.3 mm spiral still fell back.
+#: overshoot of this power (``_vstep_boost``), and to at most the rows' own utilisation at that point x its
+#: overshoot^-TIGHTEN_POWER (``NlpRefiner._vstep_ceiling``).  The step's impulse f |jump of x_s| is in the sampled
+#: differences, not in the rows (x_ss = 0 along a polyline's chords): the sum came down too little a round, or not at
+#: all while the rows were under their tightened bounds (the 0.5 mm spiral below: e 0.53 in the rows where the samples
+#: read 1.03, the same solution in rounds 2-4).  1: off.  Session 70, dense unblended G01 spirals under lp+nlp whose
+#: windows stayed over after 4 rounds and fell back to the LP's feed: 0.2 / 0.3 / 0.5 mm chords 2.193 / 2.787 / 4.077
+#: -> 1.700 / 1.946 / 2.719 s, no fallback (``tests/solvers/test_tangent_breaks``); the power alone 1.705 / 2.031 s
+#: and the 0.5 mm spiral still fell back; from the first round (tried) 5 of cam 3870-3929 ran up to 0.13 % longer
+#: (windows that pass anyway tightened harder than they needed); a power of 1.5 left the 0.3 mm spiral falling back;
+#: capping the feed rows instead (the round's feed x overshoot^-2 around the point) dipped the feed and made it worse
+#: (worst 1.35, fallbacks 1 -> 2 / 1 -> 1 / 0 -> 3 on the 0.2 / 0.3 / 1.0 mm spirals).
 VSTEP_TIGHTEN_BOOST = 2.0
-#: ... the first round (``rnd``) whose tightening it boosts
+#: ... the first round (``rnd``) whose tightening that applies to
 VSTEP_BOOST_ROUND = 2
 
 
@@ -2368,8 +2372,10 @@ class NlpRefiner:
                 shape = self._shape(n, moving, slotted=True, head=head, tail=tail)
                 cut = lam_g.size - shape.n_rest
                 lam_g = np.concatenate([lam_g[:cut], np.zeros(shape.rows - lam_g.size), lam_g[cut:]])
-            boosted = self._vstep_boost(util, fine, fd[0], vbr if rnd >= VSTEP_BOOST_ROUND else vbr[:0])
-            self._tighten(boosted, fine, a * d, d, moving, fac_u, fac_e, fac_k)
+            reach = _vstep_reach(fine, fd[0], vbr, lim.sample_period) if rnd >= VSTEP_BOOST_ROUND else None
+            self._tighten(_vstep_boost(util, reach), fine, a * d, d, moving, fac_u, fac_e, fac_k)
+            if reach is not None:
+                self._vstep_ceiling(util, reach, fine, a * d, d, moving, fac_u, fac_e)
             _tighten_points(util, fine, s_rest, d / (N * REST_SUBDIV), rest_fac)
             fac_k[added] = prev_fac[2][added]  # (a cap just added is not tightened: its overshoot was without it)
             # bounds of constant rows stay as they are (tightening them could only make the window infeasible)
@@ -2472,11 +2478,7 @@ class NlpRefiner:
         Per round each checkpoint is scaled once, by the largest overshoot near
         it (violations next to each other do not compound)."""
         K = fac_k.size
-        N = self.N
-        x = (fine - s0) / d
-        kint = np.clip(np.floor(x), 0, K // (N + 1) - 1).astype(np.int64)
-        kk = kint * (N + 1) + np.clip(np.floor((x - kint) * N), 0, N - 1).astype(np.int64)
-        near = np.clip(kk[:, None] + TIGHTEN_SPREAD[None, :], 0, K - 1)  # (F, S)
+        near = _tightened_checkpoints(fine, s0, d, K, self.N)
 
         def scale_for(ratio: FloatArray) -> FloatArray:
             """(K,) factor: min over nearby violated points of ratio^-p - margin (1 where none)."""
@@ -2504,27 +2506,31 @@ class NlpRefiner:
         moves: NDArray[np.bool_] = np.max(jump, axis=1) > AXIS_EPS
         return br[moves]
 
-    def _vstep_boost(
-        self, util: dict[str, FloatArray], fine: FloatArray, f_fine: FloatArray, vbr: FloatArray,
-    ) -> dict[str, FloatArray]:
-        """``util`` with the sampled servo error and control signal over their limits within reach of a velocity
-        step at ``vbr`` (mm, sorted) raised to VSTEP_TIGHTEN_BOOST (a copy; the rest shared).
+    def _vstep_ceiling(
+        self, util: dict[str, FloatArray], reach: NDArray[np.bool_], fine: FloatArray, s0: float, d: float,
+        moving: tuple[int, ...], fac_u: FloatArray, fac_e: FloatArray,
+    ) -> None:
+        """Hold the e (u) rows of the checkpoints around each fine point in ``reach`` whose sampled servo error
+        (control signal) is over its limit at most at the rows' own utilisation there (``util["servo_error"]``,
+        ``util["control_signal"]``) x overshoot^-TIGHTEN_POWER - TIGHTEN_MARGIN, per axis (VSTEP_TIGHTEN_BOOST).
 
-        The impulse of a step enters the sampled differences of the centres within 2 Ts of it and each centre's
-        utilisation is spread over the points within 2 Ts (``_sampled``): reach 4 Ts f."""
-        Ts = self.lim.sample_period
-        if Ts is None or not vbr.size:
-            return util
-        j = np.searchsorted(vbr, fine)
-        gap = np.minimum(np.abs(fine - vbr[np.maximum(j - 1, 0)]), np.abs(vbr[np.minimum(j, vbr.size - 1)] - fine))
-        near = gap <= 4.0 * Ts * f_fine + BREAK_EPS_MM
-        out = dict(util)
-        for name in ("sampled_servo_error", "sampled_control_signal"):
-            if name in util:
-                arr = util[name]
-                boost = near[:, None] & (arr > 1.0)
-                out[name] = np.where(boost, arr ** VSTEP_TIGHTEN_BOOST, arr)
-        return out
+        Where a velocity step's impulse carries the overshoot the rows can be far under their bound (the feed held
+        by other rows): scaling the bound alone leaves the solution as it was until the bound comes down to them."""
+        K = fac_e.shape[0]
+        near = _tightened_checkpoints(fine, s0, d, K, self.N)
+        for name, model, fac in (("sampled_servo_error", "servo_error", fac_e),
+                                 ("sampled_control_signal", "control_signal", fac_u)):
+            if name not in util or model not in util:
+                continue
+            for m, ax in enumerate(moving):
+                r = util[name][:, ax]
+                bad = np.flatnonzero(reach & (r > 1.0 + VERIFY_TOL))
+                if not bad.size:
+                    continue
+                ceil = np.full(K, np.inf)
+                np.minimum.at(ceil, near[bad].ravel(),
+                              np.repeat(util[model][bad, ax] * _tighten_scale(r[bad]), near.shape[1]))
+                fac[:, m] = np.maximum(MIN_BOUND_FACTOR, np.minimum(fac[:, m], ceil))
 
     def _row_bounds(
         self,
@@ -3164,6 +3170,42 @@ def _tighten_scale(overshoot: Any) -> Any:
     overshoot^-TIGHTEN_POWER - TIGHTEN_MARGIN (a checkpoint's: ``NlpRefiner._tighten``; a cut slot's:
     ``_Slots.place``; a rest point's: ``_tighten_points``)."""
     return overshoot**-TIGHTEN_POWER - TIGHTEN_MARGIN
+
+
+def _tightened_checkpoints(fine: FloatArray, s0: float, d: float, K: int, N: int) -> NDArray[np.int64]:
+    """(F, S): the indices of the K window checkpoints (N + 1 an interval from s0, spacing d mm) a violation at each
+    fine point tightens: TIGHTEN_SPREAD around the checkpoint before it."""
+    x = (fine - s0) / d
+    kint = np.clip(np.floor(x), 0, K // (N + 1) - 1).astype(np.int64)
+    kk = kint * (N + 1) + np.clip(np.floor((x - kint) * N), 0, N - 1).astype(np.int64)
+    near: NDArray[np.int64] = np.clip(kk[:, None] + TIGHTEN_SPREAD[None, :], 0, K - 1)
+    return near
+
+
+def _vstep_reach(fine: FloatArray, f: FloatArray, vbr: FloatArray, Ts: float | None) -> NDArray[np.bool_] | None:
+    """(F,): the fine points (mm, feed f mm/s) within reach of a velocity step at ``vbr`` (mm, sorted), or None if
+    there is none (or no sample period).  The impulse of a step enters the sampled differences of the centres within
+    2 Ts of it and each centre's utilisation is spread over the points within 2 Ts (``NlpRefiner._sampled``):
+    reach 4 Ts f."""
+    if Ts is None or not vbr.size:
+        return None
+    j = np.searchsorted(vbr, fine)
+    gap = np.minimum(np.abs(fine - vbr[np.maximum(j - 1, 0)]), np.abs(vbr[np.minimum(j, vbr.size - 1)] - fine))
+    reach: NDArray[np.bool_] = gap <= 4.0 * Ts * f + BREAK_EPS_MM
+    return reach
+
+
+def _vstep_boost(util: dict[str, FloatArray], reach: NDArray[np.bool_] | None) -> dict[str, FloatArray]:
+    """``util`` with the sampled servo error and control signal over their limits at the points in ``reach``
+    (``_vstep_reach``) raised to VSTEP_TIGHTEN_BOOST: a copy (the other entries shared), or ``util`` itself."""
+    if reach is None:
+        return util
+    out = dict(util)
+    for name in ("sampled_servo_error", "sampled_control_signal"):
+        if name in util:
+            arr = util[name]
+            out[name] = np.where(reach[:, None] & (arr > 1.0), arr**VSTEP_TIGHTEN_BOOST, arr)
+    return out
 
 
 def _tighten_points(util: dict[str, FloatArray], fine: FloatArray, s_pts: FloatArray, h: float,

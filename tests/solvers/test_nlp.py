@@ -1045,11 +1045,50 @@ def test_a_velocity_steps_overshoot_tightens_squared_within_its_reach_only() -> 
     over[::7] = 0.9  # (some under the limit)
     util = {"sampled_servo_error": over.copy(), "sampled_control_signal": over.copy(),
             "servo_error": over.copy()}
-    out = ref._vstep_boost(util, fine, fds[0], np.array([5.0]))
-    near = (np.abs(fine - 5.0) <= reach + nlp.BREAK_EPS_MM)[:, None] & (over > 1.0)
+    within = nlp._vstep_reach(fine, fds[0], np.array([5.0]), ref.lim.sample_period)
+    assert within is not None
+    np.testing.assert_array_equal(within, np.abs(fine - 5.0) <= reach + nlp.BREAK_EPS_MM)
+    out = nlp._vstep_boost(util, within)
+    near = within[:, None] & (over > 1.0)
     assert near.any() and (~near & (over > 1.0)).any()
     for name in ("sampled_servo_error", "sampled_control_signal"):
         np.testing.assert_array_equal(out[name], np.where(near, 1.02**nlp.VSTEP_TIGHTEN_BOOST, over))
     assert out["servo_error"] is util["servo_error"]
     np.testing.assert_array_equal(util["sampled_servo_error"], over)  # (the caller's dict is not changed)
-    assert ref._vstep_boost(util, fine, fds[0], np.zeros(0)) is util
+    assert nlp._vstep_reach(fine, fds[0], np.zeros(0), ref.lim.sample_period) is None
+    assert nlp._vstep_boost(util, None) is util
+
+
+def test_a_velocity_steps_overshoot_holds_the_rows_under_their_own_utilisation() -> None:
+    """Session 70 (``NlpRefiner._vstep_ceiling``): where a velocity step's impulse carries a sampled overshoot the
+    e rows can sit far under their bound; the checkpoints around each such point are held at most at the rows' own
+    utilisation there x overshoot^-2 (less the margin), never under MIN_BOUND_FACTOR, and the checkpoints out of
+    reach keep their bounds.  Checkpoints: the window's (``nlp.checkpoint_layout``) over 0-10 mm, 1 mm knots."""
+    from solvers import nlp
+
+    ref, fine, _g, _fds, _truth = _turn_at_speed(40.0, 0.0, 5.0)
+    n, N, d = 10, 4, 1.0
+    ref.N = N
+    k_loc, tau = nlp.checkpoint_layout(n, N)
+    s_chk = (k_loc + tau) * d
+    K = s_chk.size
+    sampled = np.full((fine.size, 3), 0.9)
+    model = np.full((fine.size, 3), 0.6)
+    hot = np.abs(fine - 5.0) < 0.1
+    sampled[hot, 1] = 1.03
+    model[hot, 1] = 0.58
+    far = np.abs(fine - 8.0) < 0.1  # (over, but out of the step's reach)
+    sampled[far, 1] = 1.03
+    util = {"sampled_servo_error": sampled, "servo_error": model}
+    fac_u, fac_e = np.full((K, 2), 0.995), np.full((K, 2), 0.995)
+    ref._vstep_ceiling(util, np.abs(fine - 5.0) < 0.2, fine, 0.0, d, (0, 1), fac_u, fac_e)
+    want = 0.58 * nlp._tighten_scale(1.03)
+    h = d / N
+    held = np.abs(s_chk - 5.0) <= 0.1 + 2.0 * h + 1e-12  # (TIGHTEN_SPREAD: one checkpoint before, two after)
+    np.testing.assert_allclose(fac_e[held, 1], want, rtol=1e-12)
+    fac_e[:] = 0.995
+    util["servo_error"] = model * 0.5  # (0.29 x 0.94 < MIN_BOUND_FACTOR)
+    ref._vstep_ceiling(util, np.abs(fine - 5.0) < 0.2, fine, 0.0, d, (0, 1), fac_u, fac_e)
+    assert np.all(fac_e[held, 1] == nlp.MIN_BOUND_FACTOR)
+    assert np.all(fac_e[np.abs(s_chk - 5.0) > 0.1 + 3.0 * h, 1] == 0.995)  # (8 mm among them: out of reach)
+    assert np.all(fac_e[:, 0] == 0.995) and np.all(fac_u == 0.995)
