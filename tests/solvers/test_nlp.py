@@ -1079,16 +1079,21 @@ def test_a_velocity_steps_overshoot_holds_the_rows_under_their_own_utilisation()
     model[hot, 1] = 0.58
     far = np.abs(fine - 8.0) < 0.1  # (over, but out of the step's reach)
     sampled[far, 1] = 1.03
-    util = {"sampled_servo_error": sampled, "servo_error": model}
-    fac_u, fac_e = np.full((K, 2), 0.995), np.full((K, 2), 0.995)
-    ref._vstep_ceiling(util, np.abs(fine - 5.0) < 0.2, fine, 0.0, d, (0, 1), fac_u, fac_e)
+    # (the jerk: the same on axis x)
+    util = {"sampled_servo_error": sampled, "servo_error": model, "sampled_jerk": sampled[:, [1, 0, 2]],
+            "jerk": model[:, [1, 0, 2]]}
+    fac_u, fac_e, cap_j = np.full((K, 2), 0.995), np.full((K, 2), 0.995), np.full((K, 2), np.inf)
+    ref._vstep_ceiling(util, np.abs(fine - 5.0) < 0.2, fine, 0.0, d, (0, 1), fac_u, fac_e, cap_j)
     want = 0.58 * nlp._tighten_scale(1.03)
     h = d / N
     held = np.abs(s_chk - 5.0) <= 0.1 + 2.0 * h + 1e-12  # (TIGHTEN_SPREAD: one checkpoint before, two after)
     np.testing.assert_allclose(fac_e[held, 1], want, rtol=1e-12)
-    fac_e[:] = 0.995
-    util["servo_error"] = model * 0.5  # (0.29 x 0.94 < MIN_BOUND_FACTOR)
-    ref._vstep_ceiling(util, np.abs(fine - 5.0) < 0.2, fine, 0.0, d, (0, 1), fac_u, fac_e)
-    assert np.all(fac_e[held, 1] == nlp.MIN_BOUND_FACTOR)
     assert np.all(fac_e[np.abs(s_chk - 5.0) > 0.1 + 3.0 * h, 1] == 0.995)  # (8 mm among them: out of reach)
     assert np.all(fac_e[:, 0] == 0.995) and np.all(fac_u == 0.995)
+    # the jerk rows (``Options.nlp_kinematic``): their own cap, on axis x, inf where none
+    np.testing.assert_allclose(cap_j[held, 0], want, rtol=1e-12)
+    assert np.all(np.isinf(cap_j[~held, 0])) and np.all(np.isinf(cap_j[:, 1]))
+    fac_e[:] = 0.995
+    util["servo_error"] = model * 0.5  # (0.29 x 0.94 < MIN_BOUND_FACTOR)
+    ref._vstep_ceiling(util, np.abs(fine - 5.0) < 0.2, fine, 0.0, d, (0, 1), fac_u, fac_e, cap_j)
+    assert np.all(fac_e[held, 1] == nlp.MIN_BOUND_FACTOR)

@@ -169,6 +169,39 @@ def test_lp_nlp_tightens_harder_where_a_velocity_steps_impulse_is_over(
     assert plain.summary["motion_time"] > BOOST_SLOWER * sch.summary["motion_time"]
 
 
+#: A spiral whose NLP windows under ``nlp_kinematic`` stayed over the sampled jerk with the jerk rows far under
+#: their bound (session 70): 4 fallbacks, 4.906 s without the jerk rows' ceiling; 1 and 4.164 s with it ...
+KINEMATIC_SPIRAL = (0.05, 10.0, 20.0, 800, 2000)
+#: ... this much slower at least without it
+KINEMATIC_SLOWER = 1.1
+
+
+def test_lp_nlp_kinematic_holds_the_jerk_rows_under_their_own_utilisation_near_velocity_steps(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Session 70: under ``Options.nlp_kinematic`` the samples' jerk reads each velocity step's impulse (|dv| / Ts^2)
+    where the NLP's jerk rows see none of it; their bounds scaled by overshoot^-2 stayed above the rows' values and
+    rounds 2-4 repeated one solution.  The jerk rows around such a point are held at most at their own utilisation
+    there x overshoot^-2 (``nlp._vstep_ceiling``'s ``cap_j``): fewer windows fall back to the LP's feed, the motion
+    is faster, and the samples' finite differences hold v, a, j, u and e."""
+    from solvers import nlp
+
+    tp = _spiral_program(*KINEMATIC_SPIRAL)
+    m = router()
+    opt = Options(method="lp+nlp", nlp_kinematic=True)
+    sch = schedule(tp, m, opt)
+    vmax, amax, jmax = m.limit_arrays()
+    assert max(utilisation(sch.samples.position, TS, vmax, amax, jmax).values()) <= LIMIT_FACTOR
+    dr = m.drive_arrays()
+    u, e = fd_drive(sch.samples.position, TS, dr)
+    assert float(np.max(np.abs(u) / dr["umax"])) <= LIMIT_FACTOR
+    assert float(np.max(np.abs(e) / dr["emax"])) <= LIMIT_FACTOR
+    monkeypatch.setattr(nlp, "VSTEP_TIGHTEN_BOOST", 1.0)
+    plain = schedule(tp, m, opt)
+    assert len(plain.diagnostics["nlp_fallbacks"]) > len(sch.diagnostics["nlp_fallbacks"])
+    assert plain.summary["motion_time"] > KINEMATIC_SLOWER * sch.summary["motion_time"]
+
+
 def test_smooth_path_and_corners_report_no_passed_turns() -> None:
     from geometry import examples as ex
 
