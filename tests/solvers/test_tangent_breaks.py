@@ -27,6 +27,15 @@ FEED_CAP_TOL = 1.001
 LEGS = 12
 
 
+def _assert_drive_held(pos: np.ndarray, m: Machine) -> None:
+    """The finite differences of the positions sampled at TS (``tests/fdcheck.fd_drive``) hold every axis's control
+    signal u and servo error e within LIMIT_FACTOR of the drive's limits."""
+    dr = m.drive_arrays()
+    u, e = fd_drive(pos, TS, dr)
+    assert float(np.max(np.abs(u) / dr["umax"])) <= LIMIT_FACTOR
+    assert float(np.max(np.abs(e) / dr["emax"])) <= LIMIT_FACTOR
+
+
 def _zigzag(turn_deg: float, lift: bool) -> Toolpath:
     """LEGS legs of LEG_MM, each turning by turn_deg (alternating sides; with ``lift`` the turns
     alternate between the XY and the XZ plane, so every axis sees velocity steps)."""
@@ -57,10 +66,7 @@ def test_sub_tolerance_turns_pass_at_speed_within_limits(turn_deg: float, lift: 
         util = utilisation(pos, TS, vmax, amax, jmax)
         assert max(util.values()) <= LIMIT_FACTOR, util
     else:
-        dr = m.drive_arrays()
-        u, e = fd_drive(pos, TS, dr)
-        assert float(np.max(np.abs(u) / dr["umax"])) <= LIMIT_FACTOR
-        assert float(np.max(np.abs(e) / dr["emax"])) <= LIMIT_FACTOR
+        _assert_drive_held(pos, m)
     # passed at speed: the feed at every vertex is well above rest
     vertex_s = LEG_MM * np.arange(1, LEGS)
     feed_at = np.interp(vertex_s, sch.samples.s, sch.samples.feed)
@@ -112,10 +118,7 @@ def _lp_nlp_held_without_fallback(tp: Toolpath, m: Machine) -> Schedule:
     """lp+nlp's schedule of ``tp``, checked: no NLP window fell back to the LP's feed, and the finite differences of
     its 1 kHz positions (``tests/fdcheck.fd_drive``) hold u and e within LIMIT_FACTOR."""
     sch = schedule(tp, m, Options(method="lp+nlp"))
-    dr = m.drive_arrays()
-    u, e = fd_drive(sch.samples.position, TS, dr)
-    assert float(np.max(np.abs(u) / dr["umax"])) <= LIMIT_FACTOR
-    assert float(np.max(np.abs(e) / dr["emax"])) <= LIMIT_FACTOR
+    _assert_drive_held(sch.samples.position, m)
     assert sch.diagnostics["nlp_fallbacks"] == []
     return sch
 
@@ -192,10 +195,7 @@ def test_lp_nlp_kinematic_holds_the_jerk_rows_under_their_own_utilisation_near_v
     sch = schedule(tp, m, opt)
     vmax, amax, jmax = m.limit_arrays()
     assert max(utilisation(sch.samples.position, TS, vmax, amax, jmax).values()) <= LIMIT_FACTOR
-    dr = m.drive_arrays()
-    u, e = fd_drive(sch.samples.position, TS, dr)
-    assert float(np.max(np.abs(u) / dr["umax"])) <= LIMIT_FACTOR
-    assert float(np.max(np.abs(e) / dr["emax"])) <= LIMIT_FACTOR
+    _assert_drive_held(sch.samples.position, m)
     monkeypatch.setattr(nlp, "VSTEP_TIGHTEN_BOOST", 1.0)
     plain = schedule(tp, m, opt)
     assert len(plain.diagnostics["nlp_fallbacks"]) > len(sch.diagnostics["nlp_fallbacks"])
