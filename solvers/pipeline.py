@@ -114,6 +114,12 @@ MIN_INTERVALS = 16
 #: 16 only: motion -3.0 % (lp) and -5.95 % (lp+nlp) in the geometric mean, none longer by more
 #: than 2 %, CPU x1.07 (lp) and x1.11 (lp+nlp).
 REST_MIN_INTERVALS = 64
+#: ... and under lp+nlp a piece kept on that first profile (no control point at its floor, not stuck) is solved once
+#: more on this many, which the NLP refines, with the first profile kept for ``_nlp_on_coarser_knots`` where it falls
+#: back on them (``_finer_rest_plan``): the NLP's feed spline is f, not q, and a ramp out of or into rest (f ~ sqrt(s)
+#: under a constant acceleration) is followed the closer the finer its knots.  The LP's refinement trigger (a control
+#: point at its floor on the first profile) is the first profile's, as before.  None: off.  Measured in session 71.
+NLP_REST_MIN_INTERVALS: int | None = 128
 #: A piece on the default knot spacing is first solved on knots the machine's top feed (``Machine.top_feed``, at most
 #: the piece's programmed feed, ``Piece.feed``) covers in KNOT_FLOOR_SAMPLES sample periods, where that is at least
 #: KNOT_FLOOR_MIN_GAIN times coarser than its plan's (``floor_intervals``), and that profile is kept only if its
@@ -996,6 +1002,7 @@ def solve_piece(
     first_n_int: int | None = None,
     plain: list[tuple[PieceProfile, list[int]]] | None = None,
     first_bound: float | None = None,
+    finer: bool = False,
 ) -> tuple[PieceProfile, list[int]]:
     """Walk LP windows over one piece and assemble its control points.
 
@@ -1008,8 +1015,9 @@ def solve_piece(
 
     ``first_n_int`` (``rest_intervals``, ``floor_intervals``), if given: the piece is solved on that many knot
     intervals first, and that profile is kept unless it is stuck, holds control points at a q floor, takes
-    longer than ``first_bound`` (s), if given, or an LP fails on it; with ``first_bound`` (the knot floor,
-    ``floor_intervals``) then on KNOT_FLOOR_LEVEL_STEP times the knots, and so on while they stay
+    longer than ``first_bound`` (s), if given, or an LP fails on it (with ``finer``, under lp+nlp, a kept
+    ``rest_intervals`` profile gives way to ``_finer_rest_plan``'s, and goes to ``plain``); with ``first_bound``
+    (the knot floor, ``floor_intervals``) then on KNOT_FLOOR_LEVEL_STEP times the knots, and so on while they stay
     KNOT_FLOOR_MIN_GAIN times coarser than the plan's; then the piece is solved as without it (below), from its
     plan's knots.  (Refining
     on from the first knots instead, bench seeds 0-199: the same 0 failures and -12 % / -17 % motion
@@ -1045,7 +1053,13 @@ def solve_piece(
                 )
                 is_stuck = stuck(prof)
                 if not floored and not is_stuck and first_bound is None:
-                    return prof, joins
+                    fine = (_finer_rest_plan(toolpath, piece, machine, opt, lim, stats, verify, cache, n_first)
+                            if finer else None)
+                    if fine is None:
+                        return prof, joins
+                    if plain is not None:
+                        plain.append((prof, joins))
+                    return fine
                 duration = None if is_stuck else _moving_duration(prof)
                 if not floored and duration is not None and first_bound is not None and duration <= first_bound:
                     return prof, joins
@@ -1062,9 +1076,31 @@ def solve_piece(
             if first_bound is None or KNOT_FLOOR_MIN_GAIN * n_next > n_plan:
                 break
             n_first = n_next
-            stats["knot_floor_levels"] = stats.get("knot_floor_levels", 0) + 1  # (0 in ``one_shot``'s stats)
+            stats["knot_floor_levels"] = stats.get("knot_floor_levels", 0) + 1
         stats["rest_plan_fallbacks"] = stats.get("rest_plan_fallbacks", 0) + 1
     return _refined(toolpath, piece, machine, opt, lim, stats, on_window, verify, cache, on_lp, first, plain)
+
+
+def _finer_rest_plan(
+    toolpath: Toolpath, piece: Piece, machine: Machine, opt: Options, lim: LimitSet, stats: dict[str, Any],
+    verify: FloatArray | None, cache: WindowCache | None, n_first: int,
+) -> tuple[PieceProfile, list[int]] | None:
+    """Under lp+nlp, the LP profile and joins of a piece kept on its first ``REST_MIN_INTERVALS`` plan
+    (``solve_piece``) on ``NLP_REST_MIN_INTERVALS`` instead, where that is more; None where it is not, is off
+    or is not lp+nlp, or where the finer plan fails, is stuck or holds control points at their floor."""
+    n_fine = NLP_REST_MIN_INTERVALS
+    if opt.method != "lp+nlp" or n_fine is None or n_fine <= n_first:
+        return None
+    floored: list[int] = []
+    try:
+        prof, joins = _solve_windows(toolpath, piece, plan_piece(piece, machine, opt, n_fine), opt, lim, stats,
+                                     None, verify, cache, floored=floored)
+    except (InfeasibleError, SolverFailure):
+        return None
+    if floored or stuck(prof):
+        return None
+    stats["finer_rest_plans"] = stats.get("finer_rest_plans", 0) + 1
+    return prof, joins
 
 
 def _floor_refines(opt: Options) -> bool:
@@ -2552,8 +2588,9 @@ def _schedule_stream(
         "windows": 0, "iterations": 0, "cut_rounds": 0, "cut_points": 0,
         "unverified": 0, "window_times": [], "sample_repairs": 0, "lp_chains": 0, "lp_seam_fallbacks": 0,
         "rest_shape_fallbacks": 0, "rest_shape_repairs": 0, "repairs_undone": 0, "rest_step_floor_walks": 0,
-        "knot_floor_pieces": 0, "knot_floor_fallbacks": 0, "knot_floor_levels": 0, "lp_cruise_jumps": 0,
-        "lp_cruise_intervals": 0, "solver_fallbacks": 0, "solver_fallback_reasons": [],
+        "knot_floor_pieces": 0, "knot_floor_fallbacks": 0, "knot_floor_levels": 0, "finer_rest_plans": 0,
+        "finer_rest_retries": 0, "lp_cruise_jumps": 0, "lp_cruise_intervals": 0, "solver_fallbacks": 0,
+        "solver_fallback_reasons": [],
     }
     if opt.method == "lp+nlp" and not machine.has_drives:
         raise InvalidMachineError(
@@ -2625,44 +2662,65 @@ def _schedule_stream(
             def on_window(s_done: float, s0: float = piece.s_start) -> None:
                 report((s0 + lp_share * s_done) / total)
 
-            first, first_bound = first_plan(toolpath, piece, machine, opt, lim)
-            # with NLP workers, the chains go to them while the LP still solves the later windows
-            pipe = (_chain_pipeline(toolpath, piece, machine, opt, nlp_lim, refiners, nlp_stats, first, pool, lead_in)
-                    if pool is not None and nlp_stats is not None and nlp_lim is not None else None)
-            plain: list[tuple[PieceProfile, list[int]]] = []
-            try:
-                t0 = time.perf_counter()
-                fallbacks = stats.get("rest_plan_fallbacks", 0)
-                lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache,
-                                             pipe.lp_progress if pipe is not None else None, first,
-                                             plain if nlp_stats is not None else None, first_bound)
-                t_lp += time.perf_counter() - t0
-                # repairs start from the knots the first solve started from
-                if first_bound is not None:
-                    on_floor = stats.get("rest_plan_fallbacks", 0) == fallbacks
-                    stats["knot_floor_pieces" if on_floor else "knot_floor_fallbacks"] += 1
-                    if on_floor:
-                        first = lp_prof.n_int  # (the level kept: its repairs start there)
-                if stats.get("rest_plan_fallbacks", 0) != fallbacks:
-                    first = first_bound = None
-                prof = lp_prof
-                if nlp_stats is not None and nlp_lim is not None:
-                    def on_chain(s_done: float, s0: float = piece.s_start, length: float = piece.length) -> None:
-                        report((s0 + lp_share * length + (1.0 - lp_share) * s_done) / total)
+            first0, first_bound0 = first_plan(toolpath, piece, machine, opt, lim)
+            n_failed0 = len(nlp_stats.failures) if nlp_stats is not None else 0
 
+            def solve_first(
+                finer: bool, piece: Piece = piece, cache: WindowCache = cache, on_window: Any = on_window,
+                first0: int | None = first0, first_bound0: float | None = first_bound0,
+                lead_in: Motion | None = lead_in,
+            ) -> tuple[PieceProfile, list[int], PieceProfile, int | None, float | None]:
+                """The piece's first LP and NLP solve (``finer``: ``_finer_rest_plan`` may be taken, and the NLP
+                workers get the chains while the LP still solves); (LP profile, joins, profile, the knots and
+                bound its repairs start from)."""
+                nonlocal t_lp, t_nlp
+                first, first_bound = first0, first_bound0
+                # with NLP workers, the chains go to them while the LP still solves the later windows
+                pipe = (_chain_pipeline(toolpath, piece, machine, opt, nlp_lim, refiners, nlp_stats, first, pool,
+                                        lead_in)
+                        if finer and pool is not None and nlp_stats is not None and nlp_lim is not None else None)
+                plain: list[tuple[PieceProfile, list[int]]] = []
+                try:
                     t0 = time.perf_counter()
-                    n_failed = len(nlp_stats.failures)
-                    prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners, nlp_stats,
-                                         on_chain, pipe=pipe, lead_in=lead_in, pool=pool)
-                    if plain and len(nlp_stats.failures) > n_failed:
-                        lp_prof, prof = _nlp_on_coarser_knots(toolpath, piece, machine, opt, (lp_prof, prof), plain,
-                                                           nlp_lim, refiners, nlp_stats, n_failed, lead_in, pool)
-                    t_nlp += time.perf_counter() - t0
-            except InfeasibleError as exc:
-                raise _overlap_hint(exc, piece, machine, opt) from exc
-            finally:
-                if pipe is not None:
-                    pipe.close()
+                    fallbacks = stats.get("rest_plan_fallbacks", 0)
+                    lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim, stats, on_window, None, cache,
+                                                 pipe.lp_progress if pipe is not None else None, first,
+                                                 plain if nlp_stats is not None else None, first_bound, finer)
+                    t_lp += time.perf_counter() - t0
+                    # repairs start from the knots the first solve started from
+                    if first_bound is not None:
+                        on_floor = stats.get("rest_plan_fallbacks", 0) == fallbacks
+                        stats["knot_floor_pieces" if on_floor else "knot_floor_fallbacks"] += 1
+                        if on_floor:
+                            first = lp_prof.n_int  # (the level kept: its repairs start there)
+                    if stats.get("rest_plan_fallbacks", 0) != fallbacks:
+                        first = first_bound = None
+                    prof = lp_prof
+                    if nlp_stats is not None and nlp_lim is not None:
+                        def on_chain(s_done: float, s0: float = piece.s_start, length: float = piece.length) -> None:
+                            report((s0 + lp_share * length + (1.0 - lp_share) * s_done) / total)
+
+                        t0 = time.perf_counter()
+                        n_failed = len(nlp_stats.failures)
+                        prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_lim, refiners,
+                                             nlp_stats, on_chain, pipe=pipe, lead_in=lead_in, pool=pool)
+                        if plain and len(nlp_stats.failures) > n_failed:
+                            lp_prof, prof = _nlp_on_coarser_knots(toolpath, piece, machine, opt, (lp_prof, prof),
+                                                               plain, nlp_lim, refiners, nlp_stats, n_failed,
+                                                               lead_in, pool)
+                        t_nlp += time.perf_counter() - t0
+                except InfeasibleError as exc:
+                    raise _overlap_hint(exc, piece, machine, opt) from exc
+                finally:
+                    if pipe is not None:
+                        pipe.close()
+                return lp_prof, joins, prof, first, first_bound
+
+            finer_before = stats["finer_rest_plans"]
+            lp_prof, joins, prof, first, first_bound = solve_first(True)
+            # the finer plan (``_finer_rest_plan``) is kept where its first samples need no repair; else the piece
+            # is solved as without it, repairs and all (pieces that held without it hold as they did)
+            finer_retry = stats["finer_rest_plans"] > finer_before
             emit("piece_solved", i)
             verify_s = np.zeros(0)
             rounds = 0
@@ -2706,6 +2764,13 @@ def _schedule_stream(
                 at_rest = _in_rest_intervals(s_loc, prof)
                 extra = (rounds == SAMPLE_REPAIR_ROUNDS and worst[2] > 1.0 + verify.FAIL_TOL
                          and (nlp or (REPAIR_REST_SHAPES_OFF and at_rest and LP_REST_SHAPES and opt.jerk)))
+                if finer_retry and s_loc.size:
+                    finer_retry = False
+                    if nlp_stats is not None:
+                        del nlp_stats.failures[n_failed0:]  # (the finer plan's NLP fallbacks: not the output's)
+                    stats["finer_rest_retries"] += 1
+                    lp_prof, joins, prof, first, first_bound = solve_first(False)
+                    continue
                 if worst[2] <= 1.0 + verify.FAIL_TOL and (passed is None or timing.duration < passed[0]):
                     passed = (timing.duration, lp_prof, prof)
                 if undo or not s_loc.size or rounds >= SAMPLE_REPAIR_ROUNDS + int(extra):
@@ -2829,6 +2894,11 @@ def _schedule_stream(
         "knot_floor_fallbacks": stats["knot_floor_fallbacks"],
         # ... and the finer levels of the floor solved (``KNOT_FLOOR_LEVEL_STEP``), repairs included
         "knot_floor_levels": stats["knot_floor_levels"],
+        # lp+nlp pieces kept on their first REST_MIN_INTERVALS plan and solved on NLP_REST_MIN_INTERVALS instead
+        # (``_finer_rest_plan``), repairs included
+        "finer_rest_plans": stats["finer_rest_plans"],
+        # ... of those, the pieces whose first samples needed repairs, solved again as without it
+        "finer_rest_retries": stats["finer_rest_retries"],
         # most rounds of re-solving a piece whose samples were over a limit (solvers.verify)
         "sample_repairs": stats["sample_repairs"],
         "control_points": int(sum(p.c.size for p in profiles)),
