@@ -118,7 +118,10 @@ REST_MIN_INTERVALS = 64
 #: more on this many, which the NLP refines, with the first profile kept for ``_nlp_on_coarser_knots`` where it falls
 #: back on them (``_finer_rest_plan``): the NLP's feed spline is f, not q, and a ramp out of or into rest (f ~ sqrt(s)
 #: under a constant acceleration) is followed the closer the finer its knots.  The LP's refinement trigger (a control
-#: point at its floor on the first profile) is the first profile's, as before.  None: off.  Measured in session 71.
+#: point at its floor on the first profile) is the first profile's, as before.  A piece whose first samples on it
+#: need a repair is solved again as without it, repairs and all (``_schedule_stream``: the repair rounds on the finer
+#: knots took cam seed 2076 to a 422 that the rounds on 64 avoid).  None: off.  Measured in session 71
+#: (docs/design.md, "Short pieces on finer knots").
 NLP_REST_MIN_INTERVALS: int | None = 128
 #: A piece on the default knot spacing is first solved on knots the machine's top feed (``Machine.top_feed``, at most
 #: the piece's programmed feed, ``Piece.feed``) covers in KNOT_FLOOR_SAMPLES sample periods, where that is at least
@@ -1076,7 +1079,7 @@ def solve_piece(
             if first_bound is None or KNOT_FLOOR_MIN_GAIN * n_next > n_plan:
                 break
             n_first = n_next
-            stats["knot_floor_levels"] = stats.get("knot_floor_levels", 0) + 1
+            stats["knot_floor_levels"] = stats.get("knot_floor_levels", 0) + 1  # (0 in ``one_shot``'s stats)
         stats["rest_plan_fallbacks"] = stats.get("rest_plan_fallbacks", 0) + 1
     return _refined(toolpath, piece, machine, opt, lim, stats, on_window, verify, cache, on_lp, first, plain)
 
@@ -2895,7 +2898,7 @@ def _schedule_stream(
         # ... and the finer levels of the floor solved (``KNOT_FLOOR_LEVEL_STEP``), repairs included
         "knot_floor_levels": stats["knot_floor_levels"],
         # lp+nlp pieces kept on their first REST_MIN_INTERVALS plan and solved on NLP_REST_MIN_INTERVALS instead
-        # (``_finer_rest_plan``), repairs included
+        # (``_finer_rest_plan``; their first solve only, never a repair round)
         "finer_rest_plans": stats["finer_rest_plans"],
         # ... of those, the pieces whose first samples needed repairs, solved again as without it
         "finer_rest_retries": stats["finer_rest_retries"],
