@@ -538,3 +538,16 @@ def test_a_finer_rest_plan_whose_samples_need_repairs_is_solved_as_without_it(
     assert plain.summary["finer_rest_plans"] == plain.summary["finer_rest_retries"] == 0
     np.testing.assert_array_equal(finer.samples.position, plain.samples.position)
     assert finer.diagnostics["nlp_fallbacks"] == plain.diagnostics["nlp_fallbacks"]
+
+
+@pytest.mark.parametrize("given", [{"lp_window": 40}, {"lp_overlap": 20}, {"nlp_window": 30}, {"nlp_overlap": 8}])
+def test_no_finer_rest_plan_where_windows_are_given(given: dict[str, int]) -> None:
+    """Windows and overlaps given in knot intervals (``Options.lp_window`` ... ``nlp_overlap``) would span half the
+    path on ``NLP_REST_MIN_INTERVALS``' knots: there the piece stays on its first plan (bench+opts seed 3, an LP
+    overlap of 5 intervals, ran 37.5 % longer on 128); with none given it takes them."""
+    tp, m = Toolpath([ex.line((0, 0, 0), (5.0, 0, 0))]), router()
+    sch = schedule(tp, m, Options(method="lp+nlp", **given))  # type: ignore[arg-type]
+    assert sch.summary["finer_rest_plans"] == 0
+    assert [p.c.size for p in sch.profiles] == [pipeline.REST_MIN_INTERVALS + 2]
+    default = schedule(tp, m, Options(method="lp+nlp"))
+    assert default.summary["finer_rest_plans"] == 1
