@@ -491,17 +491,21 @@ def test_a_ramp_to_a_low_feed_cap_is_monotone(monkeypatch: pytest.MonkeyPatch, c
 #: lp+nlp with ``pipeline.NLP_REST_MIN_INTERVALS`` against without, short rest-to-rest moves on the router: at least
 #: this much shorter (session 71 measured -0.9 % to -1.7 % on these).
 FINER_REST_GAIN = 0.005
+#: Short rest-to-rest paths whose pieces plan under ``pipeline.REST_MIN_INTERVALS`` knot intervals on the router.
+SHORT_PATHS = {
+    "line 1 mm": lambda: Toolpath([ex.line((0, 0, 0), (1.0, 0, 0))]),
+    "line 5 mm": lambda: Toolpath([ex.line((0, 0, 0), (5.0, 0, 0))]),
+    "square corner": lambda: ex.square_corner(50.0),
+}
 
 
 @pytest.mark.parametrize("name", ["line 1 mm", "line 5 mm", "square corner"])
-def test_lp_nlp_solves_short_pieces_on_finer_knots_first(monkeypatch: pytest.MonkeyPatch, name: str) -> None:
+def test_lp_nlp_solves_short_pieces_on_finer_knots(monkeypatch: pytest.MonkeyPatch, name: str) -> None:
     """A piece kept on its first ``pipeline.REST_MIN_INTERVALS`` plan is solved on ``NLP_REST_MIN_INTERVALS``
     instead under lp+nlp (method lp keeps the first): every piece's control points say so (n + 2 of a quadratic
     B-spline), the motion is shorter than without it (the same code, the switch off), and the drive limits hold in
     the finite differences of the samples."""
-    tp = {"line 1 mm": lambda: Toolpath([ex.line((0, 0, 0), (1.0, 0, 0))]),
-          "line 5 mm": lambda: Toolpath([ex.line((0, 0, 0), (5.0, 0, 0))]),
-          "square corner": lambda: ex.square_corner(50.0)}[name]()
+    tp = SHORT_PATHS[name]()
     m = router()
     assert pipeline.NLP_REST_MIN_INTERVALS > pipeline.REST_MIN_INTERVALS
     finer = schedule(tp, m, Options(method="lp+nlp"))
@@ -525,8 +529,7 @@ def test_a_finer_rest_plan_whose_samples_need_repairs_is_solved_as_without_it(
     sample over half a limit is flagged, ``verify.REPAIR_TOL`` -0.5), the piece is solved again as without the finer
     plan, repairs and all: the positions are those of the same schedule with ``NLP_REST_MIN_INTERVALS`` off, bit for
     bit, and the summary counts each such piece in ``finer_rest_retries``."""
-    tp = {"line 5 mm": lambda: Toolpath([ex.line((0, 0, 0), (5.0, 0, 0))]),
-          "square corner": lambda: ex.square_corner(50.0)}[name]()
+    tp = SHORT_PATHS[name]()
     m = router()
     monkeypatch.setattr(verify, "REPAIR_TOL", -0.5)
     monkeypatch.setattr(verify, "FD_REPAIR_TOL", -0.5)
@@ -545,7 +548,7 @@ def test_no_finer_rest_plan_where_windows_are_given(given: dict[str, int]) -> No
     """Windows and overlaps given in knot intervals (``Options.lp_window`` ... ``nlp_overlap``) would span half the
     path on ``NLP_REST_MIN_INTERVALS``' knots: there the piece stays on its first plan (bench+opts seed 3, an LP
     overlap of 5 intervals, ran 37.5 % longer on 128); with none given it takes them."""
-    tp, m = Toolpath([ex.line((0, 0, 0), (5.0, 0, 0))]), router()
+    tp, m = SHORT_PATHS["line 5 mm"](), router()
     sch = schedule(tp, m, Options(method="lp+nlp", **given))  # type: ignore[arg-type]
     assert sch.summary["finer_rest_plans"] == 0
     assert [p.c.size for p in sch.profiles] == [pipeline.REST_MIN_INTERVALS + 2]
