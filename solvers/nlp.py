@@ -98,6 +98,7 @@ from solvers.lp import (
     vstep_servo_error,
 )
 from solvers.machine import Machine
+from solvers.timing import PieceProfile
 
 FloatArray = NDArray[np.float64]
 GeometryFn = Callable[[FloatArray], PathSamples]
@@ -1655,6 +1656,12 @@ class NlpRefiner:
         #: the motion before the current piece when it starts at a corner, (t < 0, v, a) (``Motion``; None: the
         #: machine stands there), for the sampled check of its first window (set per piece by ``refine``)
         self.lead_in: Motion | None = None
+        #: the feed of the piece as the round before solved it (a sample repair round's: ``refine``'s ``outer``),
+        #: read by the sampled check beyond the ends of the current chain part (``_spans``) instead of the LP's
+        #: where it joins this round's LP state there (``_Outer``); None: the LP's (set per piece by ``refine``)
+        self.outer: _Outer | None = None
+        #: the knots [A, B) of the chain part ``_spans`` solves (``outer`` is read outside them)
+        self._part: tuple[int, int] = (0, 0)
         #: whether the current chain's first / last rest interval may have its rise (REST_RISE): off for the
         #: retry of a window from (to) rest that failed with it, and where the LP's feed reaches its bound at
         #: the interval's inner knot (REST_RISE_CAP_SHARE) (set per chain by ``_spans``)
@@ -1664,6 +1671,27 @@ class NlpRefiner:
         #: the last solve's window start, size, moving axes, lam_g (rows without cut slots), lam_x and its
         #: shape's row_index: the next window of the chain (``prev`` given) starts from them
         self._duals: tuple[int, int, tuple[int, ...], FloatArray, FloatArray, NDArray[np.int64]] | None = None
+
+    def _outer_sides(self, c: FloatArray, d: float) -> _OuterSides | None:
+        """``self.outer`` as the context beyond the current chain part's ends (``_Context.around``): at each end
+        inside the piece where it joins this round's LP state (f and f' within OUTER_JOIN_TOL of the LP's: the
+        LP was not changed there), else None at that end (the LP's feed is read there)."""
+        outer = self.outer
+        if outer is None:
+            return None
+        A, B = self._part
+        n_int = c.size - 2
+        ends = np.array([A * d, B * d])
+        lp = kinematics.from_q(*bspline.evaluate(c, ends, d))
+        out = outer.feed(ends)
+        scale = np.maximum(np.abs(lp[0]), 1e-300)
+        ok = ((np.abs(out[0] - lp[0]) <= OUTER_JOIN_TOL * scale)
+              & (np.abs(out[1] - lp[1]) * d <= OUTER_JOIN_TOL * scale) & (ends > 0.0) & (np.array([A, B]) < n_int))
+        if not ok.any():
+            return None
+        p = outer.p[np.isfinite(outer.p)] if outer.p is not None else np.zeros(0)
+        f_hi = max(math.sqrt(max(float(np.max(outer.c)), 0.0)), float(np.max(p, initial=0.0)))
+        return _OuterSides(outer.feed, ends[0] if ok[0] else -math.inf, ends[1] if ok[1] else math.inf, f_hi)
 
     def _shape(self, n: int, axes: tuple[int, ...], slotted: bool = False, head: bool = False,
                tail: bool = False) -> _Shape:
@@ -1707,6 +1735,7 @@ class NlpRefiner:
         verify: FloatArray | None = None,
         bump: tuple[bool, bool] = (True, True),
         lead_in: Motion | None = None,
+        outer: _Outer | None = None,
     ) -> tuple[FloatArray, NDArray[np.bool_], tuple[Rise, Rise]]:
         """f control points (n_int + 2,), the mask of knot intervals that use them, and the rise factors of
         the first and last rest interval (REST_RISE, mm/s; 0 where the LP's stays).  The mask is True on
@@ -1722,11 +1751,13 @@ class NlpRefiner:
         processes.
         ``verify``: more piece-local s to verify (sampled points found over a limit); ``bump``: whether the
         first / last rest interval may have its bump (``self.bump``); ``lead_in``: the motion before the piece
-        (``self.lead_in``).
+        (``self.lead_in``); ``outer``: the piece's feed as the round before solved it (``self.outer``; a sample
+        repair round's, on the same knots).
         """
         self.verify = np.zeros(0) if verify is None else np.asarray(verify, dtype=np.float64)
         self.bump = bump
         self.lead_in = lead_in
+        self.outer = outer if outer is not None and outer.d == d and outer.n_int == c.size - 2 else None
         n_int = c.size - 2
         p = np.zeros(n_int + 2)
         mask = np.zeros(n_int, dtype=bool)
@@ -1907,6 +1938,7 @@ class NlpRefiner:
         out: list[Span] = []
         a0 = A
         self.rise = [True, True]
+        self._part = (A, B)
         n_int = c.size - 2
         if REST_RISE_CAP_SHARE is not None:  # (the rise of a rest end whose LP feed reaches its bound: off)
             ends = ([(False, 1)] if A == 0 else []) + ([(True, n_int - 1)] if B == n_int else [])
@@ -2083,7 +2115,8 @@ class NlpRefiner:
         # the motion around the window for the sampled check: before a (the chain so far, or the LP), and
         # after b when the chain ends there (inside a chain the next window checks what follows)
         joins_lp = not tail and (end[0] != 0.0 or end[1] != 0.0)
-        ctx = _Context.around(c, d, a * d, fine[-1] if joins_lp else None, left, lim.sample_period, self.c_final)
+        ctx = _Context.around(c, d, a * d, fine[-1] if joins_lp else None, left, lim.sample_period, self.c_final,
+                              self._outer_sides(c, d))
         # the rest intervals' rest points (``REST_SUBDIV``): the head's, then the tail's
         s_rest = np.concatenate([(k0 + rest_point_taus(N)) * d for k0, on in ((a, head), (b - 1, tail)) if on]
                                 + [np.zeros(0)])
@@ -3436,6 +3469,27 @@ class _ContextMotion:
 
 #: Axis motion over a time grid: t (K,) s, v and a (K, 3) mm/s, mm/s^2 (``NlpRefiner.lead_in``).
 Motion = tuple[FloatArray, FloatArray, FloatArray]
+#: The piece's feed as a sample repair round's round before solved it (``NlpRefiner.outer``).
+_Outer = PieceProfile
+#: A sample repair round's chain part joins the chains either side as the round before solved them, not the LP's
+#: feed: the sampled check of a part's first and last window reads the motion beyond its ends from
+#: ``NlpRefiner.outer`` where the part's end state is the round before's to this relative tolerance (f, f' d).
+#: Why: chains are solved independently from the LP's states at their joins, each reading the LP's feed beyond its
+#: ends, so the differences across a join read two NLP feeds neither chain saw: bench seed 18692 (session 72, on
+#: 128-interval rest plans) read e_x 1.0135 x emax 2.7 mm past a join, where each chain's check read 0.996 / 0.999,
+#: and no repair round moved it (the verified points added there read under the limit with the LP's feed beside).
+OUTER_JOIN_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class _OuterSides:
+    """``NlpRefiner.outer``'s feed (piece-local s -> (f, f', f'')) read by ``_Context`` below ``lo`` and above
+    ``hi`` (mm; -inf / inf: not on that side), and an upper bound of it (mm/s) for ``_context_span``."""
+
+    feed: Callable[[FloatArray], kinematics.FeedDerivs]
+    lo: float
+    hi: float
+    f_hi: float
 
 
 def _standing(ctx: _ContextMotion | None, head: bool, tail: bool, Ts: float, lead_in: Motion | None = None
@@ -3480,11 +3534,12 @@ class _Context:
     @staticmethod
     def around(
         c: FloatArray, d: float, s_a: float, s_b: float | None, left: _Left | None,
-        Ts: float | None, c_final: int | None = None,
+        Ts: float | None, c_final: int | None = None, outer: _OuterSides | None = None,
     ) -> _Context:
         """``c``: the LP's q control points over the piece; ``s_a``: the window's first s; ``s_b``: its
         last verified s if the LP's feed follows it (None: nothing after it); ``left``: (A, p_A .. p_{a+1}, rise);
-        ``c_final``: how many leading entries of c are final (default all: ``_context_span``)."""
+        ``c_final``: how many leading entries of c are final (default all: ``_context_span``); ``outer``: the feed
+        read instead of the LP's below ``outer.lo`` and above ``outer.hi`` (``NlpRefiner._outer_sides``)."""
         empty: kinematics.FeedDerivs = (np.zeros(0), np.zeros(0), np.zeros(0))
         none = (np.zeros(0), np.zeros(0), empty)
         if Ts is None:
@@ -3508,6 +3563,12 @@ class _Context:
                     f, f1, f2 = f.copy(), f1.copy(), f2.copy()
                     f[on], f1[on], f2[on] = _rest_feed(float(rest[0]), float(rest[1]), float(rest[2]), s[on], d, 0,
                                                        True, rise)
+            if outer is not None:
+                out = (s < outer.lo) | (s > outer.hi)
+                if out.any():
+                    fo = outer.feed(s[out])
+                    f, f1, f2 = f.copy(), f1.copy(), f2.copy()
+                    f[out], f1[out], f2[out] = fo
             if left is not None:
                 A, p, _ = left
                 nlp = (s >= A * d) & (s <= s_a)
@@ -3522,6 +3583,8 @@ class _Context:
             need = CONTEXT_SAMPLES * Ts
             # the feed is at most the largest control point around (convex hull): the s the time needs
             f_left = float(np.max(left[1])) if left is not None else 0.0
+            if outer is not None and (min(edge, far) < outer.lo or max(edge, far) > outer.hi):
+                f_left = max(f_left, outer.f_hi)
             span = _context_span(c, d, edge, far, need, f_left, c_final)
             if span <= 0.0:
                 return none
@@ -3711,12 +3774,12 @@ _POOL_CONTEXT: PieceContext | None = None
 #: A pool worker's contexts of the pieces it solved chains of, the last POOL_WORKER_PIECES of them.
 _WORKER_PIECES: OrderedDict[Any, tuple[NlpRefiner, GeometryFn]] = OrderedDict()
 POOL_WORKER_PIECES = 2
-#: (key, A, B, c, c_final, d, breaks, bump, lead_in, verify, whole): a chain of the piece ``key`` and the LP's
+#: (key, A, B, c, c_final, d, breaks, bump, lead_in, verify, whole, outer): a chain of the piece ``key`` and the LP's
 #: control points as handed out (NaN from c_final on; None: all final), with the piece's knot spacing, breaks, rest
 #: ends and verified points (``NlpRefiner.refine``'s); ``whole``: solve [A, B) as it is (``refine``'s chains), not
-#: split into the LP's kept and solved parts first (``ChainPipeline``'s)
+#: split into the LP's kept and solved parts first (``ChainPipeline``'s); ``outer``: ``NlpRefiner.outer``
 _PipeTask = tuple[Any, int, int, FloatArray, "int | None", float, FloatArray, tuple[bool, bool], "Motion | None",
-                  FloatArray, bool]
+                  FloatArray, bool, "_Outer | None"]
 
 
 def _pool_worker(context: PieceContext) -> None:
@@ -3732,14 +3795,14 @@ def _pipe_task(task: _PipeTask) -> tuple[bool | None, list[Span], NlpStats]:
     that were not final yet (``LpNotFinal``: solved again once the LP is done)."""
     if _POOL_CONTEXT is None:  # pragma: no cover - set by the pool's initializer
         raise RuntimeError("NLP pool worker started without its context")
-    key, A, B, c, c_final, d, breaks, bump, lead_in, verify, whole = task
+    key, A, B, c, c_final, d, breaks, bump, lead_in, verify, whole, outer = task
     if key not in _WORKER_PIECES:
         _WORKER_PIECES[key] = _POOL_CONTEXT(key)
         while len(_WORKER_PIECES) > POOL_WORKER_PIECES:
             _WORKER_PIECES.popitem(last=False)
     refiner, geometry = _WORKER_PIECES[key]
     refiner.stats = NlpStats()
-    refiner.verify, refiner.bump, refiner.lead_in = verify, bump, lead_in
+    refiner.verify, refiner.bump, refiner.lead_in, refiner.outer = verify, bump, lead_in, outer
     refiner.c_final = c_final
     try:
         if whole:
@@ -3793,7 +3856,8 @@ class ChainPool:
         """``refiner._spans`` of each chain over the final c, in order, solved by the workers (``refine``: its
         ``verify``, ``bump`` and ``lead_in`` as set); their counters are merged into ``refiner.stats``."""
         refiner.prebuild(geometry, d, *chains[0], c.size - 2)
-        sent = [self.submit((key, A, B, c, None, d, breaks, refiner.bump, refiner.lead_in, refiner.verify, True))
+        sent = [self.submit((key, A, B, c, None, d, breaks, refiner.bump, refiner.lead_in, refiner.verify, True,
+                             refiner.outer))
                 for A, B in chains]
         for res in sent:
             _, spans, st = res.get()
@@ -3861,7 +3925,7 @@ class ChainPipeline:
         if not self.sent:  # (the piece's first chain: its shapes built here, before the pool forks with them)
             self.refiner.prebuild(self.geometry, self.d, A, B, self.n_int)
         return self.pool.submit((self.key, A, B, c, c_final, self.d, self.breaks, self.bump, self.lead_in,
-                                 np.zeros(0), False))
+                                 np.zeros(0), False, None))
 
     def finish(
         self, c: FloatArray, joins: list[int], on_chain: Callable[[float], None] | None = None

@@ -123,6 +123,14 @@ REST_MIN_INTERVALS = 64
 #: knots took cam seed 2076 to a 422 that the rounds on 64 avoid).  None: off.  Measured in session 71
 #: (docs/design.md, "Short pieces on finer knots").
 NLP_REST_MIN_INTERVALS: int | None = 128
+#: ... and so is a piece kept on its plan's own knots where they are fewer than NLP_REST_MIN_INTERVALS (the first
+#: level of ``_refined``: no control point at its floor, not stuck; its profile kept for ``_nlp_on_coarser_knots``).
+#: Session 72: the router's pocket at F6000 on its F words' knots (29 of 40 pieces plan 64-127 intervals) took
+#: 34.786 s against 34.533 s on the machine's knots (where all 40 took the finer plan), now 34.533 s on both; lines
+#: of 150 / 200 / 250 mm -0.61 / -0.29 / -0.15 %, circle R30 -0.96 %, wave3d +0.05 %, the flower unchanged (its
+#: plan is finer).  A/B on random cases (1 NLP worker, checker on both): bench 0-79 6 shorter none longer, cam 0-44
+#: 11 shorter none longer, 0 failures either side.  Found with it: ``REPAIR_OUTER`` (bench seed 18692).
+NLP_FINER_OWN_PLANS = True
 #: A piece on the default knot spacing is first solved on knots the machine's top feed (``Machine.top_feed``, at most
 #: the piece's programmed feed, ``Piece.feed``) covers in KNOT_FLOOR_SAMPLES sample periods, where that is at least
 #: KNOT_FLOOR_MIN_GAIN times coarser than its plan's (``floor_intervals``), and that profile is kept only if its
@@ -320,6 +328,9 @@ SAMPLE_REPAIR_ROUNDS = 2
 #: e_x 1.0091, then 1.0091, 1.0158, 1.0168 at another point (session 66); cam seed 2076 as it was in session 58,
 #: 1.0088 then 1.0219.  Pieces whose last round holds the promise are as before.
 REPAIR_UNDO = True
+#: A sample repair round's NLP chains read the feed beyond their ends from the round before, not the LP's
+#: (``nlp.OUTER_JOIN_TOL``, ``NlpRefiner.outer``; session 72, bench seed 18692).
+REPAIR_OUTER = True
 #: The repair rounds but the last keep the cap on q* next to rest ends, with room for the step at path ends
 #: (``_repair_limits``).
 REPAIR_REACH_ENDS = True
@@ -1019,7 +1030,8 @@ def solve_piece(
     ``first_n_int`` (``rest_intervals``, ``floor_intervals``), if given: the piece is solved on that many knot
     intervals first, and that profile is kept unless it is stuck, holds control points at a q floor, takes
     longer than ``first_bound`` (s), if given, or an LP fails on it (with ``finer``, under lp+nlp, a kept
-    ``rest_intervals`` profile gives way to ``_finer_rest_plan``'s, and goes to ``plain``); with ``first_bound``
+    ``rest_intervals`` profile gives way to ``_finer_rest_plan``'s, and goes to ``plain``, as does one kept on the
+    plan's own knots with ``NLP_FINER_OWN_PLANS``); with ``first_bound``
     (the knot floor, ``floor_intervals``) then on KNOT_FLOOR_LEVEL_STEP times the knots, and so on while they stay
     KNOT_FLOOR_MIN_GAIN times coarser than the plan's; then the piece is solved as without it (below), from its
     plan's knots.  (Refining
@@ -1081,7 +1093,8 @@ def solve_piece(
             n_first = n_next
             stats["knot_floor_levels"] = stats.get("knot_floor_levels", 0) + 1  # (0 in ``one_shot``'s stats)
         stats["rest_plan_fallbacks"] = stats.get("rest_plan_fallbacks", 0) + 1
-    return _refined(toolpath, piece, machine, opt, lim, stats, on_window, verify, cache, on_lp, first, plain)
+    return _refined(toolpath, piece, machine, opt, lim, stats, on_window, verify, cache, on_lp, first, plain,
+                    finer and NLP_FINER_OWN_PLANS)
 
 
 def _finer_rest_plan(
@@ -1089,13 +1102,15 @@ def _finer_rest_plan(
     verify: FloatArray | None, cache: WindowCache | None, n_first: int,
 ) -> tuple[PieceProfile, list[int]] | None:
     """Under lp+nlp, the LP profile and joins of a piece kept on its first ``REST_MIN_INTERVALS`` plan
-    (``solve_piece``) on ``NLP_REST_MIN_INTERVALS`` instead, where that is more; None where it is not, is off
-    or is not lp+nlp, where windows or overlaps are given (``Options.lp_window``, ``lp_overlap``, ``nlp_window``,
-    ``nlp_overlap``: counted in knot intervals, on finer knots they would span less of the path; bench+opts seeds
-    3, 2 and 24 ran 37.5 / 3.0 / 1.3 % longer so), or where the finer plan fails, is stuck or holds control points
-    at their floor."""
+    (``solve_piece``), or on its own plan of n_first intervals (``_refined``, ``NLP_FINER_OWN_PLANS``), on
+    ``NLP_REST_MIN_INTERVALS`` instead, where that is more; None where it is not, is off or is not lp+nlp, where
+    windows or overlaps are given (``Options.lp_window``, ``lp_overlap``, ``nlp_window``, ``nlp_overlap``: counted in
+    knot intervals, on finer knots they would span less of the path; bench+opts seeds 3, 2 and 24 ran 37.5 / 3.0 /
+    1.3 % longer so) or a knot feed floor is (``Options.knot_feed_floor``: knots coarsened on purpose, as
+    ``fit_intervals`` does to fit a budget), or where the finer plan fails, is stuck or holds control points at
+    their floor."""
     n_fine = NLP_REST_MIN_INTERVALS
-    given = (opt.lp_window, opt.lp_overlap, opt.nlp_window, opt.nlp_overlap)
+    given = (opt.lp_window, opt.lp_overlap, opt.nlp_window, opt.nlp_overlap, opt.knot_feed_floor)
     if opt.method != "lp+nlp" or n_fine is None or n_fine <= n_first or any(x is not None for x in given):
         return None
     floored: list[int] = []
@@ -1127,13 +1142,15 @@ def _refined(
     on_lp: Callable[[FloatArray, list[int]], None] | None,
     first: tuple[float, PieceProfile, list[int]] | None = None,
     plain: list[tuple[PieceProfile, list[int]]] | None = None,
+    finer: bool = False,
 ) -> tuple[PieceProfile, list[int]]:
     """``solve_piece``'s knot refinements, from the piece's plan's knots; ``first``, if given, is a candidate
     already solved (duration, profile, joins), kept if faster than what the refinements end with (it does not
     stop them: taken as their yardstick, it cut refinements short that went on to faster profiles, bench
     seeds 23, 80, 86, 111 lp +63-75 %; and a plan on fewer knots than it and no faster does not stop them
     either, bench seed 97).  ``plain``, if given, gets the profiles and joins of the levels solved on fewer knots
-    than the one kept, finest first (``_nlp_on_coarser_knots``)."""
+    than the one kept, finest first (``_nlp_on_coarser_knots``).  ``finer``: a piece kept on its plan's knots
+    gives way to ``_finer_rest_plan``'s (``NLP_FINER_OWN_PLANS``; that plan's profile goes to ``plain``)."""
     n_int: int | None = None
     best: tuple[float, PieceProfile, list[int]] | None = None
     prof: PieceProfile | None = None
@@ -1157,6 +1174,12 @@ def _refined(
             break
         is_stuck = stuck(prof)
         if not is_stuck and not floored and best is None and first is None:
+            if finer and attempt == 0:
+                fine = _finer_rest_plan(toolpath, piece, machine, opt, lim, stats, verify, cache, plan.n_int)
+                if fine is not None:
+                    if plain is not None:
+                        plain.append((prof, joins))
+                    return fine
             break
         duration = None if is_stuck else _moving_duration(prof)
         is_stuck = duration is None  # (or its time table cannot be built: a stall ``stuck`` does not see)
@@ -1788,6 +1811,7 @@ def _refine_piece(
     nlp_lim: NlpLimits, refiners: dict[tuple[int, int, int | None], NlpRefiner], stats: NlpStats,
     on_chain: Callable[[float], None] | None = None, verify_s: FloatArray | None = None,
     pipe: ChainPipeline | None = None, lead_in: Motion | None = None, pool: ChainPool | None = None,
+    outer: PieceProfile | None = None,
 ) -> PieceProfile:
     """The NLP stage (spec §5-6) on one piece: its LP feed refined under the drive limits.
 
@@ -1797,7 +1821,8 @@ def _refine_piece(
     (mm) done; ``verify_s``: piece-local s verified besides the fine grid; ``pipe``: the chains
     already handed out while the LP ran (``_chain_pipeline``; used if the LP kept its first knot plan);
     ``lead_in``: the previous piece's motion up to the corner the piece starts at (``_lead_in``); ``pool``: the
-    schedule's NLP workers (``_chain_pool``; None: the chains are solved in this process)."""
+    schedule's NLP workers (``_chain_pool``; None: the chains are solved in this process); ``outer``: the piece's
+    profile as the round before solved it (a sample repair round's: ``NlpRefiner.outer``)."""
     geometry, breaks = _local(toolpath, piece), _breaks(toolpath, piece)
     if pipe is not None and verify_s is None and pipe.n_int == lp_prof.n_int and pipe.d == lp_prof.d:
         refiner = pipe.refiner
@@ -1809,7 +1834,7 @@ def _refine_piece(
         key: _PoolKey = (piece.index, shape)
         p, mask, rise = refiner.refine(geometry, lp_prof.c, lp_prof.d, joins, breaks, on_chain,
                                        None if pool is None else (pool, key), verify_s,
-                                       _standing_ends(toolpath, piece), lead_in)
+                                       _standing_ends(toolpath, piece), lead_in, outer)
     # the rest intervals the NLP solved (``solvers.nlp.REST_ENDS``) as q control points; a span reverted to
     # the LP's feed below takes the LP's rest interval next to it back too
     c, mask, g, h = rest_profile(lp_prof.c, p, mask, lp_prof.d, rise)
@@ -2803,6 +2828,7 @@ def _schedule_stream(
                     lim_r = replace(lim_r, a_rest=lim.a_rest * share,
                                     a_step=None if lim.a_step is None else lim.a_step * share)
                     cache = {}  # (its windows were solved with the full share)
+                before = prof
                 lp_prof, joins = solve_piece(toolpath, piece, machine, opt, lim_r, stats, None, verify_s, cache,
                                              None, first, first_bound=first_bound)
                 prof = lp_prof
@@ -2811,8 +2837,10 @@ def _schedule_stream(
                     if (REPAIR_NLP_STEP and opt.nlp_kinematic and rounds >= SAMPLE_REPAIR_ROUNDS
                             and nlp_lim.a_step is not None):
                         nlp_r = replace(nlp_lim, a_step=lim_r.a_step)  # (the NLP's steps as the LP's)
+                    # (the chains read their neighbours beyond their ends as this round's were: ``nlp.OUTER_JOIN_TOL``)
                     prof = _refine_piece(toolpath, piece, machine, opt, lp_prof, joins, nlp_r, {}, nlp_stats,
-                                         None, verify_s, lead_in=lead_in, pool=pool)
+                                         None, verify_s, lead_in=lead_in, pool=pool,
+                                         outer=before if REPAIR_OUTER else None)
             stats["sample_repairs"] = max(stats["sample_repairs"], rounds)
             kind, axis, util, s_worst, t_worst = worst
             if util > 1.0 + verify.FAIL_TOL:

@@ -17,7 +17,7 @@ from geometry import primitives
 from geometry.nurbs import NurbsSegment
 from geometry.toolpath import Toolpath
 from solvers import lp, pipeline, verify
-from solvers.errors import InfeasibleError, InvalidOptionsError, ScheduleError
+from solvers.errors import InfeasibleError, InvalidOptionsError, LimitViolationError, ScheduleError
 from solvers.machine import Axis, AxisLimits, Machine, router
 from solvers.pipeline import Options, schedule
 from solvers.timing import PieceProfile, PieceTiming
@@ -1348,6 +1348,32 @@ def test_bench_18692_lp_nlp_keeps_the_round_that_held_the_servo_error() -> None:
     may differ with the CPU's LP vertices; on any, the schedule must pass the independent checker.)"""
     out = harness.run(gen.case(18692, "bench"), "lp+nlp")
     assert out.ok, out.describe()
+
+
+def test_bench_18692_a_repair_round_reads_the_chains_beside_as_the_round_before_solved_them(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Bench seed 18692 again (session 72, on the finer plans of ``pipeline.NLP_FINER_OWN_PLANS``, which move its
+    second piece's samples by 0.9 ms): they read e_x 1.0135 x emax 2.7 mm past the join of two NLP chains, where
+    each chain's own sampled check read 0.996 / 0.999 (each read the LP's feed beyond its end, not the other
+    chain's), and the repair rounds' verified points, read beside the LP's feed again, moved nothing: refused
+    after 3 rounds.  A repair round's chains read the round before's feed beyond their ends
+    (``pipeline.REPAIR_OUTER``, ``nlp.OUTER_JOIN_TOL``): one round settles it, and the samples pass the
+    independent checker.  (Which round holds may differ with the CPU's LP vertices.)"""
+    case = gen.case(18692, "bench")
+    opt = harness.options_for(case, "lp+nlp")
+    sch = schedule(case.toolpath(), case.machine, opt)
+    assert sch.summary["sample_repairs"] == 1 and sch.summary["repairs_undone"] == 0
+    smp = sch.samples
+    rep = checker.check(case.segments, gen.limits_of(case.machine), opt.sample_period, smp.t, smp.feed,
+                        smp.position, program=case.program, **harness.promised(opt))
+    assert rep.ok, rep.violations
+    monkeypatch.setattr(pipeline, "REPAIR_OUTER", False)
+    try:
+        off = schedule(case.toolpath(), case.machine, opt)
+    except LimitViolationError:
+        return
+    assert off.summary["sample_repairs"] > 1 or off.summary["repairs_undone"] > 0
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")

@@ -902,6 +902,47 @@ def test_context_around_a_window_is_the_motion_outside_it() -> None:
     np.testing.assert_array_equal(v[mo.left_size : mo.left_size + 2], 7.0)  # the window's own, in its place
 
 
+def test_a_repair_rounds_context_beyond_a_chain_part_is_the_round_befores_feed() -> None:
+    """``NlpRefiner.outer`` (a sample repair round: the piece's feed as the round before solved it): the context of
+    a window reads that feed below the chain part's first knot and above its last, where its f and f' there are the
+    LP's (``_outer_sides``, ``OUTER_JOIN_TOL``); the LP's feed between them and at an end where they are not (the LP
+    changed there).  Constant LP feed F (q = F^2); the round before's q is F^2 up to the part's end B and (1.1 F)^2
+    from two control points before it, so it joins the LP at A only."""
+    from types import SimpleNamespace
+
+    from solvers.nlp import CONTEXT_SAMPLES, OUTER_JOIN_TOL, NlpRefiner, _Context, _OuterSides
+    from solvers.timing import PieceProfile
+
+    d, n_int, F, Ts = 1.0, 40, 100.0, 1e-3
+    A, B = 10, 30
+    c = np.full(n_int + 2, F**2)
+    c_before = c.copy()
+    c_before[B:] = (1.1 * F) ** 2
+    before = PieceProfile(0.0, n_int * d, d, c_before)
+    sides = NlpRefiner._outer_sides(SimpleNamespace(outer=before, _part=(A, B)), c, d)  # type: ignore[arg-type]
+    assert sides is not None and sides.lo == A * d and sides.hi == np.inf
+    assert sides.f_hi >= 1.1 * F
+    # the same profile but for a relative change of 10 x the tolerance at A: no side is read
+    c_off = c_before.copy()
+    c_off[A : A + 2] *= 1.0 + 20.0 * OUTER_JOIN_TOL
+    off = PieceProfile(0.0, n_int * d, d, c_off)
+    assert NlpRefiner._outer_sides(SimpleNamespace(outer=off, _part=(A, B)), c, d) is None  # type: ignore[arg-type]
+    # a part's first window: before A the round before's feed (here F3), never the LP's
+    F3 = 70.0
+    const = _OuterSides(lambda s: (np.full(s.size, F3), np.zeros(s.size), np.zeros(s.size)), A * d, B * d, F3)
+    ctx = _Context.around(c, d, A * d, None, None, Ts, None, const)
+    np.testing.assert_allclose(ctx.left_fd[0], F3, rtol=1e-12)
+    np.testing.assert_allclose(ctx.left_t, -(A * d - ctx.left_s) / F3, rtol=CONTEXT_TIME_RTOL)
+    assert ctx.left_t[0] <= -CONTEXT_SAMPLES * Ts
+    # the part's last window: after B the round before's feed; a window's start inside the part reads the LP's
+    ctx = _Context.around(c, d, B * d - 0.5, B * d, None, Ts, None, const)
+    np.testing.assert_allclose(ctx.right_fd[0], F3, rtol=1e-12)
+    np.testing.assert_allclose(ctx.right_t, (ctx.right_s - B * d) / F3, rtol=CONTEXT_TIME_RTOL)
+    inside = ctx.left_s >= A * d
+    assert inside.all()
+    np.testing.assert_allclose(ctx.left_fd[0], F, rtol=1e-12)
+
+
 def test_long_nlp_windows_only_on_long_pieces_within_the_cap() -> None:
     """``plan_piece``: the long NLP window (6 x the overlap) on a piece of at least NLP_LONG_WINDOW_MIN_COUNT
     of them (the 18.35 m path at 4.63 mm knots), not on one flower loop, not where 6 x the overlap is over
