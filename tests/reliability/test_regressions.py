@@ -1359,15 +1359,18 @@ def test_bench_18692_a_repair_round_reads_the_chains_beside_as_the_round_before_
     chain's), and the repair rounds' verified points, read beside the LP's feed again, moved nothing: refused
     after 3 rounds.  A repair round's chains read the round before's feed beyond their ends
     (``pipeline.REPAIR_OUTER``, ``nlp.OUTER_JOIN_TOL``): one round settles it, and the samples pass the
-    independent checker.  (Which round holds may differ with the CPU's LP vertices.)"""
+    independent checker; the NLP workers' chains read it as this process's do (2 workers against 1: the same
+    positions, bit for bit).  (Which round holds may differ with the CPU's LP vertices.)"""
     case = gen.case(18692, "bench")
-    opt = harness.options_for(case, "lp+nlp")
+    opt = dataclasses.replace(harness.options_for(case, "lp+nlp"), nlp_workers=2)
     sch = schedule(case.toolpath(), case.machine, opt)
     assert sch.summary["sample_repairs"] == 1 and sch.summary["repairs_undone"] == 0
     smp = sch.samples
     rep = checker.check(case.segments, gen.limits_of(case.machine), opt.sample_period, smp.t, smp.feed,
                         smp.position, program=case.program, **harness.promised(opt))
     assert rep.ok, rep.violations
+    one = schedule(case.toolpath(), case.machine, dataclasses.replace(opt, nlp_workers=1))
+    np.testing.assert_array_equal(one.samples.position, smp.position)
     monkeypatch.setattr(pipeline, "REPAIR_OUTER", False)
     try:
         off = schedule(case.toolpath(), case.machine, opt)
