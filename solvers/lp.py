@@ -395,6 +395,13 @@ KINEMATIC_REST_FROM_JERK = True
 #: feed is the output, and it must hold the true jerk too (cam+opts seed 183 lp+nlp: 47 NLP windows infeasible,
 #: the LP's feed kept, 1.26 x jmax after the repair rounds where two lines meet at 0.05 degrees; session 68).
 KINEMATIC_VSTEP_COUPLING = True
+#: ... and so are its jerk rows next to a curvature jump (``LimitSet.step_jerk_period``, ``WindowLP._step_jerk``): held
+#: as the samples' third differences see them with the acceleration step beside them, as method lp's are.  Bench+opts
+#: seed 840 lp+nlp (session 72; `nlp_kinematic`, `nlp_overlap` 3): its NLP windows failed on most of a 24.5 mm piece,
+#: the LP's feed was kept, and at a C1 knot inside a NURBS (x_ss 0.134 -> 0.046 /mm) passed at 15 mm/s the samples
+#: read jerk_y 1.117 x (the profile's own jerk <= 0.994 x there, the acceleration step within its STEP_SHARE): a 422
+#: after the repair rounds (1.018 x), whose verified points left the LP as it was.
+KINEMATIC_STEP_JERK = True
 
 
 @dataclass(frozen=True)
@@ -464,7 +471,7 @@ class LimitSet:
             a_rest = np.minimum(amax, jmax * sample_period / 2.0) if jerk else amax
             a_step = STEP_SHARE * jmax * sample_period
         return cls(vmax, amax, jmax, a_rest, m.feed_max, jerk, a_step if jerk else None,
-                   sample_period if jerk and not rest_from_drive else None,
+                   sample_period if jerk and (not rest_from_drive or (kinematic and KINEMATIC_STEP_JERK)) else None,
                    v_step_limit(m, sample_period, jerk, rest_from_drive, kinematic,
                                 V_STEP_SHARE_DRIVE if rest_from_drive else V_STEP_SHARE),
                    sample_period if not rest_from_drive or (kinematic and jerk and KINEMATIC_VSTEP_COUPLING) else None,

@@ -1487,6 +1487,37 @@ def test_lp_nlp_with_kinematic_limits_holds_the_jerk_where_lines_meet_at_speed(
     assert not off.ok and off.error is not None and "jerk" in off.error
 
 
+def _fault(index: int) -> None:
+    """``Options.nlp_fault``: every NLP window fails, so the LP's feed is what the samples hold."""
+    raise RuntimeError(f"NLP window {index}: fault injected")
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_lp_nlp_with_kinematic_limits_holds_the_jerk_next_to_a_curvature_jump() -> None:
+    """Found by the "+opts" random cases (session 72): bench+opts seed 840 lp+nlp (``nlp_kinematic``, ``nlp_overlap``
+    3) was refused, the sampled jerk_y 1.117 x jmax (1.018 x after the repair rounds): its NLP windows failed on most
+    of a 24.5 mm piece and kept the LP's feed, and at a C1 knot inside a NURBS (x_ss 0.134 -> 0.046 /mm) passed at
+    15 mm/s the samples read the acceleration step beside a jerk the LP held at its limit, where its own jerk read
+    at most 0.994 x.  lp+nlp's LP under ``nlp_kinematic`` now holds its jerk rows next to a curvature jump as the
+    samples' third differences see them, as method lp does (``lp.KINEMATIC_STEP_JERK``).  With every NLP window
+    failing (the LP's feed alone) the samples pass the independent checker without a repair round, and are refused
+    with the switch off.  (The case as generated, its NLP on: passes, 38 s of CPU; measured in session 72.)"""
+    case = gen.case(840, "bench+opts")
+    assert case.options.get("nlp_kinematic") is True and case.options.get("nlp_overlap") == 3
+    opt = dataclasses.replace(harness.options_for(case, "lp+nlp"), nlp_fault=_fault, nlp_workers=1)
+    sch = schedule(case.toolpath(), case.machine, opt)
+    assert sch.summary["sample_repairs"] == 0
+    smp = sch.samples
+    rep = checker.check(case.segments, gen.limits_of(case.machine), opt.sample_period, smp.t, smp.feed,
+                        smp.position, program=case.program, **harness.promised(opt))
+    assert rep.ok, rep.violations
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(lp, "KINEMATIC_STEP_JERK", False)
+        with pytest.raises(LimitViolationError) as err:
+            schedule(case.toolpath(), case.machine, opt)
+    assert err.value.axis == "y" and "jerk" in str(err.value)
+
+
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_an_lp_overlap_under_the_stopping_distance_is_named() -> None:
     """Found by the "+opts" random cases (session 67): cam seed 109 with ``lp_window=11, lp_overlap=3`` (the default
