@@ -1660,8 +1660,8 @@ class NlpRefiner:
         #: read by the sampled check beyond the ends of the current chain part (``_spans``) instead of the LP's
         #: where it joins this round's LP state there (``_Outer``); None: the LP's (set per piece by ``refine``)
         self.outer: _Outer | None = None
-        #: the knots [A, B) of the chain part ``_spans`` solves (``outer`` is read outside them)
-        self._part: tuple[int, int] = (0, 0)
+        #: ``outer`` as the context beyond the ends of the chain part ``_spans`` solves (``_outer_sides``, set per part)
+        self._part_outer: _OuterSides | None = None
         #: whether the current chain's first / last rest interval may have its rise (REST_RISE): off for the
         #: retry of a window from (to) rest that failed with it, and where the LP's feed reaches its bound at
         #: the interval's inner knot (REST_RISE_CAP_SHARE) (set per chain by ``_spans``)
@@ -1672,14 +1672,13 @@ class NlpRefiner:
         #: shape's row_index: the next window of the chain (``prev`` given) starts from them
         self._duals: tuple[int, int, tuple[int, ...], FloatArray, FloatArray, NDArray[np.int64]] | None = None
 
-    def _outer_sides(self, c: FloatArray, d: float) -> _OuterSides | None:
-        """``self.outer`` as the context beyond the current chain part's ends (``_Context.around``): at each end
-        inside the piece where it joins this round's LP state (f and f' within OUTER_JOIN_TOL of the LP's: the
-        LP was not changed there), else None at that end (the LP's feed is read there)."""
+    def _outer_sides(self, c: FloatArray, d: float, A: int, B: int) -> _OuterSides | None:
+        """``self.outer`` as the context beyond the ends of the chain part over knots [A, B) (``_Context.around``):
+        at each end inside the piece where it joins this round's LP state (f and f' within OUTER_JOIN_TOL of the
+        LP's: the LP was not changed there), else None at that end (the LP's feed is read there)."""
         outer = self.outer
         if outer is None:
             return None
-        A, B = self._part
         n_int = c.size - 2
         ends = np.array([A * d, B * d])
         lp = kinematics.from_q(*bspline.evaluate(c, ends, d))
@@ -1938,7 +1937,7 @@ class NlpRefiner:
         out: list[Span] = []
         a0 = A
         self.rise = [True, True]
-        self._part = (A, B)
+        self._part_outer = self._outer_sides(c, d, A, B)
         n_int = c.size - 2
         if REST_RISE_CAP_SHARE is not None:  # (the rise of a rest end whose LP feed reaches its bound: off)
             ends = ([(False, 1)] if A == 0 else []) + ([(True, n_int - 1)] if B == n_int else [])
@@ -2116,7 +2115,7 @@ class NlpRefiner:
         # after b when the chain ends there (inside a chain the next window checks what follows)
         joins_lp = not tail and (end[0] != 0.0 or end[1] != 0.0)
         ctx = _Context.around(c, d, a * d, fine[-1] if joins_lp else None, left, lim.sample_period, self.c_final,
-                              self._outer_sides(c, d))
+                              self._part_outer)
         # the rest intervals' rest points (``REST_SUBDIV``): the head's, then the tail's
         s_rest = np.concatenate([(k0 + rest_point_taus(N)) * d for k0, on in ((a, head), (b - 1, tail)) if on]
                                 + [np.zeros(0)])

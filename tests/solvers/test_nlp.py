@@ -919,14 +919,14 @@ def test_a_repair_rounds_context_beyond_a_chain_part_is_the_round_befores_feed()
     c_before = c.copy()
     c_before[B:] = (1.1 * F) ** 2
     before = PieceProfile(0.0, n_int * d, d, c_before)
-    sides = NlpRefiner._outer_sides(SimpleNamespace(outer=before, _part=(A, B)), c, d)  # type: ignore[arg-type]
+    sides = NlpRefiner._outer_sides(SimpleNamespace(outer=before), c, d, A, B)  # type: ignore[arg-type]
     assert sides is not None and sides.lo == A * d and sides.hi == np.inf
     assert sides.f_hi >= 1.1 * F
     # the same profile but for a relative change of 10 x the tolerance at A: no side is read
     c_off = c_before.copy()
     c_off[A : A + 2] *= 1.0 + 20.0 * OUTER_JOIN_TOL
     off = PieceProfile(0.0, n_int * d, d, c_off)
-    assert NlpRefiner._outer_sides(SimpleNamespace(outer=off, _part=(A, B)), c, d) is None  # type: ignore[arg-type]
+    assert NlpRefiner._outer_sides(SimpleNamespace(outer=off), c, d, A, B) is None  # type: ignore[arg-type]
     # a part's first window: before A the round before's feed (here F3), never the LP's
     F3 = 70.0
     const = _OuterSides(lambda s: (np.full(s.size, F3), np.zeros(s.size), np.zeros(s.size)), A * d, B * d, F3)
