@@ -1684,8 +1684,9 @@ class NlpRefiner:
         lp = kinematics.from_q(*bspline.evaluate(c, ends, d))
         out = outer.feed(ends)
         scale = np.maximum(np.abs(lp[0]), 1e-300)
-        ok = ((np.abs(out[0] - lp[0]) <= OUTER_JOIN_TOL * scale)
-              & (np.abs(out[1] - lp[1]) * d <= OUTER_JOIN_TOL * scale) & (ends > 0.0) & (np.array([A, B]) < n_int))
+        inside = np.array([A > 0, B < n_int])  # (a rest end has no neighbour)
+        ok = (inside & (np.abs(out[0] - lp[0]) <= OUTER_JOIN_TOL * scale)
+              & (np.abs(out[1] - lp[1]) * d <= OUTER_JOIN_TOL * scale))
         if not ok.any():
             return None
         p = outer.p[np.isfinite(outer.p)] if outer.p is not None else np.zeros(0)
